@@ -1,0 +1,10 @@
+//! # caustics_core
+//!
+//! The math of `bevy_caustics`, with no Bevy in it: optics, triangle meshes,
+//! scenes, and the ground-truth photon tracer that every real-time technique
+//! measures itself against. Everything here runs on the CPU and tests in seconds.
+
+pub mod optics;
+pub mod params;
+
+pub use glam;

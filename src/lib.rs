@@ -1,0 +1,1 @@
+pub use caustics_core;
