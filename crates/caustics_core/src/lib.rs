@@ -4,7 +4,15 @@
 //! scenes, and the ground-truth photon tracer that every real-time technique
 //! measures itself against. Everything here runs on the CPU and tests in seconds.
 
+pub mod bvh;
+pub mod estimate;
+pub mod mesh;
+pub mod metrics;
 pub mod optics;
 pub mod params;
+pub mod rng;
+pub mod scene;
+pub mod scenes;
+pub mod tracer;
 
 pub use glam;

@@ -42,6 +42,9 @@ impl Refraction {
 /// [`Refraction::TotalInternalReflection`]. `eta == 1` returns `incident` unchanged.
 #[inline]
 pub fn refract(incident: Vec3, normal: Vec3, eta: f32) -> Refraction {
+    if eta == 1.0 {
+        return Refraction::Transmitted(incident);
+    }
     // Orient the normal against the incident direction.
     let mut n = normal;
     let mut cos_i = -incident.dot(n);
@@ -68,6 +71,10 @@ pub fn refract(incident: Vec3, normal: Vec3, eta: f32) -> Refraction {
 /// ignored); `eta = n₁ / n₂`. Returns 1 under total internal reflection.
 #[inline]
 pub fn fresnel_reflectance(cos_i: f32, eta: f32) -> f32 {
+    if eta == 1.0 {
+        // No interface: nothing is reflected, exactly.
+        return 0.0;
+    }
     let cos_i = cos_i.abs().min(1.0);
     let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
     if sin2_t >= 1.0 {

@@ -1,0 +1,257 @@
+//! Indexed triangle meshes with smooth vertex normals, validated on construction, and
+//! the procedural generators used by tests, examples and the bench.
+
+use glam::{Affine3A, Vec2, Vec3};
+use thiserror::Error;
+
+/// Why a mesh was refused. Nothing is changed or partially built on error.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum MeshError {
+    /// The mesh has no triangles.
+    #[error("mesh has no triangles")]
+    Empty,
+    /// `normals.len() != positions.len()`.
+    #[error("mesh has {positions} positions but {normals} normals")]
+    NormalCount { positions: usize, normals: usize },
+    /// A triangle refers to a vertex that does not exist.
+    #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertices} vertices")]
+    IndexOutOfRange { triangle: usize, index: u32, vertices: usize },
+    /// A position is NaN or infinite.
+    #[error("vertex {0} has a position that is not finite")]
+    NonFinitePosition(usize),
+    /// A normal is NaN, infinite or zero.
+    #[error("vertex {0} has a normal that is NaN, infinite or zero")]
+    BadNormal(usize),
+}
+
+/// A triangle mesh in one coordinate frame, with unit vertex normals that are
+/// interpolated across each triangle as Bevy's PBR shading does (barycentric
+/// interpolation, then renormalisation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TriMesh {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    /// Builds a mesh, checking every index, position and normal. Normals are
+    /// normalised; zero, NaN or infinite normals are an error.
+    pub fn new(
+        positions: Vec<Vec3>,
+        normals: Vec<Vec3>,
+        triangles: Vec<[u32; 3]>,
+    ) -> Result<Self, MeshError> {
+        if triangles.is_empty() {
+            return Err(MeshError::Empty);
+        }
+        if normals.len() != positions.len() {
+            return Err(MeshError::NormalCount { positions: positions.len(), normals: normals.len() });
+        }
+        if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
+            return Err(MeshError::NonFinitePosition(i));
+        }
+        let normals = normals
+            .iter()
+            .enumerate()
+            .map(|(i, n)| n.try_normalize().ok_or(MeshError::BadNormal(i)))
+            .collect::<Result<Vec<_>, _>>()?;
+        for (t, tri) in triangles.iter().enumerate() {
+            if let Some(&index) = tri.iter().find(|&&i| i as usize >= positions.len()) {
+                return Err(MeshError::IndexOutOfRange { triangle: t, index, vertices: positions.len() });
+            }
+        }
+        Ok(Self { positions, normals, triangles })
+    }
+
+    /// Builds a mesh whose normals are the area-weighted average of the face normals
+    /// around each vertex (what a modelling tool's "smooth shading" writes).
+    pub fn with_smooth_normals(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Self, MeshError> {
+        let mut normals = vec![Vec3::ZERO; positions.len()];
+        for tri in &triangles {
+            let [a, b, c] = tri.map(|i| positions.get(i as usize).copied().unwrap_or(Vec3::ZERO));
+            let face = (b - a).cross(c - a);
+            for &i in tri {
+                if let Some(n) = normals.get_mut(i as usize) {
+                    *n += face;
+                }
+            }
+        }
+        Self::new(positions, normals, triangles)
+    }
+
+    /// Vertex positions.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Unit vertex normals.
+    pub fn normals(&self) -> &[Vec3] {
+        &self.normals
+    }
+
+    /// Triangles as vertex index triples (counter-clockwise seen from the front).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+
+    /// The three corner positions of triangle `t`.
+    #[inline]
+    pub fn corners(&self, t: usize) -> [Vec3; 3] {
+        self.triangles[t].map(|i| self.positions[i as usize])
+    }
+
+    /// The smooth shading normal at barycentric `(u, v)` of triangle `t`
+    /// (weights `1 − u − v`, `u`, `v` on its corners), renormalised. Falls back to the
+    /// geometric normal where the interpolated normals cancel out.
+    #[inline]
+    pub fn shading_normal(&self, t: usize, uv: Vec2) -> Vec3 {
+        let [a, b, c] = self.triangles[t].map(|i| self.normals[i as usize]);
+        let n = a * (1.0 - uv.x - uv.y) + b * uv.x + c * uv.y;
+        n.try_normalize().unwrap_or_else(|| {
+            let [p0, p1, p2] = self.corners(t);
+            (p1 - p0).cross(p2 - p0).normalize_or(Vec3::Y)
+        })
+    }
+
+    /// The mesh with `transform` applied (normals by the inverse transpose).
+    pub fn transformed(&self, transform: &Affine3A) -> Self {
+        let normal_matrix = transform.matrix3.inverse().transpose();
+        Self {
+            positions: self.positions.iter().map(|&p| transform.transform_point3(p)).collect(),
+            normals: self
+                .normals
+                .iter()
+                .map(|&n| Vec3::from(normal_matrix * n).normalize_or(n))
+                .collect(),
+            triangles: self.triangles.clone(),
+        }
+    }
+
+    /// Axis-aligned bounds `(min, max)`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.positions
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)))
+    }
+
+    /// Total surface area.
+    pub fn area(&self) -> f32 {
+        (0..self.triangles.len())
+            .map(|t| {
+                let [a, b, c] = self.corners(t);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .sum()
+    }
+
+    /// A regular grid over x, z ∈ [−size/2, size/2] with `n × n` vertices at heights
+    /// `height(x, z)` and normals `normal(x, z)`. Vertex `p = j·n + i` (i along x, j
+    /// along z); each cell is split into (p, p+n, p+1) and (p+1, p+n, p+n+1), so the
+    /// front faces +y.
+    pub fn heightfield(
+        n: usize,
+        size: f32,
+        height: impl Fn(f32, f32) -> f32,
+        normal: impl Fn(f32, f32) -> Vec3,
+    ) -> Result<Self, MeshError> {
+        let n = n.max(2);
+        let step = size / (n - 1) as f32;
+        let mut positions = Vec::with_capacity(n * n);
+        let mut normals = Vec::with_capacity(n * n);
+        for j in 0..n {
+            for i in 0..n {
+                let x = -0.5 * size + i as f32 * step;
+                let z = -0.5 * size + j as f32 * step;
+                positions.push(Vec3::new(x, height(x, z), z));
+                normals.push(normal(x, z));
+            }
+        }
+        let mut triangles = Vec::with_capacity(2 * (n - 1) * (n - 1));
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let p = (j * n + i) as u32;
+                let n = n as u32;
+                triangles.push([p, p + n, p + 1]);
+                triangles.push([p + 1, p + n, p + n + 1]);
+            }
+        }
+        Self::new(positions, normals, triangles)
+    }
+
+    /// A flat rectangle centred at `center`, spanned by `half_u` and `half_v`
+    /// (its normal is `half_u × half_v`).
+    pub fn quad(center: Vec3, half_u: Vec3, half_v: Vec3) -> Self {
+        let n = half_u.cross(half_v).normalize_or(Vec3::Y);
+        let positions = vec![
+            center - half_u - half_v,
+            center + half_u - half_v,
+            center + half_u + half_v,
+            center - half_u + half_v,
+        ];
+        Self { positions, normals: vec![n; 4], triangles: vec![[0, 1, 2], [0, 2, 3]] }
+    }
+
+    /// A UV sphere with `rings` latitude bands and `segments` longitude slices and
+    /// exact outward normals.
+    pub fn uv_sphere(center: Vec3, radius: f32, rings: usize, segments: usize) -> Self {
+        let (rings, segments) = (rings.max(2), segments.max(3));
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        for r in 0..=rings {
+            let theta = std::f32::consts::PI * r as f32 / rings as f32;
+            for s in 0..=segments {
+                let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+                let n = Vec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin());
+                positions.push(center + radius * n);
+                normals.push(n);
+            }
+        }
+        let row = (segments + 1) as u32;
+        let mut triangles = Vec::new();
+        for r in 0..rings as u32 {
+            for s in 0..segments as u32 {
+                let a = r * row + s;
+                let (b, c, d) = (a + row, a + 1, a + row + 1);
+                if r != 0 {
+                    triangles.push([a, c, b]);
+                }
+                if r + 1 != rings as u32 {
+                    triangles.push([c, d, b]);
+                }
+            }
+        }
+        Self { positions, normals, triangles }
+    }
+
+    /// The inner wall of an open cylinder (a ring seen from inside: normals point to
+    /// the axis), axis along +y, standing on `base`.
+    pub fn ring(base: Vec3, radius: f32, height: f32, segments: usize) -> Self {
+        let segments = segments.max(3);
+        let mut positions = Vec::new();
+        let mut normals = Vec::new();
+        for s in 0..=segments {
+            let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+            let out = Vec3::new(phi.cos(), 0.0, phi.sin());
+            for y in [0.0, height] {
+                positions.push(base + radius * out + Vec3::Y * y);
+                normals.push(-out);
+            }
+        }
+        let mut triangles = Vec::new();
+        for s in 0..segments as u32 {
+            let (a, b, c, d) = (2 * s, 2 * s + 1, 2 * s + 2, 2 * s + 3);
+            triangles.push([a, b, c]);
+            triangles.push([c, b, d]);
+        }
+        Self { positions, normals, triangles }
+    }
+
+    /// Appends `other` to this mesh.
+    pub fn append(&mut self, other: &TriMesh) {
+        let offset = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.normals.extend_from_slice(&other.normals);
+        self.triangles.extend(other.triangles.iter().map(|t| t.map(|i| i + offset)));
+    }
+}

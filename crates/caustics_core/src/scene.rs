@@ -1,0 +1,145 @@
+//! What the CPU algorithms see of a scene: lights, specular generators and diffuse
+//! receivers, all in world space. The Bevy crate builds one from the ECS; the
+//! procedural scenes in [`crate::scenes`] build one in code.
+
+use crate::mesh::TriMesh;
+use crate::params::{ParamError, SpecularInteraction, check_finite};
+use glam::Vec3;
+use thiserror::Error;
+
+/// The emitting part of a light. Flux units follow the light's own: with Bevy's lux
+/// and lumens, irradiance comes out in lux.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Parallel light travelling along `direction`, with irradiance `irradiance` on a
+    /// plane perpendicular to the beam.
+    Directional { direction: Vec3, irradiance: f32 },
+    /// Isotropic point source of radiant intensity `intensity` (per steradian), so
+    /// irradiance at distance r under normal incidence is `intensity / r²`.
+    Point { position: Vec3, intensity: f32 },
+    /// A point source restricted to a cone along `direction`, with Bevy's falloff
+    /// between `inner_angle` and `outer_angle` (half-angles, radians).
+    Spot { position: Vec3, direction: Vec3, intensity: f32, inner_angle: f32, outer_angle: f32 },
+}
+
+/// A light with a linear RGB colour that scales its flux per channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    pub kind: LightKind,
+    pub color: Vec3,
+}
+
+impl Light {
+    /// A white light.
+    pub fn white(kind: LightKind) -> Self {
+        Self { kind, color: Vec3::ONE }
+    }
+
+    /// Checks that directions are non-zero and every number finite and non-negative.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let finite = |name, v: Vec3| {
+            check_finite(name, v.x)?;
+            check_finite(name, v.y)?;
+            check_finite(name, v.z)
+        };
+        finite("light colour", self.color)?;
+        match self.kind {
+            LightKind::Directional { direction, irradiance } => {
+                finite("light direction", direction)?;
+                nonzero(direction)?;
+                crate::params::check_coefficient("irradiance", irradiance)?;
+            }
+            LightKind::Point { position, intensity } => {
+                finite("light position", position)?;
+                crate::params::check_coefficient("intensity", intensity)?;
+            }
+            LightKind::Spot { position, direction, intensity, inner_angle, outer_angle } => {
+                finite("light position", position)?;
+                finite("light direction", direction)?;
+                nonzero(direction)?;
+                crate::params::check_coefficient("intensity", intensity)?;
+                crate::params::check_coefficient("spot inner angle", inner_angle)?;
+                crate::params::check_coefficient("spot outer angle", outer_angle)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Bevy's spot cone attenuation: `s = saturate((cos θ − cos θₒ)/(cos θᵢ − cos θₒ))`, squared
+    /// (`bevy_pbr` `spot_light` in `lighting.wgsl`). One for other lights.
+    pub fn cone_attenuation(&self, dir_from_light: Vec3) -> f32 {
+        match self.kind {
+            LightKind::Spot { direction, inner_angle, outer_angle, .. } => {
+                let (cos_outer, cos_inner) = (outer_angle.cos(), inner_angle.min(outer_angle).cos());
+                let scale = 1.0 / (cos_inner - cos_outer).max(1e-4);
+                let cd = dir_from_light.dot(direction.normalize_or(Vec3::NEG_Y));
+                let s = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
+                s * s
+            }
+            _ => 1.0,
+        }
+    }
+}
+
+fn nonzero(v: Vec3) -> Result<(), ParamError> {
+    if v.length_squared() > 0.0 {
+        Ok(())
+    } else {
+        Err(ParamError::NotFinite { name: "zero-length light direction", value: 0.0 })
+    }
+}
+
+/// A specular surface that reflects or refracts light into caustics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Generator {
+    pub mesh: TriMesh,
+    pub interaction: SpecularInteraction,
+}
+
+/// A diffuse surface on which caustics land (and which blocks light).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Receiver {
+    pub mesh: TriMesh,
+    /// Linear RGB albedo, used when a view is shaded.
+    pub albedo: Vec3,
+}
+
+/// Why a scene was refused.
+#[derive(Clone, Debug, PartialEq, Error)]
+pub enum SceneError {
+    #[error("light {index}: {source}")]
+    Light { index: usize, source: ParamError },
+    #[error("generator {index}: {source}")]
+    Generator { index: usize, source: ParamError },
+    #[error("the scene has no lights")]
+    NoLights,
+}
+
+/// Lights, generators and receivers in world space.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Scene {
+    pub lights: Vec<Light>,
+    pub generators: Vec<Generator>,
+    pub receivers: Vec<Receiver>,
+}
+
+impl Scene {
+    /// Checks every light and generator; the first problem is returned.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        if self.lights.is_empty() {
+            return Err(SceneError::NoLights);
+        }
+        for (index, l) in self.lights.iter().enumerate() {
+            l.validate().map_err(|source| SceneError::Light { index, source })?;
+        }
+        for (index, g) in self.generators.iter().enumerate() {
+            g.interaction.validate().map_err(|source| SceneError::Generator { index, source })?;
+        }
+        Ok(())
+    }
+
+    /// Bounds `(min, max)` of all generator geometry, `None` without generators.
+    pub fn generator_bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.generators.iter().map(|g| g.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+    }
+}

@@ -1,0 +1,184 @@
+//! Procedural scenes built in code — the pool, the glass sphere, the metal ring —
+//! and the JSON scene description used by `shared/reference`.
+
+use crate::estimate::GridRegion;
+use crate::mesh::TriMesh;
+use crate::params::SpecularInteraction;
+use crate::scene::{Generator, Light, LightKind, Receiver, Scene};
+use glam::Vec3;
+use serde::Deserialize;
+
+/// A scene together with the receiver region on which its caustic is measured.
+#[derive(Clone, Debug)]
+pub struct BenchScene {
+    pub name: String,
+    pub scene: Scene,
+    pub region: GridRegion,
+}
+
+/// One sinusoid of a heightfield: `a·sin(kx·x + kz·z + φ)`.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub struct Wave {
+    pub kx: f32,
+    pub kz: f32,
+    pub amplitude: f32,
+    pub phase: f32,
+}
+
+/// Water surface `y = height + Σ aᵢ sin(kxᵢ x + kzᵢ z + φᵢ)` on an `n × n` grid with the
+/// analytic normals `(−∂y/∂x, 1, −∂y/∂z)`.
+pub fn wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) -> TriMesh {
+    let h = |x: f32, z: f32| height + waves.iter().map(|w| w.amplitude * (w.kx * x + w.kz * z + w.phase).sin()).sum::<f32>();
+    let nrm = |x: f32, z: f32| {
+        let (mut dx, mut dz) = (0.0, 0.0);
+        for w in waves {
+            let c = w.amplitude * (w.kx * x + w.kz * z + w.phase).cos();
+            dx += c * w.kx;
+            dz += c * w.kz;
+        }
+        Vec3::new(-dx, 1.0, -dz)
+    };
+    // Analytic normals are never zero (their y is 1), so this cannot fail.
+    TriMesh::heightfield(n, size, h, nrm).expect("heightfield normals have y = 1")
+}
+
+/// The rippled pool of `shared/reference` with an `n × n` water grid: directional
+/// light along (0.3, −1, −0.2) with irradiance 1, water IOR 1.333 at y ≈ 0.8, floor
+/// y = 0 measured over x, z ∈ [−1, 1] on `cells × cells` cells.
+pub fn wave_pool(n: usize, cells: usize) -> BenchScene {
+    let waves = [
+        Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 },
+        Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 },
+    ];
+    let desc = SceneDescription {
+        name: "wave_pool".into(),
+        light: LightDescription { kind: "directional".into(), direction: [0.3, -1.0, -0.2], irradiance: 1.0 },
+        generators: vec![GeneratorDescription {
+            shape: "heightfield".into(),
+            material: "glass".into(),
+            ior: 1.333,
+            n,
+            size: 4.0,
+            height: 0.8,
+            waves: waves.iter().map(|w| [w.kx, w.kz, w.amplitude, w.phase]).collect(),
+        }],
+        receiver: ReceiverDescription { y: 0.0, size: 2.0 },
+        max_depth: 3,
+    };
+    desc.build(cells).expect("the built-in pool description is valid")
+}
+
+/// A glass sphere (IOR 1.5, radius 0.5) 1 m above a floor, lit by a point light
+/// straight above: the bright focal spot under a glass ball.
+pub fn glass_sphere(segments: usize) -> BenchScene {
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Point { position: Vec3::new(0.0, 4.0, 0.0), intensity: 10.0 })],
+        generators: vec![Generator {
+            mesh: TriMesh::uv_sphere(Vec3::new(0.0, 1.0, 0.0), 0.5, segments / 2, segments),
+            interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
+        }],
+        receivers: vec![floor(4.0)],
+    };
+    BenchScene { name: "glass_sphere".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
+}
+
+/// A mirror ring (radius 1, height 0.3) on a floor under a low directional light:
+/// the cardioid of Ernst et al. 2005, Fig. 1.
+pub fn metal_ring(segments: usize) -> BenchScene {
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(1.0, -0.45, 0.0), irradiance: 1.0 })],
+        generators: vec![Generator {
+            mesh: TriMesh::ring(Vec3::ZERO, 1.0, 0.3, segments),
+            interaction: SpecularInteraction::Reflect,
+        }],
+        receivers: vec![floor(4.0)],
+    };
+    BenchScene { name: "metal_ring".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
+}
+
+/// A square floor `size` wide at y = 0, facing up, light grey.
+pub fn floor(size: f32) -> Receiver {
+    Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * (0.5 * size), Vec3::X * (0.5 * size)), albedo: Vec3::splat(0.8) }
+}
+
+/// The scene description format of `shared/reference/*_scene.json`.
+#[derive(Clone, Debug, Deserialize)]
+pub struct SceneDescription {
+    pub name: String,
+    pub light: LightDescription,
+    pub generators: Vec<GeneratorDescription>,
+    pub receiver: ReceiverDescription,
+    pub max_depth: u32,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+pub struct LightDescription {
+    #[serde(rename = "type")]
+    pub kind: String,
+    pub direction: [f32; 3],
+    pub irradiance: f32,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+pub struct GeneratorDescription {
+    pub shape: String,
+    pub material: String,
+    pub ior: f32,
+    pub n: usize,
+    pub size: f32,
+    pub height: f32,
+    /// `[kx, kz, amplitude, phase]` per wave.
+    pub waves: Vec<[f32; 4]>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+pub struct ReceiverDescription {
+    pub y: f32,
+    /// Side of the measured square, centred on the origin.
+    pub size: f32,
+}
+
+impl SceneDescription {
+    /// Parses the JSON text of a scene description.
+    pub fn from_json(text: &str) -> Result<Self, String> {
+        serde_json::from_str(text).map_err(|e| format!("scene description does not parse: {e}"))
+    }
+
+    /// Builds the scene, with its measured region cut into `cells × cells`.
+    pub fn build(&self, cells: usize) -> Result<BenchScene, String> {
+        if self.light.kind != "directional" {
+            return Err(format!("light type {:?} is not supported (only \"directional\")", self.light.kind));
+        }
+        let light = Light::white(LightKind::Directional {
+            direction: Vec3::from_array(self.light.direction),
+            irradiance: self.light.irradiance,
+        });
+        let generators = self
+            .generators
+            .iter()
+            .map(|g| {
+                if g.shape != "heightfield" {
+                    return Err(format!("generator shape {:?} is not supported (only \"heightfield\")", g.shape));
+                }
+                let interaction = match g.material.as_str() {
+                    "glass" => SpecularInteraction::Refract { ior: g.ior, dispersion: None },
+                    "mirror" => SpecularInteraction::Reflect,
+                    m => return Err(format!("generator material {m:?} is not supported (\"glass\" or \"mirror\")")),
+                };
+                let waves: Vec<Wave> =
+                    g.waves.iter().map(|&[kx, kz, amplitude, phase]| Wave { kx, kz, amplitude, phase }).collect();
+                Ok(Generator { mesh: wave_heightfield(g.n, g.size, g.height, &waves), interaction })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let half = 0.5 * self.receiver.size;
+        let mut floor = floor(8.0 * self.receiver.size);
+        floor.mesh = floor.mesh.transformed(&glam::Affine3A::from_translation(Vec3::Y * self.receiver.y));
+        let scene = Scene { lights: vec![light], generators, receivers: vec![floor] };
+        scene.validate().map_err(|e| e.to_string())?;
+        Ok(BenchScene {
+            name: self.name.clone(),
+            scene,
+            region: GridRegion::horizontal(-half, -half, self.receiver.y, self.receiver.size, cells),
+        })
+    }
+}

@@ -1,0 +1,362 @@
+//! The ground-truth photon tracer (CPU, rayon, deterministic): photons leave each
+//! light towards the generators, follow any number of specular reflections and
+//! refractions with exact Fresnel weights, and are deposited where they first reach a
+//! receiver. Only caustic paths (light → specular⁺ → diffuse, Heckbert's L S⁺ D) are
+//! deposited: direct light is Bevy's job.
+//!
+//! At a dielectric the photon is *split* into its reflected and transmitted parts,
+//! each weighted by the Fresnel terms, rather than choosing one at random: a flat
+//! interface then transmits exactly the Fresnel fraction with no sampling noise.
+//! Branches lighter than [`TraceSettings::min_weight`] of the photon's emitted flux
+//! or deeper than [`TraceSettings::max_depth`] are dropped and their flux counted in
+//! [`TraceStats::dropped`], so energy bookkeeping stays exact.
+
+use crate::bvh::{SceneBvh, Surface};
+use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_reflectance, reflect, refract};
+use crate::params::SpecularInteraction;
+use crate::rng::Pcg32;
+use crate::scene::{Light, LightKind, Scene, SceneError};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::f32::consts::TAU;
+
+/// How many photons, from which seed, and where paths stop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TraceSettings {
+    /// Photons emitted per light.
+    pub photons_per_light: u64,
+    /// Seed of the per-photon random streams.
+    pub seed: u64,
+    /// Most specular interactions a branch may have before it is dropped.
+    pub max_depth: u32,
+    /// Branches whose flux falls below this fraction of the emitted photon's are dropped.
+    pub min_weight: f32,
+}
+
+impl Default for TraceSettings {
+    fn default() -> Self {
+        Self { photons_per_light: 1 << 20, seed: 0x5eed, max_depth: 8, min_weight: 1e-4 }
+    }
+}
+
+/// One photon deposit on a receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhotonHit {
+    pub position: Vec3,
+    /// Unit geometric normal of the receiver triangle, facing the incoming photon.
+    pub normal: Vec3,
+    /// Unit direction of travel when it arrived.
+    pub direction: Vec3,
+    /// RGB flux carried (light units × m²).
+    pub flux: Vec3,
+    /// Index into [`Scene::receivers`].
+    pub receiver: u32,
+}
+
+/// Where deposits go. Each worker fills its own empty copy; copies are merged in a
+/// fixed order, so a sink's result does not depend on the number of threads.
+pub trait PhotonSink: Send + Sync + Sized {
+    /// An empty sink of the same shape.
+    fn empty_like(&self) -> Self;
+    /// Records one deposit.
+    fn deposit(&mut self, hit: &PhotonHit);
+    /// Adds another sink's deposits to this one.
+    fn merge(&mut self, other: Self);
+}
+
+/// Energy bookkeeping of one trace, RGB flux summed over photons.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TraceStats {
+    pub photons: u64,
+    /// Flux that left the lights towards the generators.
+    pub emitted: Vec3,
+    /// Flux deposited on receivers after at least one specular interaction.
+    pub deposited: Vec3,
+    /// Flux that reached a receiver without touching a generator (direct light, not recorded).
+    pub direct: Vec3,
+    /// Flux that left the scene.
+    pub escaped: Vec3,
+    /// Flux of branches cut by `max_depth` or `min_weight`.
+    pub dropped: Vec3,
+}
+
+impl TraceStats {
+    fn add(&mut self, o: &TraceStats) {
+        self.photons += o.photons;
+        self.emitted += o.emitted;
+        self.deposited += o.deposited;
+        self.direct += o.direct;
+        self.escaped += o.escaped;
+        self.dropped += o.dropped;
+    }
+}
+
+/// Where photons of one light start and how much flux each carries.
+#[derive(Clone, Copy, Debug)]
+enum Emitter {
+    /// A rectangle perpendicular to the beam covering the generators' shadow.
+    Parallel { direction: Vec3, corner: Vec3, edge_u: Vec3, edge_v: Vec3, flux: f32 },
+    /// A cone of directions from a point (a whole sphere when `cos_max = -1`).
+    Cone { position: Vec3, axis: Vec3, cos_max: f32, flux: f32 },
+}
+
+/// An orthonormal basis `(t, b)` perpendicular to unit `n` (Duff et al. 2017).
+pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
+    let sign = 1f32.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+impl Emitter {
+    /// Aims `photons` photons of `light` at the box `(lo, hi)`.
+    fn new(light: &Light, (lo, hi): (Vec3, Vec3), photons: u64) -> Self {
+        let n = photons.max(1) as f32;
+        let center = 0.5 * (lo + hi);
+        let radius = 0.5 * (hi - lo).length() * 1.001 + 1e-4;
+        let corners = (0..8).map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { lo.x } else { hi.x },
+                if i & 2 == 0 { lo.y } else { hi.y },
+                if i & 4 == 0 { lo.z } else { hi.z },
+            )
+        });
+        match light.kind {
+            LightKind::Directional { direction, irradiance } => {
+                let d = direction.normalize();
+                let (t, b) = orthonormal_basis(d);
+                let (mut u0, mut u1, mut v0, mut v1) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
+                for c in corners {
+                    let (u, v) = ((c - center).dot(t), (c - center).dot(b));
+                    (u0, u1, v0, v1) = (u0.min(u), u1.max(u), v0.min(v), v1.max(v));
+                }
+                // Pad by a hair so that photons grazing the bounds still hit.
+                let pad = 1e-3 * radius;
+                let (u0, u1, v0, v1) = (u0 - pad, u1 + pad, v0 - pad, v1 + pad);
+                let area = (u1 - u0) * (v1 - v0);
+                Emitter::Parallel {
+                    direction: d,
+                    corner: center - d * (2.0 * radius) + t * u0 + b * v0,
+                    edge_u: t * (u1 - u0),
+                    edge_v: b * (v1 - v0),
+                    flux: irradiance * area / n,
+                }
+            }
+            LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
+                let to_center = center - position;
+                let dist = to_center.length();
+                let (axis, cos_max) = if dist > radius {
+                    (to_center / dist, (1.0 - (radius / dist).powi(2)).max(0.0).sqrt())
+                } else {
+                    (Vec3::Y, -1.0)
+                };
+                let solid_angle = TAU * (1.0 - cos_max);
+                Emitter::Cone { position, axis, cos_max, flux: intensity * solid_angle / n }
+            }
+        }
+    }
+
+    /// Photon origin, unit direction and scalar flux from two uniform numbers.
+    #[inline]
+    fn sample(&self, light: &Light, xi: Vec2) -> (Vec3, Vec3, f32) {
+        match *self {
+            Emitter::Parallel { direction, corner, edge_u, edge_v, flux } => {
+                (corner + edge_u * xi.x + edge_v * xi.y, direction, flux)
+            }
+            Emitter::Cone { position, axis, cos_max, flux } => {
+                // Uniform over the spherical cap: cos θ uniform in [cos_max, 1].
+                let cos_t = 1.0 - xi.x * (1.0 - cos_max);
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                let phi = TAU * xi.y;
+                let (t, b) = orthonormal_basis(axis);
+                let dir = (axis * cos_t + t * (sin_t * phi.cos()) + b * (sin_t * phi.sin())).normalize();
+                (position, dir, flux * light.cone_attenuation(dir))
+            }
+        }
+    }
+}
+
+/// A branch of a photon path waiting to be followed.
+#[derive(Clone, Copy)]
+struct Branch {
+    origin: Vec3,
+    dir: Vec3,
+    flux: Vec3,
+    depth: u32,
+}
+
+/// A scene prepared for tracing: validated, with its BVH built once.
+pub struct PhotonTracer<'a> {
+    scene: &'a Scene,
+    bvh: SceneBvh,
+    /// Trace one RGB channel per photon (with its own IOR) when any generator disperses.
+    dispersive: bool,
+    /// Offset used to leave a surface without hitting it again.
+    epsilon: f32,
+}
+
+impl<'a> PhotonTracer<'a> {
+    /// Validates `scene` and builds its BVH.
+    pub fn new(scene: &'a Scene) -> Result<Self, SceneError> {
+        scene.validate()?;
+        let bvh = SceneBvh::build(scene);
+        let dispersive = scene.generators.iter().any(|g| {
+            matches!(g.interaction, SpecularInteraction::Refract { dispersion: Some(d), .. } if d.b != 0.0)
+        });
+        let extent = scene
+            .generators
+            .iter()
+            .map(|g| &g.mesh)
+            .chain(scene.receivers.iter().map(|r| &r.mesh))
+            .map(|m| {
+                let (lo, hi) = m.bounds();
+                (hi - lo).max_element().max(lo.abs().max_element()).max(hi.abs().max_element())
+            })
+            .fold(1.0f32, f32::max);
+        Ok(Self { scene, bvh, dispersive, epsilon: 2e-5 * extent })
+    }
+
+    /// The scene's BVH, for callers that cast their own rays (view rendering).
+    pub fn bvh(&self) -> &SceneBvh {
+        &self.bvh
+    }
+
+    /// Traces `settings.photons_per_light` photons from every light into `sink`,
+    /// calling `progress(done, total)` between batches.
+    pub fn trace<S: PhotonSink>(
+        &self,
+        settings: &TraceSettings,
+        sink: &mut S,
+        progress: &(dyn Fn(u64, u64) + Sync),
+    ) -> TraceStats {
+        const BATCH: u64 = 1 << 14;
+        let mut stats = TraceStats::default();
+        let Some(bounds) = self.scene.generator_bounds() else {
+            return stats;
+        };
+        let per_light = settings.photons_per_light;
+        let total = per_light * self.scene.lights.len() as u64;
+        let wave = BATCH * 4 * rayon::current_num_threads() as u64;
+        let mut done = 0;
+        for (li, light) in self.scene.lights.iter().enumerate() {
+            let emitter = Emitter::new(light, bounds, per_light);
+            let mut start = 0;
+            while start < per_light {
+                let end = (start + wave).min(per_light);
+                // Batches of a wave run in parallel; their sinks merge in batch order.
+                let results: Vec<(S, TraceStats)> = (start..end)
+                    .step_by(BATCH as usize)
+                    .collect::<Vec<_>>()
+                    .into_par_iter()
+                    .map(|b0| {
+                        let mut local = sink.empty_like();
+                        let mut st = TraceStats::default();
+                        for i in b0..(b0 + BATCH).min(end) {
+                            self.trace_photon(light, li as u32, &emitter, settings, i, &mut local, &mut st);
+                        }
+                        (local, st)
+                    })
+                    .collect();
+                for (s, st) in results {
+                    sink.merge(s);
+                    stats.add(&st);
+                }
+                done += end - start;
+                progress(done, total);
+                start = end;
+            }
+        }
+        stats
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn trace_photon<S: PhotonSink>(
+        &self,
+        light: &Light,
+        light_index: u32,
+        emitter: &Emitter,
+        settings: &TraceSettings,
+        index: u64,
+        sink: &mut S,
+        stats: &mut TraceStats,
+    ) {
+        let mut rng = Pcg32::for_photon(settings.seed, light_index, index);
+        let xi = Vec2::new(rng.next_f32(), rng.next_f32());
+        let (origin, dir, flux) = emitter.sample(light, xi);
+        // Dispersive scenes: each photon carries one channel, three times as strong.
+        let channel = self.dispersive.then(|| (index % 3) as usize);
+        let color = match channel {
+            Some(c) => Vec3::from_array(std::array::from_fn(|i| if i == c { 3.0 } else { 0.0 })) * light.color,
+            None => light.color,
+        };
+        let wavelength = RGB_WAVELENGTHS_UM[channel.unwrap_or(1)];
+        let emitted = color * flux;
+        stats.photons += 1;
+        stats.emitted += emitted;
+        if flux <= 0.0 {
+            return;
+        }
+        let cutoff = settings.min_weight * emitted.max_element();
+
+        let mut stack = [Branch { origin, dir, flux: emitted, depth: 0 }; 16];
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let b = stack[len];
+            let Some(hit) = self.bvh.intersect(b.origin, b.dir, 0.0, f32::INFINITY) else {
+                stats.escaped += b.flux;
+                continue;
+            };
+            let p = b.origin + b.dir * hit.t;
+            let ng = hit.geometric_normal;
+            match hit.surface {
+                Surface::Receiver(r) => {
+                    if b.depth == 0 {
+                        stats.direct += b.flux;
+                    } else {
+                        stats.deposited += b.flux;
+                        let normal = if ng.dot(b.dir) > 0.0 { -ng } else { ng };
+                        sink.deposit(&PhotonHit { position: p, normal, direction: b.dir, flux: b.flux, receiver: r });
+                    }
+                }
+                Surface::Generator(g) => {
+                    let generator = &self.scene.generators[g as usize];
+                    let ns = generator.mesh.shading_normal(hit.triangle as usize, hit.uv);
+                    let mut children = [(Vec3::ZERO, 0.0f32); 2];
+                    match generator.interaction.ior_at(wavelength) {
+                        None => children[0] = (reflect(b.dir, ns), 1.0),
+                        Some(ior) => {
+                            let entering = b.dir.dot(ng) < 0.0;
+                            let eta = if entering { 1.0 / ior } else { ior };
+                            let r = fresnel_reflectance(b.dir.dot(ns), eta);
+                            children[0] = (reflect(b.dir, ns), r);
+                            if let Refraction::Transmitted(t) = refract(b.dir, ns, eta) {
+                                children[1] = (t, 1.0 - r);
+                            } else {
+                                children[0].1 = 1.0;
+                            }
+                        }
+                    }
+                    for (dir, weight) in children {
+                        if weight <= 0.0 {
+                            continue;
+                        }
+                        let flux = b.flux * weight;
+                        if b.depth + 1 > settings.max_depth || flux.max_element() < cutoff || len == stack.len() {
+                            stats.dropped += flux;
+                            continue;
+                        }
+                        // Leave the surface on the side the new direction goes.
+                        let side = if dir.dot(ng) >= 0.0 { ng } else { -ng };
+                        stack[len] = Branch { origin: p + side * self.epsilon, dir, flux, depth: b.depth + 1 };
+                        len += 1;
+                    }
+                }
+            }
+        }
+    }
+}
