@@ -2,7 +2,7 @@
 //! or by kernel density estimation at arbitrary receiver points.
 
 use crate::tracer::{PhotonHit, PhotonSink};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use std::collections::HashMap;
 
 /// A rectangle on a receiver plane cut into `nu × nv` cells: the corner `origin` and
@@ -59,11 +59,11 @@ impl GridRegion {
 }
 
 /// Caustic irradiance binned on a [`GridRegion`]: deposited flux over cell area,
-/// RGB, row-major.
+/// RGB, row-major. Flux accumulates in f64: a cell may receive 10⁶ photons.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IrradianceGrid {
     pub region: GridRegion,
-    flux: Vec<Vec3>,
+    flux: Vec<DVec3>,
     tolerance: f32,
 }
 
@@ -72,13 +72,13 @@ impl IrradianceGrid {
     /// from its plane.
     pub fn new(region: GridRegion) -> Self {
         let tolerance = 1e-4 * region.edge_u.length().max(region.edge_v.length());
-        Self { region, flux: vec![Vec3::ZERO; region.nu * region.nv], tolerance }
+        Self { region, flux: vec![DVec3::ZERO; region.nu * region.nv], tolerance }
     }
 
     /// Irradiance per cell (flux / cell area), RGB, row-major.
     pub fn irradiance(&self) -> Vec<Vec3> {
-        let inv = 1.0 / self.region.cell_area();
-        self.flux.iter().map(|f| *f * inv).collect()
+        let inv = 1.0 / self.region.cell_area() as f64;
+        self.flux.iter().map(|f| (*f * inv).as_vec3()).collect()
     }
 
     /// Irradiance of one channel-average (luminance-free mean of RGB) per cell.
@@ -87,7 +87,7 @@ impl IrradianceGrid {
     }
 
     /// Total flux deposited in the region.
-    pub fn total_flux(&self) -> Vec3 {
+    pub fn total_flux(&self) -> DVec3 {
         self.flux.iter().copied().sum()
     }
 }
@@ -99,7 +99,7 @@ impl PhotonSink for IrradianceGrid {
     #[inline]
     fn deposit(&mut self, hit: &PhotonHit) {
         if let Some(i) = self.region.cell_of(hit.position, self.tolerance) {
-            self.flux[i] += hit.flux;
+            self.flux[i] += hit.flux.as_dvec3();
         }
     }
     fn merge(&mut self, other: Self) {

@@ -16,7 +16,7 @@ use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_reflectance, reflect
 use crate::params::SpecularInteraction;
 use crate::rng::Pcg32;
 use crate::scene::{Light, LightKind, Scene, SceneError};
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::TAU;
 
@@ -64,20 +64,21 @@ pub trait PhotonSink: Send + Sync + Sized {
     fn merge(&mut self, other: Self);
 }
 
-/// Energy bookkeeping of one trace, RGB flux summed over photons.
+/// Energy bookkeeping of one trace, RGB flux summed over photons (in f64, so that
+/// the balance closes to rounding even for 10⁹ photons).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TraceStats {
     pub photons: u64,
     /// Flux that left the lights towards the generators.
-    pub emitted: Vec3,
+    pub emitted: DVec3,
     /// Flux deposited on receivers after at least one specular interaction.
-    pub deposited: Vec3,
+    pub deposited: DVec3,
     /// Flux that reached a receiver without touching a generator (direct light, not recorded).
-    pub direct: Vec3,
+    pub direct: DVec3,
     /// Flux that left the scene.
-    pub escaped: Vec3,
+    pub escaped: DVec3,
     /// Flux of branches cut by `max_depth` or `min_weight`.
-    pub dropped: Vec3,
+    pub dropped: DVec3,
 }
 
 impl TraceStats {
@@ -296,7 +297,7 @@ impl<'a> PhotonTracer<'a> {
         let wavelength = RGB_WAVELENGTHS_UM[channel.unwrap_or(1)];
         let emitted = color * flux;
         stats.photons += 1;
-        stats.emitted += emitted;
+        stats.emitted += emitted.as_dvec3();
         if flux <= 0.0 {
             return;
         }
@@ -308,7 +309,7 @@ impl<'a> PhotonTracer<'a> {
             len -= 1;
             let b = stack[len];
             let Some(hit) = self.bvh.intersect(b.origin, b.dir, 0.0, f32::INFINITY) else {
-                stats.escaped += b.flux;
+                stats.escaped += b.flux.as_dvec3();
                 continue;
             };
             let p = b.origin + b.dir * hit.t;
@@ -316,9 +317,9 @@ impl<'a> PhotonTracer<'a> {
             match hit.surface {
                 Surface::Receiver(r) => {
                     if b.depth == 0 {
-                        stats.direct += b.flux;
+                        stats.direct += b.flux.as_dvec3();
                     } else {
-                        stats.deposited += b.flux;
+                        stats.deposited += b.flux.as_dvec3();
                         let normal = if ng.dot(b.dir) > 0.0 { -ng } else { ng };
                         sink.deposit(&PhotonHit { position: p, normal, direction: b.dir, flux: b.flux, receiver: r });
                     }
@@ -347,7 +348,7 @@ impl<'a> PhotonTracer<'a> {
                         }
                         let flux = b.flux * weight;
                         if b.depth + 1 > settings.max_depth || flux.max_element() < cutoff || len == stack.len() {
-                            stats.dropped += flux;
+                            stats.dropped += flux.as_dvec3();
                             continue;
                         }
                         // Leave the surface on the side the new direction goes.
