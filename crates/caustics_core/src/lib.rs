@@ -14,5 +14,6 @@ pub mod rng;
 pub mod scene;
 pub mod scenes;
 pub mod tracer;
+pub mod view;
 
 pub use glam;

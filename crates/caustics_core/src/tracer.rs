@@ -93,12 +93,82 @@ impl TraceStats {
 }
 
 /// Where photons of one light start and how much flux each carries.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 enum Emitter {
-    /// A rectangle perpendicular to the beam covering the generators' shadow.
-    Parallel { direction: Vec3, corner: Vec3, edge_u: Vec3, edge_v: Vec3, flux: f32 },
+    /// Points on a plane perpendicular to the beam, uniform over the cells of
+    /// `footprint` that the generators' shadow touches.
+    Parallel { direction: Vec3, footprint: Footprint, flux: f32 },
     /// A cone of directions from a point (a whole sphere when `cos_max = -1`).
     Cone { position: Vec3, axis: Vec3, cos_max: f32, flux: f32 },
+}
+
+/// The generators' shadow on a plane perpendicular to a parallel beam, as the set of
+/// cells of a `RES × RES` grid over its bounding rectangle that any generator
+/// triangle's projected bounding box overlaps (conservative: every photon that can
+/// hit a generator starts in a marked cell). Emitting only there wastes no photons
+/// on light that misses the generators.
+#[derive(Clone, Debug)]
+struct Footprint {
+    corner: Vec3,
+    cell_u: Vec3,
+    cell_v: Vec3,
+    /// Marked cells as (column, row).
+    cells: Vec<(u16, u16)>,
+}
+
+impl Footprint {
+    const RES: usize = 128;
+
+    fn new(scene: &Scene, direction: Vec3, center: Vec3, radius: f32) -> Self {
+        let (t, b) = orthonormal_basis(direction);
+        let project = |p: Vec3| Vec2::new((p - center).dot(t), (p - center).dot(b));
+        let (mut lo, mut hi) = (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN));
+        for g in &scene.generators {
+            for &p in g.mesh.positions() {
+                (lo, hi) = (lo.min(project(p)), hi.max(project(p)));
+            }
+        }
+        // Pad by a hair so that photons grazing the outline still start inside.
+        let pad = Vec2::splat(1e-3 * radius);
+        let (lo, hi) = (lo - pad, hi + pad);
+        let cell = (hi - lo) / Self::RES as f32;
+        let mut marked = vec![false; Self::RES * Self::RES];
+        let to_cell = |x: f32, lo: f32, size: f32| (((x - lo) / size).floor().max(0.0) as usize).min(Self::RES - 1);
+        for g in &scene.generators {
+            for tri in 0..g.mesh.triangles().len() {
+                let q = g.mesh.corners(tri).map(project);
+                let (a, c) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+                for row in to_cell(a.y, lo.y, cell.y)..=to_cell(c.y, lo.y, cell.y) {
+                    for col in to_cell(a.x, lo.x, cell.x)..=to_cell(c.x, lo.x, cell.x) {
+                        marked[row * Self::RES + col] = true;
+                    }
+                }
+            }
+        }
+        let cells = (0..marked.len())
+            .filter(|&i| marked[i])
+            .map(|i| ((i % Self::RES) as u16, (i / Self::RES) as u16))
+            .collect();
+        Self {
+            corner: center - direction * (2.0 * radius) + t * lo.x + b * lo.y,
+            cell_u: t * cell.x,
+            cell_v: b * cell.y,
+            cells,
+        }
+    }
+
+    /// Area of all marked cells.
+    fn area(&self) -> f32 {
+        self.cells.len() as f32 * self.cell_u.length() * self.cell_v.length()
+    }
+
+    /// A uniform point over the marked cells.
+    #[inline]
+    fn sample(&self, pick: f32, xi: Vec2) -> Vec3 {
+        let i = ((pick * self.cells.len() as f32) as usize).min(self.cells.len() - 1);
+        let (col, row) = self.cells[i];
+        self.corner + self.cell_u * (col as f32 + xi.x) + self.cell_v * (row as f32 + xi.y)
+    }
 }
 
 /// An orthonormal basis `(t, b)` perpendicular to unit `n` (Duff et al. 2017).
@@ -113,38 +183,16 @@ pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
 }
 
 impl Emitter {
-    /// Aims `photons` photons of `light` at the box `(lo, hi)`.
-    fn new(light: &Light, (lo, hi): (Vec3, Vec3), photons: u64) -> Self {
+    /// Aims `photons` photons of `light` at the scene's generators.
+    fn new(light: &Light, scene: &Scene, (lo, hi): (Vec3, Vec3), photons: u64) -> Self {
         let n = photons.max(1) as f32;
         let center = 0.5 * (lo + hi);
         let radius = 0.5 * (hi - lo).length() * 1.001 + 1e-4;
-        let corners = (0..8).map(|i| {
-            Vec3::new(
-                if i & 1 == 0 { lo.x } else { hi.x },
-                if i & 2 == 0 { lo.y } else { hi.y },
-                if i & 4 == 0 { lo.z } else { hi.z },
-            )
-        });
         match light.kind {
             LightKind::Directional { direction, irradiance } => {
-                let d = direction.normalize();
-                let (t, b) = orthonormal_basis(d);
-                let (mut u0, mut u1, mut v0, mut v1) = (f32::MAX, f32::MIN, f32::MAX, f32::MIN);
-                for c in corners {
-                    let (u, v) = ((c - center).dot(t), (c - center).dot(b));
-                    (u0, u1, v0, v1) = (u0.min(u), u1.max(u), v0.min(v), v1.max(v));
-                }
-                // Pad by a hair so that photons grazing the bounds still hit.
-                let pad = 1e-3 * radius;
-                let (u0, u1, v0, v1) = (u0 - pad, u1 + pad, v0 - pad, v1 + pad);
-                let area = (u1 - u0) * (v1 - v0);
-                Emitter::Parallel {
-                    direction: d,
-                    corner: center - d * (2.0 * radius) + t * u0 + b * v0,
-                    edge_u: t * (u1 - u0),
-                    edge_v: b * (v1 - v0),
-                    flux: irradiance * area / n,
-                }
+                let direction = direction.normalize();
+                let footprint = Footprint::new(scene, direction, center, radius);
+                Emitter::Parallel { direction, flux: irradiance * footprint.area() / n, footprint }
             }
             LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
                 let to_center = center - position;
@@ -160,14 +208,15 @@ impl Emitter {
         }
     }
 
-    /// Photon origin, unit direction and scalar flux from two uniform numbers.
+    /// Photon origin, unit direction and scalar flux from uniform random numbers.
     #[inline]
-    fn sample(&self, light: &Light, xi: Vec2) -> (Vec3, Vec3, f32) {
-        match *self {
-            Emitter::Parallel { direction, corner, edge_u, edge_v, flux } => {
-                (corner + edge_u * xi.x + edge_v * xi.y, direction, flux)
+    fn sample(&self, light: &Light, rng: &mut Pcg32) -> (Vec3, Vec3, f32) {
+        let xi = Vec2::new(rng.next_f32(), rng.next_f32());
+        match self {
+            Emitter::Parallel { direction, footprint, flux } => {
+                (footprint.sample(rng.next_f32(), xi), *direction, *flux)
             }
-            Emitter::Cone { position, axis, cos_max, flux } => {
+            &Emitter::Cone { position, axis, cos_max, flux } => {
                 // Uniform over the spherical cap: cos θ uniform in [cos_max, 1].
                 let cos_t = 1.0 - xi.x * (1.0 - cos_max);
                 let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
@@ -243,7 +292,7 @@ impl<'a> PhotonTracer<'a> {
         let wave = BATCH * 4 * rayon::current_num_threads() as u64;
         let mut done = 0;
         for (li, light) in self.scene.lights.iter().enumerate() {
-            let emitter = Emitter::new(light, bounds, per_light);
+            let emitter = Emitter::new(light, self.scene, bounds, per_light);
             let mut start = 0;
             while start < per_light {
                 let end = (start + wave).min(per_light);
@@ -286,8 +335,7 @@ impl<'a> PhotonTracer<'a> {
         stats: &mut TraceStats,
     ) {
         let mut rng = Pcg32::for_photon(settings.seed, light_index, index);
-        let xi = Vec2::new(rng.next_f32(), rng.next_f32());
-        let (origin, dir, flux) = emitter.sample(light, xi);
+        let (origin, dir, flux) = emitter.sample(light, &mut rng);
         // Dispersive scenes: each photon carries one channel, three times as strong.
         let channel = self.dispersive.then(|| (index % 3) as usize);
         let color = match channel {

@@ -1,0 +1,137 @@
+//! Shading a camera view on the CPU: receivers lit by the lights (with shadows) and
+//! by caustic irradiance from a [`PhotonMap`], seen directly or through the
+//! generators (Whitted-style specular paths). This is the reference image a GPU
+//! technique's frame is compared with, pixel by pixel.
+
+use crate::bvh::Surface;
+use crate::estimate::PhotonMap;
+use crate::optics::{Refraction, fresnel_reflectance, reflect, refract};
+use crate::scene::{LightKind, Scene};
+use crate::tracer::PhotonTracer;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PinholeCamera {
+    pub position: Vec3,
+    pub look_at: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view, radians.
+    pub fov_y: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl PinholeCamera {
+    /// Origin and unit direction of the ray through pixel centre `(x, y)` (y down).
+    pub fn ray(&self, x: u32, y: u32) -> (Vec3, Vec3) {
+        let forward = (self.look_at - self.position).normalize_or(Vec3::NEG_Z);
+        let right = forward.cross(self.up).normalize_or(Vec3::X);
+        let up = right.cross(forward);
+        let half_h = (0.5 * self.fov_y).tan();
+        let half_w = half_h * self.width as f32 / self.height.max(1) as f32;
+        let sx = (2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0) * half_w;
+        let sy = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * half_h;
+        (self.position, (forward + right * sx + up * sy).normalize())
+    }
+}
+
+/// A rendered view: linear radiance and the caustic irradiance seen at each pixel.
+#[derive(Clone, Debug)]
+pub struct ViewImage {
+    pub width: u32,
+    pub height: u32,
+    /// Outgoing radiance towards the camera, linear RGB.
+    pub radiance: Vec<Vec3>,
+    /// Caustic irradiance on the receiver seen at each pixel (zero elsewhere).
+    pub caustic: Vec<Vec3>,
+}
+
+/// Radiance of the sky seen through the generators or past the scene.
+const BACKGROUND: Vec3 = Vec3::new(0.02, 0.025, 0.03);
+/// Most specular bounces a camera path follows.
+const MAX_VIEW_DEPTH: u32 = 6;
+
+/// Renders `camera`'s view: Lambertian receivers under direct light (shadowed by all
+/// geometry) plus the caustic irradiance of `photons` — radiance `albedo/π · E`.
+pub fn render_view(tracer: &PhotonTracer, scene: &Scene, camera: &PinholeCamera, photons: &PhotonMap) -> ViewImage {
+    let pixels: Vec<(Vec3, Vec3)> = (0..camera.width * camera.height)
+        .into_par_iter()
+        .map(|i| {
+            let (o, d) = camera.ray(i % camera.width, i / camera.width);
+            shade(tracer, scene, photons, o, d, 0)
+        })
+        .collect();
+    let (radiance, caustic) = pixels.into_iter().unzip();
+    ViewImage { width: camera.width, height: camera.height, radiance, caustic }
+}
+
+/// Radiance along a ray and, if it ends on a receiver seen directly, that point's caustic irradiance.
+fn shade(tracer: &PhotonTracer, scene: &Scene, photons: &PhotonMap, o: Vec3, d: Vec3, depth: u32) -> (Vec3, Vec3) {
+    let Some(hit) = tracer.bvh().intersect(o, d, 0.0, f32::INFINITY) else {
+        return (BACKGROUND, Vec3::ZERO);
+    };
+    let p = o + d * hit.t;
+    let ng = hit.geometric_normal;
+    let eps = 1e-4 * (1.0 + p.abs().max_element());
+    match hit.surface {
+        Surface::Receiver(r) => {
+            let n = if ng.dot(d) > 0.0 { -ng } else { ng };
+            let p = p + n * eps;
+            let caustic = photons.irradiance_at(p, n);
+            let direct = direct_irradiance(tracer, scene, p, n);
+            let albedo = scene.receivers[r as usize].albedo;
+            (albedo / PI * (direct + caustic), if depth == 0 { caustic } else { Vec3::ZERO })
+        }
+        Surface::Generator(g) if depth < MAX_VIEW_DEPTH => {
+            let generator = &scene.generators[g as usize];
+            let ns = generator.mesh.shading_normal(hit.triangle as usize, hit.uv);
+            let leave = |dir: Vec3| p + if dir.dot(ng) >= 0.0 { ng } else { -ng } * eps;
+            let reflected = reflect(d, ns);
+            match generator.interaction.ior_at(crate::optics::RGB_WAVELENGTHS_UM[1]) {
+                None => (shade(tracer, scene, photons, leave(reflected), reflected, depth + 1).0, Vec3::ZERO),
+                Some(ior) => {
+                    let eta = if d.dot(ng) < 0.0 { 1.0 / ior } else { ior };
+                    let r = fresnel_reflectance(d.dot(ns), eta);
+                    let mut l = Vec3::ZERO;
+                    if r > 0.01 {
+                        l += r * shade(tracer, scene, photons, leave(reflected), reflected, depth + 1).0;
+                    }
+                    if let Refraction::Transmitted(t) = refract(d, ns, eta) {
+                        l += (1.0 - r) * shade(tracer, scene, photons, leave(t), t, depth + 1).0;
+                    }
+                    (l, Vec3::ZERO)
+                }
+            }
+        }
+        Surface::Generator(_) => (BACKGROUND, Vec3::ZERO),
+    }
+}
+
+/// Irradiance from the lights at `p` with normal `n`, zero where anything blocks the
+/// light (generators included: their light arrives as caustics instead).
+fn direct_irradiance(tracer: &PhotonTracer, scene: &Scene, p: Vec3, n: Vec3) -> Vec3 {
+    scene
+        .lights
+        .iter()
+        .map(|light| {
+            let (to_light, distance, e) = match light.kind {
+                LightKind::Directional { direction, irradiance } => (-direction.normalize(), f32::INFINITY, irradiance),
+                LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
+                    let v = position - p;
+                    let r = v.length();
+                    let att = light.cone_attenuation(-v / r);
+                    (v / r, r, intensity * att / (r * r).max(1e-8))
+                }
+            };
+            let cos = n.dot(to_light);
+            if cos <= 0.0 || e <= 0.0 || tracer.bvh().intersect(p, to_light, 0.0, distance).is_some() {
+                Vec3::ZERO
+            } else {
+                light.color * e * cos
+            }
+        })
+        .sum()
+}
