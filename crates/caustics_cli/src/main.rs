@@ -1,1 +1,67 @@
-fn main(){}
+//! `caustics`: render a scene's caustics, write irradiance planes, and run the
+//! error-against-run-time bench. Errors are one line on stderr and a non-zero exit.
+
+mod bench;
+mod images;
+mod plot;
+mod render;
+mod scenes;
+
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "caustics", version, about = "Caustics rendering and measurement for bevy_caustics")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a view of a scene (or its caustic irradiance plane) with one method.
+    Render(render::RenderArgs),
+    /// Run every method at several quality settings on the built-in scenes and write
+    /// a CSV, a Markdown table and a PNG plot of error against run time.
+    Bench(bench::BenchArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
+        }
+    };
+    let result = match cli.command {
+        Command::Render(args) => render::run(args),
+        Command::Bench(args) => bench::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("caustics: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Creates the parent folder of an output file.
+fn prepare_output(path: &std::path::Path) -> Result<PathBuf, String> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    }
+    Ok(path.to_path_buf())
+}
+
+/// A progress line on stderr, rewritten in place.
+fn progress(label: &str) -> impl Fn(u64, u64) + Sync + '_ {
+    move |done, total| {
+        eprint!("\r{label}: {:5.1} % ({done}/{total} photons)", 100.0 * done as f64 / total.max(1) as f64);
+        if done == total {
+            eprintln!();
+        }
+    }
+}

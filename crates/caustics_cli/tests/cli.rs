@@ -1,0 +1,94 @@
+//! The `caustics` command end to end: outputs appear, bad input is one clear line.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn caustics(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_caustics")).args(args).output().expect("the caustics binary runs")
+}
+
+fn out_dir(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// A failure is one line on stderr starting with `caustics:`, no backtrace, exit ≠ 0.
+fn assert_clean_failure(out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "should fail: {stderr}");
+    assert!(stderr.contains(needle), "stderr should mention {needle:?}: {stderr}");
+    assert!(!stderr.contains("panicked") && !stderr.contains("backtrace"), "{stderr}");
+}
+
+#[test]
+fn bad_input_is_one_clear_line() {
+    let dir = out_dir("bad_input");
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = caustics(&["render", "no-such-scene.gltf"]);
+    assert_clean_failure(&out, "no such file");
+    assert_eq!(String::from_utf8_lossy(&out.stderr).trim().lines().count(), 1);
+
+    let broken = dir.join("broken.json");
+    std::fs::write(&broken, "{ \"name\": \"x\", \"light\": ").unwrap();
+    assert_clean_failure(&caustics(&["render", broken.to_str().unwrap()]), "does not parse");
+
+    let bad_ior = dir.join("bad_ior.json");
+    std::fs::write(
+        &bad_ior,
+        r#"{"name": "x", "light": {"type": "directional", "direction": [0, -1, 0], "irradiance": 1},
+            "generators": [{"shape": "heightfield", "material": "glass", "ior": 0.5, "n": 8, "size": 1,
+                            "height": 1, "waves": []}],
+            "receiver": {"y": 0, "size": 1}, "max_depth": 3}"#,
+    )
+    .unwrap();
+    assert_clean_failure(&caustics(&["render", bad_ior.to_str().unwrap()]), "index of refraction 0.5 is impossible");
+
+    assert_clean_failure(&caustics(&["render", "pool", "--size", "0x10"]), "size");
+    assert_clean_failure(&caustics(&["bench", "--scenes", "teapot"]), "unknown scene");
+}
+
+#[test]
+fn render_writes_png_and_exr_of_the_irradiance_plane() {
+    let dir = out_dir("render");
+    let (png, exr) = (dir.join("pool.png"), dir.join("pool.exr"));
+    let out = caustics(&[
+        "render", "pool", "--irradiance-plane", "--size", "64x64", "--photons", "200000",
+        "--out", png.to_str().unwrap(), "--exr", exr.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 64));
+    let hdr = image::open(&exr).unwrap().into_rgb32f();
+    let mean = hdr.pixels().map(|p| p.0[1] as f64).sum::<f64>() / (64.0 * 64.0);
+    // The pool's floor irradiance averages 0.852 (shared/reference); 2·10⁵ photons
+    // on 64² cells leave a few percent of noise.
+    assert!((mean - 0.852).abs() < 0.05, "mean irradiance {mean}");
+}
+
+#[test]
+fn render_writes_a_camera_view() {
+    let dir = out_dir("view");
+    let png = dir.join("sphere.png");
+    let out = caustics(&["render", "sphere", "--size", "48x32", "--photons", "100000", "--out", png.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&png).unwrap().into_rgb8();
+    assert_eq!(img.dimensions(), (48, 32));
+    assert!(img.pixels().any(|p| p.0 != [0, 0, 0]), "the view is black");
+}
+
+#[test]
+fn bench_writes_csv_table_and_plot() {
+    let dir = out_dir("bench");
+    let out = caustics(&["bench", "--quick", "--scenes", "sphere", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(dir.join("bench.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().skip(1).collect();
+    assert!(rows.len() >= 3, "{csv}");
+    // Monte Carlo: the error must fall as photons grow.
+    let errors: Vec<f64> = rows.iter().map(|r| r.rsplit(',').next().unwrap().parse().unwrap()).collect();
+    assert!(errors.last() < errors.first(), "error does not fall: {errors:?}");
+    assert!(std::fs::read_to_string(dir.join("bench.md")).unwrap().contains("| sphere | reference |"));
+    let plot = image::open(dir.join("bench.png")).unwrap();
+    assert_eq!((plot.width(), plot.height()), (900, 600));
+}
