@@ -56,12 +56,26 @@ fn prepare_output(path: &std::path::Path) -> Result<PathBuf, String> {
     Ok(path.to_path_buf())
 }
 
-/// A progress line on stderr, rewritten in place.
+/// Progress on stderr: a line rewritten in place on a terminal, else a line per 10 %.
 fn progress(label: &str) -> impl Fn(u64, u64) + Sync + '_ {
+    use std::io::IsTerminal;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let terminal = std::io::stderr().is_terminal();
+    let step = if terminal { 1 } else { 10 };
+    let last = AtomicU64::new(u64::MAX);
     move |done, total| {
-        eprint!("\r{label}: {:5.1} % ({done}/{total} photons)", 100.0 * done as f64 / total.max(1) as f64);
-        if done == total {
-            eprintln!();
+        let percent = 100 * done / total.max(1);
+        let bucket = percent / step;
+        if last.swap(bucket, Ordering::Relaxed) == bucket {
+            return;
+        }
+        if terminal {
+            eprint!("\r{label}: {percent:3} % ({done}/{total} photons)");
+            if done == total {
+                eprintln!();
+            }
+        } else {
+            eprintln!("{label}: {percent:3} % ({done}/{total} photons)");
         }
     }
 }

@@ -1,8 +1,8 @@
 //! The ground-truth tracer on cases where physics gives the answer.
 //!
-//! Photons leave a light at uniformly random points/directions, so binned irradiance
-//! carries Poisson noise: a cell receiving k photons of equal flux has relative
-//! standard deviation ≈ 1/√k. Tolerances below are stated in those standard deviations
+//! Photons leave a light at random points/directions (stratified in emission order),
+//! so binned irradiance carries at most Poisson noise: a cell receiving k photons of
+//! equal flux has relative standard deviation ≤ 1/√k (stratification only lowers it). Tolerances below are stated in those standard deviations
 //! (5σ per cell; the chance of a false failure over ~1000 cells is below 10⁻³).
 //! Where photons are deterministic (normal incidence) the only error is f32 rounding.
 
