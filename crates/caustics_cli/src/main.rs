@@ -2,6 +2,7 @@
 //! error-against-run-time bench. Errors are one line on stderr and a non-zero exit.
 
 mod bench;
+mod gltf;
 mod images;
 mod plot;
 mod render;

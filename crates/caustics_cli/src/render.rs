@@ -4,11 +4,10 @@ use crate::images::{percentile_white, write_exr, write_png};
 use crate::scenes::{LoadedScene, default_camera, open};
 use crate::{prepare_output, progress};
 use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
-use caustics_core::glam::Vec3;
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::view::render_view;
 use clap::{Args, ValueEnum};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Which algorithm computes the caustics.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -93,8 +92,3 @@ fn kernel_radius(photons: &PhotonList, region: &caustics_core::estimate::GridReg
     (64.0 * area / (std::f32::consts::PI * in_region as f32)).sqrt()
 }
 
-/// Loads a glTF scene through Bevy's loader and the plugin's automatic tagging.
-pub fn load_gltf(path: &Path, cells: usize) -> Result<LoadedScene, String> {
-    let _ = (path, cells, Vec3::ZERO);
-    Err("glTF scenes are loaded through Bevy; this build has no loader yet".into())
-}

@@ -44,7 +44,7 @@ pub fn open(spec: &str, cells: usize) -> Result<LoadedScene, String> {
             let desc = SceneDescription::from_json(&text).map_err(|e| format!("{spec}: {e}"))?;
             Ok(LoadedScene { bench: desc.build(cells).map_err(|e| format!("{spec}: {e}"))?, camera: None })
         }
-        "gltf" | "glb" => crate::render::load_gltf(path, cells),
+        "gltf" | "glb" => crate::gltf::load(path, cells),
         _ => Err(format!("{spec}: unknown scene format (expected .gltf, .glb or .json)")),
     }
 }

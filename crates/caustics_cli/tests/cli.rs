@@ -92,3 +92,25 @@ fn bench_writes_csv_table_and_plot() {
     let plot = image::open(dir.join("bench.png")).unwrap();
     assert_eq!((plot.width(), plot.height()), (900, 600));
 }
+
+#[test]
+fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
+    let scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes/pool.gltf");
+    let dir = out_dir("gltf");
+    let exr = dir.join("plane.exr");
+    let out = caustics(&[
+        "render", scene.to_str().unwrap(), "--irradiance-plane", "--size", "32x32", "--photons", "300000",
+        "--out", dir.join("plane.png").to_str().unwrap(), "--exr", exr.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    // The water (transmission 1, IOR 1.333) refracts the 1-lux sun onto the floor: the
+    // region under it averages E·cos θ·T ≈ 0.95·0.97, the Fresnel-transmitted fraction.
+    let hdr = image::open(&exr).unwrap().into_rgb32f();
+    let mean = hdr.pixels().map(|p| p.0[1] as f64).sum::<f64>() / (32.0 * 32.0);
+    assert!((0.8..1.0).contains(&mean), "mean caustic irradiance {mean}");
+
+    let broken = dir.join("broken.gltf");
+    std::fs::write(&broken, "{ \"asset\": { \"version\": \"2.0\" }, \"scenes\": [ ").unwrap();
+    let out = caustics(&["render", broken.to_str().unwrap()]);
+    assert_clean_failure(&out, "broken.gltf");
+}

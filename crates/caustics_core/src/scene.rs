@@ -143,3 +143,32 @@ impl Scene {
         self.generators.iter().map(|g| g.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
     }
 }
+
+/// What a surface does in caustics, judged from its PBR material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SurfaceRole {
+    /// A specular surface that makes caustics.
+    Generator(SpecularInteraction),
+    /// A diffuse surface that shows them.
+    Receiver,
+}
+
+/// The glTF 2.0 convention: a material with `KHR_materials_transmission` (transmission
+/// ≥ ½) refracts with its `KHR_materials_ior` index; a smooth metal (metallic ≥ 0.99,
+/// perceptual roughness ≤ 0.05) is a mirror; everything else is a receiver. An
+/// impossible IOR is an error, so that the caller can report it and skip the surface.
+pub fn role_from_material(
+    transmission: f32,
+    ior: f32,
+    metallic: f32,
+    perceptual_roughness: f32,
+) -> Result<SurfaceRole, ParamError> {
+    if transmission >= 0.5 {
+        crate::params::check_ior(ior)?;
+        Ok(SurfaceRole::Generator(SpecularInteraction::Refract { ior, dispersion: None }))
+    } else if metallic >= 0.99 && perceptual_roughness <= 0.05 {
+        Ok(SurfaceRole::Generator(SpecularInteraction::Reflect))
+    } else {
+        Ok(SurfaceRole::Receiver)
+    }
+}

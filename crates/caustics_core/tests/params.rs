@@ -41,3 +41,16 @@ fn malformed_meshes_are_refused() {
     );
     assert!(matches!(TriMesh::new(p, vec![Vec3::Y], vec![[0, 1, 2]]), Err(MeshError::NormalCount { .. })));
 }
+
+#[test]
+fn materials_are_tagged_by_the_gltf_convention() {
+    use caustics_core::scene::{SurfaceRole, role_from_material};
+    assert_eq!(
+        role_from_material(1.0, 1.333, 0.0, 0.0),
+        Ok(SurfaceRole::Generator(SpecularInteraction::Refract { ior: 1.333, dispersion: None }))
+    );
+    assert_eq!(role_from_material(0.0, 1.5, 1.0, 0.0), Ok(SurfaceRole::Generator(SpecularInteraction::Reflect)));
+    assert_eq!(role_from_material(0.0, 1.5, 1.0, 0.4), Ok(SurfaceRole::Receiver), "rough metal is diffuse enough");
+    assert_eq!(role_from_material(0.0, 1.5, 0.0, 0.9), Ok(SurfaceRole::Receiver));
+    assert!(role_from_material(1.0, 0.7, 0.0, 0.0).is_err(), "transmissive with IOR < 1");
+}

@@ -1,0 +1,190 @@
+//! glTF 2.0 scenes through Bevy's own loader: the file is loaded as a Bevy world
+//! asset (no renderer needed), then its meshes, materials, lights and camera are
+//! turned into a core [`Scene`] with the glTF tagging convention of
+//! [`caustics_core::scene::role_from_material`].
+
+use crate::scenes::LoadedScene;
+use bevy::asset::{AssetPlugin, LoadState, UnapprovedPathMode};
+use bevy::camera::{Camera, Projection};
+use bevy::gltf::GltfAssetLabel;
+use bevy::light::{DirectionalLight, PointLight, SpotLight};
+use bevy::mesh::{Indices, Mesh, Mesh3d, VertexAttributeValues};
+use bevy::pbr::{MeshMaterial3d, StandardMaterial};
+use bevy::prelude::*;
+use bevy::render::{RenderPlugin, settings::WgpuSettings};
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+use bevy::world_serialization::WorldAsset;
+use caustics_core::estimate::GridRegion;
+use caustics_core::glam;
+use caustics_core::mesh::TriMesh;
+use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene, SurfaceRole, role_from_material};
+use caustics_core::scenes::BenchScene;
+use caustics_core::view::PinholeCamera;
+use std::f32::consts::PI;
+use std::path::Path;
+
+/// Updates to wait for the file and its dependencies before giving up.
+const MAX_UPDATES: usize = 2000;
+
+/// Loads `path` and converts it; `cells` sets the irradiance-plane resolution.
+pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
+    let name = path.display().to_string();
+    let abs = std::fs::canonicalize(path).map_err(|e| format!("{name}: {e}"))?;
+    let (dir, file) = (abs.parent().unwrap_or(Path::new("/")), abs.file_name().unwrap_or_default());
+
+    let mut app = App::new();
+    app.add_plugins(
+        DefaultPlugins
+            .set(AssetPlugin {
+                file_path: dir.display().to_string(),
+                unapproved_path_mode: UnapprovedPathMode::Deny,
+                ..default()
+            })
+            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+            // Loading needs no GPU: no backend, no render world.
+            .set(RenderPlugin { render_creation: WgpuSettings { backends: None, ..default() }.into(), ..default() })
+            .disable::<WinitPlugin>()
+            .disable::<bevy::log::LogPlugin>(),
+    );
+    app.finish();
+    app.cleanup();
+    let handle = app
+        .world()
+        .resource::<AssetServer>()
+        .load::<WorldAsset>(GltfAssetLabel::Scene(0).from_asset(file.to_string_lossy().into_owned()));
+    for _ in 0..MAX_UPDATES {
+        app.update();
+        let server = app.world().resource::<AssetServer>();
+        if let LoadState::Failed(err) = server.load_state(&handle) {
+            // Bevy's load errors carry the loader's backtrace on later lines.
+            let err = err.to_string();
+            return Err(format!("{name}: {}", err.lines().next().unwrap_or("failed to load")));
+        }
+        if server.is_loaded_with_dependencies(&handle) {
+            let world = app.world_mut();
+            // The glTF scene is a world of its own: read it in place, no spawning.
+            let mut scene_world = std::mem::take(
+                &mut world.resource_mut::<Assets<WorldAsset>>().get_mut(&handle).ok_or("scene asset vanished")?.world,
+            );
+            return convert(&mut scene_world, world, &name, cells);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    Err(format!("{name}: the scene did not finish loading"))
+}
+
+/// World transform of an entity of the scene world, following `ChildOf` to the root.
+fn global_transform(world: &World, entity: Entity) -> GlobalTransform {
+    let local = world.get::<Transform>(entity).copied().unwrap_or_default();
+    match world.get::<ChildOf>(entity) {
+        Some(parent) => global_transform(world, parent.parent()).mul_transform(local),
+        None => GlobalTransform::from(local),
+    }
+}
+
+fn to_glam(v: Vec3) -> glam::Vec3 {
+    glam::Vec3::from_array(v.to_array())
+}
+
+/// A Bevy mesh in world space as a core mesh.
+fn tri_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, String> {
+    let positions = match mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) {
+        Ok(VertexAttributeValues::Float32x3(p)) => p.iter().map(|&p| glam::Vec3::from_array(p)).collect::<Vec<_>>(),
+        _ => return Err("has no Float32x3 positions".into()),
+    };
+    let indices: Vec<u32> = match mesh.indices() {
+        Some(Indices::U16(i)) => i.iter().map(|&i| i as u32).collect(),
+        Some(Indices::U32(i)) => i.clone(),
+        None => (0..positions.len() as u32).collect(),
+    };
+    let triangles: Vec<[u32; 3]> = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let local = match mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL) {
+        Ok(VertexAttributeValues::Float32x3(n)) => {
+            TriMesh::new(positions, n.iter().map(|&n| glam::Vec3::from_array(n)).collect(), triangles)
+        }
+        _ => TriMesh::with_smooth_normals(positions, triangles),
+    }
+    .map_err(|e| e.to_string())?;
+    let affine = transform.affine();
+    let world = glam::Affine3A::from_cols_array(&affine.to_cols_array());
+    Ok(local.transformed(&world))
+}
+
+/// Converts the glTF scene's world; `app` holds its mesh and material assets.
+fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<LoadedScene, String> {
+    let mut scene = Scene::default();
+    let mut query = world.query::<(Entity, &Mesh3d, &MeshMaterial3d<StandardMaterial>, Option<&Name>)>();
+    let meshes = app.resource::<Assets<Mesh>>();
+    let materials = app.resource::<Assets<StandardMaterial>>();
+    for (entity, mesh, material, entity_name) in query.iter(world) {
+        let transform = &global_transform(world, entity);
+        let label = entity_name.map_or("unnamed mesh".to_string(), |n| n.to_string());
+        let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(&material.0)) else {
+            return Err(format!("{name}: {label}: its mesh or material did not load"));
+        };
+        let mesh = tri_mesh(mesh, transform).map_err(|e| format!("{name}: {label}: {e}"))?;
+        let role = role_from_material(
+            material.specular_transmission,
+            material.ior,
+            material.metallic,
+            material.perceptual_roughness,
+        )
+        .map_err(|e| format!("{name}: {label}: {e}"))?;
+        match role {
+            SurfaceRole::Generator(interaction) => scene.generators.push(Generator { mesh, interaction }),
+            SurfaceRole::Receiver => {
+                let c = material.base_color.to_linear();
+                scene.receivers.push(Receiver { mesh, albedo: glam::Vec3::new(c.red, c.green, c.blue) });
+            }
+        }
+    }
+    let color = |c: Color| {
+        let c = c.to_linear();
+        glam::Vec3::new(c.red, c.green, c.blue)
+    };
+    let mut lights = world.query::<(Entity, Option<&DirectionalLight>, Option<&PointLight>, Option<&SpotLight>)>();
+    for (entity, directional, point, spot) in lights.iter(world) {
+        let t = global_transform(world, entity);
+        let position = to_glam(t.translation());
+        let forward = to_glam(t.forward().as_vec3());
+        // Bevy's point and spot intensities are luminous power (lm); the tracer wants
+        // intensity per steradian: Φ / 4π (Bevy's own convention, also for spots).
+        let light = match (directional, point, spot) {
+            (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
+            (_, Some(p), _) => Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) },
+            (_, _, Some(s)) => Light {
+                kind: LightKind::Spot {
+                    position,
+                    direction: forward,
+                    intensity: s.intensity / (4.0 * PI),
+                    inner_angle: s.inner_angle,
+                    outer_angle: s.outer_angle,
+                },
+                color: color(s.color),
+            },
+            _ => continue,
+        };
+        scene.lights.push(light);
+    }
+    scene.validate().map_err(|e| format!("{name}: {e}"))?;
+    let (lo, hi) = scene.generator_bounds().ok_or_else(|| format!("{name}: no caustic generators (transmissive or mirror materials)"))?;
+    let floor_y = scene.receivers.iter().map(|r| r.mesh.bounds().0.y).fold(f32::INFINITY, f32::min);
+    let size = (hi.x - lo.x).max(hi.z - lo.z);
+    let region = GridRegion::horizontal(0.5 * (lo.x + hi.x - size), 0.5 * (lo.z + hi.z - size), floor_y.min(lo.y), size, cells);
+
+    let mut cameras = world.query::<(Entity, &Camera, &Projection)>();
+    let camera = cameras.iter(world).find_map(|(entity, _, p)| match p {
+        Projection::Perspective(p) => Some((global_transform(world, entity), p)),
+        _ => None,
+    });
+    let camera = camera.map(|(t, p)| PinholeCamera {
+            position: to_glam(t.translation()),
+            look_at: to_glam(t.translation() + t.forward().as_vec3()),
+            up: to_glam(t.up().as_vec3()),
+            fov_y: p.fov,
+            width: 0,
+            height: 0,
+    });
+    Ok(LoadedScene { bench: BenchScene { name: name.to_string(), scene, region }, camera })
+}
