@@ -1,1 +1,45 @@
-pub fn x(){}
+//! # bevy_caustics — the Bevy side
+//!
+//! Components ([`CausticGenerator`], [`CausticReceiver`], [`ParticipatingMedium`]),
+//! the per-view caustic irradiance buffer and its composite onto receivers, a pass
+//! report, glTF tagging and a headless renderer for tests and tools. The math lives in
+//! `caustics_core`; this crate is a thin layer of components, systems and passes.
+
+pub mod components;
+pub mod headless;
+pub mod irradiance;
+pub mod report;
+
+pub use components::{
+    CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InvalidCausticParams,
+    ParticipatingMedium,
+};
+pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, InjectedIrradiance};
+pub use report::CausticPassReport;
+
+use bevy::prelude::*;
+
+/// Adds caustics to every 3D camera's view. Passes run only for views and scenes that
+/// need them: a scene without generators (and without injected irradiance) does no
+/// caustics work at all — see [`CausticPassReport`].
+#[derive(Default)]
+pub struct CausticsPlugin;
+
+impl Plugin for CausticsPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<CausticGenerator>()
+            .register_type::<CausticReceiver>()
+            .register_type::<ParticipatingMedium>()
+            .add_systems(PostUpdate, components::validate_caustic_params);
+        report::build(app);
+        irradiance::build(app);
+    }
+}
+
+/// Everything a game needs: `use caustics_bevy::prelude::*`.
+pub mod prelude {
+    pub use crate::{
+        CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsPlugin,
+        GeneratorInteraction, InjectedIrradiance, ParticipatingMedium,
+    };
+}

@@ -1,0 +1,133 @@
+//! The components a game adds: what makes caustics, what shows them, and the medium
+//! light scatters in. Every value is checked when it is added or changed; an invalid
+//! entity is reported once and skipped by every pass until it is fixed.
+
+use bevy::camera::visibility::{self, VisibilityClass};
+use bevy::prelude::*;
+use caustics_core::optics::CauchyDispersion;
+use caustics_core::params::{MediumCoefficients, ParamError, SpecularInteraction};
+
+/// Which published technique renders a generator's caustics.
+#[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum CausticTechnique {
+    /// The plugin picks one from the generator and the scene.
+    #[default]
+    Auto,
+    /// Ernst, Akenine-Möller & Jensen 2005: a caustic volume per generator triangle.
+    WarpedVolumes,
+    /// Iwasaki et al.: illumination textures on virtual planes around a receiver.
+    IlluminationTextures,
+    /// Trendall & Stewart 2000: pool-floor irradiance as convolutions of a heightfield.
+    Convolution,
+    /// Wyman 2008: hierarchical caustic maps from a photon buffer per light.
+    HierarchicalMaps,
+}
+
+/// How a generator surface redirects light.
+#[derive(Reflect, Clone, Copy, Debug, PartialEq)]
+pub enum GeneratorInteraction {
+    /// A perfect mirror.
+    Reflect,
+    /// A dielectric boundary: air outside (the side the normals face), index `ior` inside.
+    Refract {
+        /// Index of refraction inside (≥ 1): water 1.333, glass 1.5, diamond 2.42.
+        ior: f32,
+        /// Cauchy coefficients `(A, B µm²)`; when set, the IOR varies per colour channel.
+        dispersion: Option<Vec2>,
+    },
+}
+
+/// A specular mesh that reflects or refracts light into caustics. Put it on an
+/// entity with a `Mesh3d`; the mesh is read in world space every frame it changes.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component)]
+pub struct CausticGenerator {
+    pub interaction: GeneratorInteraction,
+    pub technique: CausticTechnique,
+}
+
+impl CausticGenerator {
+    /// A mirror.
+    pub fn mirror() -> Self {
+        Self { interaction: GeneratorInteraction::Reflect, technique: CausticTechnique::Auto }
+    }
+
+    /// A refracting surface of index `ior`, without dispersion.
+    pub fn refractive(ior: f32) -> Self {
+        Self { interaction: GeneratorInteraction::Refract { ior, dispersion: None }, technique: CausticTechnique::Auto }
+    }
+
+    /// The interaction as the core algorithms see it.
+    pub fn specular_interaction(&self) -> SpecularInteraction {
+        match self.interaction {
+            GeneratorInteraction::Reflect => SpecularInteraction::Reflect,
+            GeneratorInteraction::Refract { ior, dispersion } => SpecularInteraction::Refract {
+                ior,
+                dispersion: dispersion.map(|d| CauchyDispersion { a: d.x, b: d.y }),
+            },
+        }
+    }
+}
+
+/// A diffuse surface that shows caustics: its `StandardMaterial` albedo (base colour
+/// times base-colour texture) multiplies the caustic irradiance that lands on it.
+/// Surfaces without it never receive caustic light, but still block it.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default)]
+#[require(VisibilityClass)]
+#[component(on_add = visibility::add_visibility_class::<CausticReceiver>)]
+pub struct CausticReceiver;
+
+/// A homogeneous participating medium in which caustic light scatters into visible
+/// shafts (Ernst et al. 2005 §3.5). Unlike Bevy's `FogVolume`, which scatters the
+/// *direct* light of shadow-mapped lights (volumetric fog), this medium scatters the
+/// light that generators focus, and its coefficients are physical: σₛ and σₐ per metre
+/// and a Henyey–Greenstein phase. Use both together: fog for sunbeams, this for the
+/// caustic shafts under waves.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component)]
+pub struct ParticipatingMedium {
+    /// Scattering coefficient σₛ (1/m).
+    pub scattering: f32,
+    /// Absorption coefficient σₐ (1/m).
+    pub absorption: f32,
+    /// Henyey–Greenstein asymmetry g ∈ (−1, 1): > 0 scatters forwards.
+    pub asymmetry: f32,
+}
+
+impl ParticipatingMedium {
+    /// The coefficients as the core algorithms see them.
+    pub fn coefficients(&self) -> MediumCoefficients {
+        MediumCoefficients { scattering: self.scattering, absorption: self.absorption, asymmetry: self.asymmetry }
+    }
+}
+
+/// Marks an entity whose caustics parameters are invalid; the message says why. Passes
+/// skip it. It is removed as soon as the parameters are fixed.
+#[derive(Component, Clone, Debug, PartialEq)]
+pub struct InvalidCausticParams(pub ParamError);
+
+/// Checks generators and media when they are added or changed: an invalid one gets
+/// [`InvalidCausticParams`] and one warning; a fixed one loses the marker.
+pub fn validate_caustic_params(
+    mut commands: Commands,
+    generators: Query<(Entity, &CausticGenerator, Option<&InvalidCausticParams>), Changed<CausticGenerator>>,
+    media: Query<(Entity, &ParticipatingMedium, Option<&InvalidCausticParams>), Changed<ParticipatingMedium>>,
+) {
+    let results = generators
+        .iter()
+        .map(|(e, g, m)| (e, "CausticGenerator", g.specular_interaction().validate(), m))
+        .chain(media.iter().map(|(e, m, marker)| (e, "ParticipatingMedium", m.coefficients().validate(), marker)));
+    for (entity, kind, result, marker) in results {
+        match (result, marker) {
+            (Err(err), previous) if previous.map(|p| &p.0) != Some(&err) => {
+                warn!("bevy_caustics: {kind} on {entity} is skipped: {err}");
+                commands.entity(entity).insert(InvalidCausticParams(err));
+            }
+            (Ok(()), Some(_)) => {
+                commands.entity(entity).remove::<InvalidCausticParams>();
+            }
+            _ => {}
+        }
+    }
+}
