@@ -1,1 +1,216 @@
-pub fn placeholder() {}
+//! Rendering without a window: build an app, render N frames into an image, read the
+//! pixels back as linear floats. Used by the tests, the examples' headless mode and the
+//! CLI. Runs on any wgpu adapter, Mesa's software Vulkan (lavapipe) included.
+
+use crate::CausticsPlugin;
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::prelude::*;
+use bevy::render::{
+    RenderPlugin,
+    gpu_readback::{Readback, ReadbackComplete},
+    render_resource::{Extent3d, TextureDimension, TextureFormat, TextureUsages},
+};
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use thiserror::Error;
+
+/// Why a headless render could not run.
+#[derive(Debug, Error)]
+pub enum HeadlessError {
+    #[error(
+        "no GPU adapter found ({0}). Install Mesa's software Vulkan to render without a GPU: \
+         `apt-get install -y mesa-vulkan-drivers`"
+    )]
+    NoAdapter(String),
+    #[error("the frame was not read back after {0} extra updates")]
+    NoReadback(u32),
+    #[error("cannot write {path}: {reason}")]
+    Write { path: String, reason: String },
+}
+
+/// Checks that wgpu finds an adapter on the backends Bevy would use.
+pub fn probe_adapter() -> Result<String, HeadlessError> {
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
+        backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all()),
+        ..wgpu::InstanceDescriptor::new_without_display_handle()
+    });
+    let adapter = bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
+        .map_err(|e| HeadlessError::NoAdapter(e.to_string()))?;
+    let info = adapter.get_info();
+    Ok(format!("{} ({:?})", info.name, info.backend))
+}
+
+/// Linear RGBA pixels of a rendered frame, row-major from the top-left.
+#[derive(Clone, Debug)]
+pub struct RenderedImage {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Vec4>,
+}
+
+impl RenderedImage {
+    /// The pixel at `(x, y)`.
+    pub fn pixel(&self, x: u32, y: u32) -> Vec4 {
+        self.pixels[(y * self.width + x) as usize]
+    }
+
+    /// Writes an 8-bit sRGB PNG, scaling linear values by `scale` and clamping.
+    pub fn save_png(&self, path: &Path, scale: f32) -> Result<(), HeadlessError> {
+        let err = |reason: String| HeadlessError::Write { path: path.display().to_string(), reason };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
+        }
+        let mut image = Image::new(
+            Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+            TextureDimension::D2,
+            self.pixels
+                .iter()
+                .flat_map(|p| {
+                    let c = Color::LinearRgba(LinearRgba::new(p.x * scale, p.y * scale, p.z * scale, 1.0));
+                    c.to_srgba().to_u8_array()
+                })
+                .collect(),
+            TextureFormat::Rgba8UnormSrgb,
+            RenderAssetUsages::MAIN_WORLD,
+        );
+        image.texture_descriptor.format = TextureFormat::Rgba8UnormSrgb;
+        let dynamic = image.try_into_dynamic().map_err(|e| err(e.to_string()))?;
+        dynamic.to_rgb8().save(path).map_err(|e| err(e.to_string()))
+    }
+}
+
+/// A Bevy app that renders into an offscreen HDR image (`Rgba16Float`, linear, no
+/// tonemapping unless the camera asks for it), with [`CausticsPlugin`] added.
+pub struct HeadlessRenderer {
+    pub app: App,
+    target: Handle<Image>,
+    width: u32,
+    height: u32,
+}
+
+impl HeadlessRenderer {
+    /// Builds the app, after checking that an adapter exists.
+    pub fn new(width: u32, height: u32) -> Result<Self, HeadlessError> {
+        probe_adapter()?;
+        let mut app = App::new();
+        app.add_plugins(
+            DefaultPlugins
+                .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+                .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
+                .disable::<WinitPlugin>(),
+        )
+        .add_plugins(CausticsPlugin);
+        app.finish();
+        app.cleanup();
+        let mut image = Image::new_target_texture(width, height, TextureFormat::Rgba16Float, None);
+        image.texture_descriptor.usage |= TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
+        let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+        Ok(Self { app, target, width, height })
+    }
+
+    /// The render target to put on the camera.
+    pub fn render_target(&self) -> RenderTarget {
+        RenderTarget::Image(self.target.clone().into())
+    }
+
+    /// The app's world, to spawn a scene into.
+    pub fn world_mut(&mut self) -> &mut World {
+        self.app.world_mut()
+    }
+
+    /// Runs `frames` updates, then reads the last frame back.
+    pub fn render(&mut self, frames: u32) -> Result<RenderedImage, HeadlessError> {
+        for _ in 0..frames {
+            self.app.update();
+        }
+        let result: Arc<Mutex<Option<Vec<u8>>>> = Arc::default();
+        let sink = result.clone();
+        let reader = self
+            .app
+            .world_mut()
+            .spawn(Readback::texture(self.target.clone()))
+            .observe(move |event: On<ReadbackComplete>| {
+                if let Ok(mut slot) = sink.lock() {
+                    *slot = Some(event.data.clone());
+                }
+            })
+            .id();
+        const MAX_EXTRA: u32 = 16;
+        for _ in 0..MAX_EXTRA {
+            self.app.update();
+            let bytes = result.lock().ok().and_then(|mut s| s.take());
+            if let Some(bytes) = bytes {
+                self.app.world_mut().despawn(reader);
+                return Ok(RenderedImage { width: self.width, height: self.height, pixels: decode_rgba16f(&bytes) });
+            }
+        }
+        Err(HeadlessError::NoReadback(MAX_EXTRA))
+    }
+}
+
+/// Rgba16Float bytes to linear RGBA.
+fn decode_rgba16f(bytes: &[u8]) -> Vec<Vec4> {
+    bytes
+        .chunks_exact(8)
+        .map(|p| Vec4::from_array(std::array::from_fn(|c| f16_to_f32(u16::from_le_bytes([p[2 * c], p[2 * c + 1]])))))
+        .collect()
+}
+
+/// IEEE 754 half to single precision.
+pub fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exponent = (h >> 10) & 0x1f;
+    let mantissa = (h & 0x3ff) as f32;
+    sign * match exponent {
+        0 => mantissa * 2f32.powi(-24),
+        0x1f if mantissa == 0.0 => f32::INFINITY,
+        0x1f => f32::NAN,
+        e => (1.0 + mantissa / 1024.0) * 2f32.powi(e as i32 - 15),
+    }
+}
+
+/// Single to half precision (round to nearest), for building injected irradiance images.
+pub fn f32_to_f16(value: f32) -> u16 {
+    let bits = value.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    if value.is_nan() {
+        return sign | 0x7e00;
+    }
+    let abs = value.abs();
+    if abs >= 65520.0 {
+        return sign | 0x7c00;
+    }
+    if abs < 6.103_515_6e-5 {
+        return sign | (abs / 2f32.powi(-24)).round() as u16;
+    }
+    let exponent = abs.log2().floor() as i32;
+    let mantissa = (abs / 2f32.powi(exponent) - 1.0) * 1024.0;
+    let (mut e, mut m) = (exponent + 15, mantissa.round() as u32);
+    if m == 1024 {
+        m = 0;
+        e += 1;
+    }
+    sign | ((e as u16) << 10) | m as u16
+}
+
+/// An [`Image`] in the caustic irradiance format from linear RGB values (row-major),
+/// ready to use as [`crate::InjectedIrradiance`].
+pub fn irradiance_image(width: u32, height: u32, values: &[Vec3]) -> Image {
+    let data = values
+        .iter()
+        .flat_map(|v| [v.x, v.y, v.z, 1.0])
+        .flat_map(|c| f32_to_f16(c).to_le_bytes())
+        .collect();
+    let mut image = Image::new(
+        Extent3d { width, height, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        crate::CAUSTIC_IRRADIANCE_FORMAT,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+    image
+}

@@ -1,0 +1,153 @@
+//! The composite path on a real GPU adapter (lavapipe in CI): a known irradiance
+//! pattern injected into the buffer must come out as albedo/π · E · exposure on
+//! receiver pixels, and nowhere else. Also: a scene with nothing to do runs no
+//! caustics pass, and invalid parameters are skipped without a panic.
+//!
+//! One test function: a process holds one Bevy app with a render device at a time.
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::Exposure;
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::image::{ImageSampler, ImageSamplerDescriptor};
+use bevy::light::GlobalAmbientLight;
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use bevy::camera::Hdr;
+use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
+use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium};
+use std::f32::consts::PI;
+
+const SIZE: u32 = 64;
+/// Linear albedos of the receiver texture's two texels (exact in Rgba8Unorm: k/255).
+const ALBEDO: [Vec3; 2] = [Vec3::new(204.0 / 255.0, 51.0 / 255.0, 25.0 / 255.0), Vec3::new(25.0 / 255.0, 102.0 / 255.0, 230.0 / 255.0)];
+/// `exposure = 1 / (1.2 · 2^ev100)` (Bevy's `Exposure::exposure`).
+const EV100: f32 = 0.0;
+
+/// The injected irradiance at pixel (x, y), in lux.
+fn irradiance(x: u32, y: u32) -> Vec3 {
+    Vec3::new(1.0 + 0.02 * x as f32, 0.8 + 0.01 * y as f32, 1.2) * 2.0
+}
+
+fn spawn_view(renderer: &mut HeadlessRenderer, inject: bool) {
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    let texture = Image {
+        sampler: ImageSampler::Descriptor(ImageSamplerDescriptor::nearest()),
+        ..Image::new(
+            Extent3d { width: 2, height: 1, depth_or_array_layers: 1 },
+            TextureDimension::D2,
+            ALBEDO.iter().flat_map(|a| [(a.x * 255.0).round() as u8, (a.y * 255.0).round() as u8, (a.z * 255.0).round() as u8, 255]).collect(),
+            TextureFormat::Rgba8Unorm,
+            RenderAssetUsages::RENDER_WORLD,
+        )
+    };
+    let texture = world.resource_mut::<Assets<Image>>().add(texture);
+    let receiver_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color_texture: Some(texture),
+        ..default()
+    });
+    let plain = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    let plane = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(1.0)).mesh());
+    let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(0.4, 0.4, 0.4));
+    // The receiver fills the middle of the view; a cube stands on it; a plain plane
+    // (not a receiver) lies beside it.
+    world.spawn((Mesh3d(plane.clone()), MeshMaterial3d(receiver_material), CausticReceiver));
+    world.spawn((Mesh3d(cube), MeshMaterial3d(plain.clone()), Transform::from_xyz(0.5, 0.2, 0.5)));
+    world.spawn((Mesh3d(plane), MeshMaterial3d(plain), Transform::from_xyz(2.0, 0.0, 0.0)));
+    let mut camera = world.spawn((
+        Camera3d::default(),
+        Camera { ..default() },
+        target,
+        Hdr,
+        Tonemapping::None,
+        Exposure { ev100: EV100 },
+        Projection::from(OrthographicProjection { scale: 3.0 / SIZE as f32, ..OrthographicProjection::default_3d() }),
+        Transform::from_xyz(0.5, 5.0, 0.0).looking_at(Vec3::new(0.5, 0.0, 0.0), Vec3::NEG_Z),
+        Msaa::Off,
+    ));
+    if inject {
+        let values: Vec<Vec3> = (0..SIZE * SIZE).map(|i| irradiance(i % SIZE, i / SIZE)).collect();
+        let image = camera.world_scope(|w| w.resource_mut::<Assets<Image>>().add(irradiance_image(SIZE, SIZE, &values)));
+        camera.insert(InjectedIrradiance(image));
+    }
+}
+
+/// World position seen at pixel (x, y) for the orthographic camera above: 3 m across,
+/// centred on (0.5, 0, 0), screen right = +x, screen up = −z.
+fn world_at(x: u32, y: u32) -> Vec2 {
+    let s = 3.0 / SIZE as f32;
+    Vec2::new(0.5 + (x as f32 + 0.5 - SIZE as f32 / 2.0) * s, (y as f32 + 0.5 - SIZE as f32 / 2.0) * s)
+}
+
+#[test]
+fn composite_adds_albedo_times_irradiance_on_visible_receivers_only() {
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    spawn_view(&mut renderer, true);
+    let image = renderer.render(4).unwrap_or_else(|e| panic!("{e}"));
+    image.save_png(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_composite.png"), 1.0).unwrap();
+    let report = renderer.world_mut().resource::<CausticPassReport>().clone();
+    assert_eq!(report.views("inject"), 1, "{report:?}");
+    assert_eq!(report.views("composite"), 1, "{report:?}");
+
+    let exposure = 1.0 / (1.2 * 2f32.powf(EV100));
+    let (mut seen, mut checked) = ([false; 2], 0);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let p = world_at(x, y);
+            let got = image.pixel(x, y).truncate();
+            let on_receiver = p.x.abs() < 0.97 && p.y.abs() < 0.97;
+            let under_cube = (p.x - 0.5).abs() < 0.25 && (p.y - 0.5).abs() < 0.25;
+            let on_texel_edge = p.x.abs() < 0.05;
+            if !on_receiver || under_cube {
+                // Nothing lights the scene but the caustics: anything else stays black.
+                if (p.x.abs() > 1.03 || p.y.abs() > 1.03) && !((p.x - 0.5).abs() < 0.27 && (p.y - 0.5).abs() < 0.27) {
+                    assert!(got.max_element() < 1e-4, "pixel ({x},{y}) at {p} off the receiver got {got}");
+                }
+                continue;
+            }
+            if on_texel_edge {
+                continue;
+            }
+            let e = irradiance(x, y) / PI * exposure;
+            let albedo = got / e;
+            // Rgba16Float keeps 11 significant bits: 2⁻¹¹ ≈ 5·10⁻⁴ relative per value,
+            // twice (the buffer and the target): 2·10⁻³ covers it.
+            let which = ALBEDO.iter().position(|a| (albedo - *a).abs().max_element() < 2e-3 * a.max_element().max(1.0));
+            let Some(which) = which else {
+                panic!("pixel ({x},{y}) at {p}: {got} is not albedo·E/π·exposure (albedo would be {albedo})");
+            };
+            seen[which] = true;
+            checked += 1;
+        }
+    }
+    assert!(seen[0] && seen[1], "both texels of the base-colour texture must show");
+    assert!(checked > 1500, "only {checked} receiver pixels checked");
+
+    // The same app without injected irradiance and without generators: no pass runs.
+    let cameras: Vec<Entity> = renderer.world_mut().query_filtered::<Entity, With<InjectedIrradiance>>().iter(renderer.world_mut()).collect();
+    for camera in cameras {
+        renderer.world_mut().entity_mut(camera).remove::<InjectedIrradiance>();
+    }
+    let image = renderer.render(3).unwrap_or_else(|e| panic!("{e}"));
+    let report = renderer.world_mut().resource::<CausticPassReport>().clone();
+    assert!(report.is_empty(), "a scene with nothing to do ran {report:?}");
+    assert!(image.pixels.iter().all(|p| p.truncate().max_element() < 1e-4), "no caustics, no light");
+
+    // Invalid parameters: reported and skipped, never a panic.
+    let world = renderer.world_mut();
+    let bad_generator = world.spawn(CausticGenerator::refractive(0.5)).id();
+    let bad_medium = world.spawn(ParticipatingMedium { scattering: -1.0, absorption: f32::NAN, asymmetry: 0.0 }).id();
+    let good = world.spawn(CausticGenerator::refractive(1.5)).id();
+    renderer.render(2).unwrap_or_else(|e| panic!("{e}"));
+    let world = renderer.world_mut();
+    let marker = |e: Entity| world.get::<InvalidCausticParams>(e).map(|m| m.0.to_string());
+    assert!(marker(bad_generator).unwrap().contains("index of refraction 0.5"));
+    assert!(marker(bad_medium).unwrap().contains("scattering"));
+    assert_eq!(marker(good), None);
+    // Fixing the value clears the marker.
+    world.entity_mut(bad_generator).insert(CausticGenerator::refractive(1.33));
+    renderer.render(1).unwrap_or_else(|e| panic!("{e}"));
+    assert!(renderer.world_mut().get::<InvalidCausticParams>(bad_generator).is_none());
+}
