@@ -1,0 +1,215 @@
+//! The main demo: a rippled pool under the sun. Its caustics come from the
+//! ground-truth photon tracer (`caustics_core`), evaluated at the surface each pixel
+//! sees and handed to the plugin as injected irradiance, which the composite lays on
+//! the pool floor with the floor's own material.
+//!
+//! `cargo run --example demo` opens a window when there is a display; otherwise, or
+//! with `--headless`, it renders offscreen and writes a PNG (`--out`, default
+//! `target/demo.png`). `--photons N` sets the tracer's photon count.
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use bevy::window::WindowResolution;
+use bevy_caustics::caustics_core::{
+    bvh::Surface,
+    estimate::{PhotonList, PhotonMap},
+    glam,
+    mesh::TriMesh,
+    scenes::wave_pool,
+    tracer::{PhotonTracer, TraceSettings},
+    view::PinholeCamera,
+};
+use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticsPlugin, InjectedIrradiance};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+const WIDTH: u32 = 960;
+const HEIGHT: u32 = 540;
+/// Sun illuminance (lux): Bevy's daylight default.
+const SUN_LUX: f32 = light_consts::lux::AMBIENT_DAYLIGHT;
+const CAMERA_POSITION: Vec3 = Vec3::new(0.0, 3.4, 3.9);
+const CAMERA_TARGET: Vec3 = Vec3::new(0.0, 0.0, 0.3);
+const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
+
+struct Args {
+    headless: bool,
+    out: PathBuf,
+    photons: u64,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut args = Args { headless: false, out: PathBuf::from("target/demo.png"), photons: 4 << 20 };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--headless" => args.headless = true,
+            "--out" => args.out = it.next().ok_or("--out needs a path")?.into(),
+            "--photons" => {
+                args.photons = it.next().and_then(|n| n.parse().ok()).ok_or("--photons needs a whole number")?
+            }
+            other => return Err(format!("unknown argument {other:?} (use --headless, --out PATH, --photons N)")),
+        }
+    }
+    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
+    args.headless |= !has_display;
+    Ok(args)
+}
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("demo: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), String> {
+    let args = parse_args()?;
+    let irradiance = trace_caustics(args.photons)?;
+    if args.headless {
+        let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
+        let target = renderer.render_target();
+        spawn_pool(renderer.world_mut(), target, irradiance);
+        let image = renderer.render(8).map_err(|e| e.to_string())?;
+        image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
+        eprintln!("wrote {}", args.out.display());
+    } else {
+        let mut app = App::new();
+        app.add_plugins(DefaultPlugins.set(WindowPlugin {
+            primary_window: Some(Window {
+                title: "bevy_caustics — rippled pool".into(),
+                resolution: WindowResolution::new(WIDTH, HEIGHT).with_scale_factor_override(1.0),
+                resizable: false,
+                ..default()
+            }),
+            ..default()
+        }))
+        .add_plugins(CausticsPlugin)
+        .add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()));
+        app.run();
+    }
+    Ok(())
+}
+
+/// The view's caustic irradiance (lux), one value per pixel, from the ground-truth tracer.
+fn trace_caustics(photons: u64) -> Result<Vec<glam::Vec3>, String> {
+    let pool = wave_pool(129, 128);
+    let tracer = PhotonTracer::new(&pool.scene).map_err(|e| e.to_string())?;
+    let mut list = PhotonList::default();
+    let settings = TraceSettings { photons_per_light: photons, ..default() };
+    eprintln!("tracing {photons} photons through the water…");
+    tracer.trace(&settings, &mut list, &|done, total| {
+        if done == total || done % (total / 4).max(1) < 65536 {
+            eprintln!("  {:3.0} %", 100.0 * done as f64 / total as f64);
+        }
+    });
+    let map = PhotonMap::new(list.0, 0.02);
+    let camera = PinholeCamera {
+        position: glam::Vec3::from_array(CAMERA_POSITION.to_array()),
+        look_at: glam::Vec3::from_array(CAMERA_TARGET.to_array()),
+        up: glam::Vec3::Y,
+        fov_y: FOV_Y,
+        width: WIDTH,
+        height: HEIGHT,
+    };
+    eprintln!("gathering caustic irradiance for {WIDTH}×{HEIGHT} pixels…");
+    use rayon::prelude::*;
+    Ok((0..WIDTH * HEIGHT)
+        .into_par_iter()
+        .map(|i| {
+            // The composite shades the receiver the depth buffer holds: the floor seen
+            // straight through the (transparent, unrefracting) water mesh.
+            let (mut origin, dir) = camera.ray(i % WIDTH, i / WIDTH);
+            for _ in 0..4 {
+                let Some(hit) = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY) else { break };
+                let p = origin + dir * hit.t;
+                if let Surface::Receiver(_) = hit.surface {
+                    return map.irradiance_at(p, hit.geometric_normal) * SUN_LUX;
+                }
+                origin = p + dir * 1e-4;
+            }
+            glam::Vec3::ZERO
+        })
+        .collect())
+}
+
+fn bevy_mesh(mesh: &TriMesh) -> Mesh {
+    let to = |v: &[glam::Vec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();
+    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, to(mesh.positions()))
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, to(mesh.normals()))
+        .with_inserted_indices(Indices::U32(mesh.triangles().iter().flatten().copied().collect()))
+}
+
+/// Pool tiles: light cyan with dark grout, 16 tiles per metre-square texture repeat.
+fn tile_texture() -> Image {
+    const N: u32 = 64;
+    let data = (0..N * N)
+        .flat_map(|i| {
+            let (x, y) = (i % N, i / N);
+            if x < 3 || y < 3 { [70, 90, 100, 255] } else { [190, 225, 230, 255] }
+        })
+        .collect();
+    let mut image = Image::new(
+        Extent3d { width: N, height: N, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        ..ImageSamplerDescriptor::linear()
+    });
+    image
+}
+
+fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<glam::Vec3>) {
+    let pool = wave_pool(129, 128);
+    let water = bevy_mesh(&pool.scene.generators[0].mesh);
+    let tiles = world.resource_mut::<Assets<Image>>().add(tile_texture());
+    let injected = world.resource_mut::<Assets<Image>>().add(irradiance_image(
+        WIDTH,
+        HEIGHT,
+        &irradiance.iter().map(|v| Vec3::from_array(v.to_array())).collect::<Vec<_>>(),
+    ));
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let floor_material = materials.add(StandardMaterial {
+        base_color_texture: Some(tiles),
+        uv_transform: bevy::math::Affine2::from_scale(Vec2::splat(16.0)),
+        perceptual_roughness: 0.9,
+        ..default()
+    });
+    let water_material = materials.add(StandardMaterial {
+        base_color: Color::srgba(0.55, 0.8, 0.9, 0.3),
+        alpha_mode: AlphaMode::Blend,
+        perceptual_roughness: 0.05,
+        reflectance: 0.5,
+        ..default()
+    });
+    let mut meshes = world.resource_mut::<Assets<Mesh>>();
+    let floor = meshes.add(Plane3d::new(Vec3::Y, Vec2::splat(8.0)).mesh());
+    let water = meshes.add(water);
+
+    world.spawn((Mesh3d(floor), MeshMaterial3d(floor_material), CausticReceiver));
+    world.spawn((Mesh3d(water), MeshMaterial3d(water_material), CausticGenerator::refractive(1.333)));
+    world.spawn((
+        DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
+        Transform::default().looking_to(Vec3::new(0.3, -1.0, -0.2), Vec3::Y),
+    ));
+    world.spawn((
+        Camera3d::default(),
+        target,
+        Projection::from(PerspectiveProjection { fov: FOV_Y, ..default() }),
+        Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),
+        InjectedIrradiance(injected),
+    ));
+}
