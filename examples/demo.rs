@@ -207,6 +207,8 @@ fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<glam::Vec
     ));
     world.spawn((
         Camera3d::default(),
+        // Caustics are added to the linear HDR image, before tonemapping.
+        bevy::camera::Hdr,
         target,
         Projection::from(PerspectiveProjection { fov: FOV_Y, ..default() }),
         Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),

@@ -172,45 +172,15 @@ pub fn f16_to_f32(h: u16) -> f32 {
     }
 }
 
-/// Single to half precision (round to nearest), for building injected irradiance images.
-pub fn f32_to_f16(value: f32) -> u16 {
-    let bits = value.to_bits();
-    let sign = ((bits >> 16) & 0x8000) as u16;
-    if value.is_nan() {
-        return sign | 0x7e00;
-    }
-    let abs = value.abs();
-    if abs >= 65520.0 {
-        return sign | 0x7c00;
-    }
-    if abs < 6.103_515_6e-5 {
-        return sign | (abs / 2f32.powi(-24)).round() as u16;
-    }
-    let exponent = abs.log2().floor() as i32;
-    let mantissa = (abs / 2f32.powi(exponent) - 1.0) * 1024.0;
-    let (mut e, mut m) = (exponent + 15, mantissa.round() as u32);
-    if m == 1024 {
-        m = 0;
-        e += 1;
-    }
-    sign | ((e as u16) << 10) | m as u16
-}
-
-/// An [`Image`] in the caustic irradiance format from linear RGB values (row-major),
+/// An `Rgba32Float` image of irradiance (lux) from linear RGB values (row-major),
 /// ready to use as [`crate::InjectedIrradiance`].
 pub fn irradiance_image(width: u32, height: u32, values: &[Vec3]) -> Image {
-    let data = values
-        .iter()
-        .flat_map(|v| [v.x, v.y, v.z, 1.0])
-        .flat_map(|c| f32_to_f16(c).to_le_bytes())
-        .collect();
-    let mut image = Image::new(
+    let data = values.iter().flat_map(|v| [v.x, v.y, v.z, 1.0]).flat_map(f32::to_le_bytes).collect();
+    Image::new(
         Extent3d { width, height, depth_or_array_layers: 1 },
         TextureDimension::D2,
         data,
-        crate::CAUSTIC_IRRADIANCE_FORMAT,
+        TextureFormat::Rgba32Float,
         RenderAssetUsages::RENDER_WORLD,
-    );
-    image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
-    image
+    )
 }

@@ -2,20 +2,23 @@
 //!
 //! Every technique accumulates caustic irradiance `E` (the light's units per m², lux
 //! for Bevy's lights) into an HDR buffer the size of the view, at the surface each
-//! pixel sees. The composite then draws the [`CausticReceiver`] meshes once more, after
+//! pixel sees, stored as `E · exposure` (the view's exposure, as `bevy_pbr` applies it
+//! to lights) so that sunlight focused a hundredfold still fits in half floats. The composite then draws the [`CausticReceiver`] meshes once more, after
 //! the opaque pass and depth-tested against it, adding the Lambertian radiance
 //! `albedo/π · E` scaled by the view's exposure — exactly what `bevy_pbr` adds for the
 //! same irradiance from a light — so caustics land on receivers only, with their
 //! unmodified `StandardMaterial` colour and texture, and only where they are visible.
 //!
-//! An application can supply the buffer itself with [`InjectedIrradiance`] (the CLI
-//! and the demo inject the CPU reference tracer's irradiance this way).
+//! An application can supply the buffer itself with [`InjectedIrradiance`] (the demo
+//! injects the CPU reference tracer's irradiance this way). Caustics views need
+//! Bevy's `Hdr` camera component: the composite adds linear light before tonemapping.
 
 mod composite;
 
 use crate::components::{CausticReceiver, InvalidCausticParams};
 use crate::report::PassRecorder;
-use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
+use bevy::camera::Hdr;
 use bevy::pbr::{MeshMaterial3d, StandardMaterial};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -24,8 +27,9 @@ use bevy::render::{
     camera::ExtractedCamera,
     extract_component::{ExtractComponent, ExtractComponentPlugin},
     render_asset::RenderAssets,
-    render_resource::*,
+    render_resource::{binding_types::{texture_2d, uniform_buffer}, *},
     renderer::{RenderContext, RenderDevice, ViewQuery},
+    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
     sync_world::MainEntity,
     texture::{CachedTexture, GpuImage, TextureCache},
 };
@@ -36,10 +40,11 @@ pub use composite::CausticCompositePipeline;
 /// accumulate with additive blending.
 pub const CAUSTIC_IRRADIANCE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
-/// Caustic irradiance supplied by the application for a camera's view: an image of
-/// the view's size in [`CAUSTIC_IRRADIANCE_FORMAT`], linear, in the light's units per
-/// m² (lux for Bevy lights), one value per pixel for the surface that pixel sees. It is
-/// copied into the view's buffer each frame before the techniques add theirs.
+/// Caustic irradiance supplied by the application for a camera's view: a float image
+/// (`Rgba32Float` or `Rgba16Float`), linear, in the light's units per m² (lux for Bevy
+/// lights), one value per pixel for the surface that pixel sees (an image of another
+/// size is resampled to the view). It starts the view's buffer each frame, before the
+/// techniques add theirs. [`crate::headless::irradiance_image`] builds one.
 #[derive(Component, Clone, Debug, ExtractComponent, Reflect)]
 #[reflect(Component)]
 pub struct InjectedIrradiance(pub Handle<Image>);
@@ -69,6 +74,7 @@ struct ExtractedReceivers(HashMap<MainEntity, ReceiverAlbedo>);
 
 pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "composite.wgsl");
+    bevy::asset::embedded_asset!(app, "inject.wgsl");
     app.register_type::<InjectedIrradiance>()
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
@@ -76,7 +82,10 @@ pub(crate) fn build(app: &mut App) {
     };
     render_app
         .init_resource::<ExtractedReceivers>()
-        .add_systems(RenderStartup, composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems))
+        .add_systems(
+            RenderStartup,
+            (composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems), init_inject_pipeline),
+        )
         .add_systems(ExtractSchedule, (extract_receivers, mark_views_with_work))
         .add_systems(
             Render,
@@ -111,17 +120,23 @@ fn extract_receivers(
 }
 
 /// A view has caustics work when the application injects irradiance into it (and,
-/// with techniques, when a valid generator lights one of its receivers).
+/// with techniques, when a valid generator lights one of its receivers). Caustics are
+/// added to the linear HDR image before tonemapping, so the camera needs [`Hdr`] (as
+/// bloom does); a camera without it is reported once and skipped.
 fn mark_views_with_work(
     mut commands: Commands,
-    views: Extract<Query<(bevy::render::sync_world::RenderEntity, Has<InjectedIrradiance>), With<Camera3d>>>,
+    views: Extract<Query<(Entity, bevy::render::sync_world::RenderEntity, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>>,
+    mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
 ) {
-    for (render_entity, injected) in &views {
+    for (main_entity, render_entity, injected, hdr) in &views {
         let mut entity = commands.entity(render_entity);
-        if injected {
+        if injected && hdr {
             entity.insert(ViewCausticWork);
         } else {
             entity.remove::<(ViewCausticWork, ViewCausticIrradiance)>();
+        }
+        if injected && !hdr && warned.insert(main_entity) {
+            warn!("bevy_caustics: camera {main_entity} has caustics but no `Hdr` component; add `Hdr` to see them");
         }
     }
 }
@@ -147,7 +162,7 @@ fn prepare_irradiance_buffers(
                 sample_count: 1,
                 dimension: TextureDimension::D2,
                 format: CAUSTIC_IRRADIANCE_FORMAT,
-                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT | TextureUsages::COPY_DST,
+                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT,
                 view_formats: &[],
             },
         );
@@ -160,53 +175,79 @@ fn prepare_irradiance_buffers(
     }
 }
 
-/// Starts the view's buffer for this frame: the injected irradiance, or zero.
-fn inject_irradiance(
-    view: ViewQuery<(&ViewCausticIrradiance, Option<&InjectedIrradiance>)>,
-    images: Res<RenderAssets<GpuImage>>,
-    recorder: Res<PassRecorder>,
-    mut warned: Local<bool>,
-    mut ctx: RenderContext,
-) {
-    let (buffer, injected) = view.into_inner();
-    let target = &buffer.texture.texture;
-    let source = injected.and_then(|i| images.get(&i.0));
-    match source {
-        Some(src) if src.texture_descriptor.format == CAUSTIC_IRRADIANCE_FORMAT => {
-            let size = Extent3d {
-                width: src.texture_descriptor.size.width.min(target.width()),
-                height: src.texture_descriptor.size.height.min(target.height()),
-                depth_or_array_layers: 1,
-            };
-            if size.width != target.width() || size.height != target.height() {
-                clear(&mut ctx, &buffer.texture.default_view);
-            }
-            ctx.command_encoder().copy_texture_to_texture(src.texture.as_image_copy(), target.as_image_copy(), size);
-            recorder.record("inject");
-        }
-        Some(src) => {
-            if !*warned {
-                warn!(
-                    "bevy_caustics: InjectedIrradiance image is {:?}; it must be {CAUSTIC_IRRADIANCE_FORMAT:?}",
-                    src.texture_descriptor.format
-                );
-                *warned = true;
-            }
-            clear(&mut ctx, &buffer.texture.default_view);
-        }
-        None => clear(&mut ctx, &buffer.texture.default_view),
-    }
+/// The pipeline that starts a view's buffer from [`InjectedIrradiance`].
+#[derive(Resource)]
+struct InjectPipeline {
+    layout: BindGroupLayoutDescriptor,
+    pipeline: CachedRenderPipelineId,
 }
 
-fn clear(ctx: &mut RenderContext, view: &TextureView) {
-    ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
-        label: Some("caustic_irradiance_clear"),
+fn init_inject_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    fullscreen: Res<FullscreenShader>,
+    pipeline_cache: Res<PipelineCache>,
+) {
+    let layout = BindGroupLayoutDescriptor::new(
+        "caustic_inject_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (texture_2d(TextureSampleType::Float { filterable: false }), uniform_buffer::<ViewUniform>(true)),
+        ),
+    );
+    let pipeline = pipeline_cache.queue_render_pipeline(RenderPipelineDescriptor {
+        label: Some("caustic_inject_pipeline".into()),
+        layout: vec![layout.clone()],
+        vertex: fullscreen.to_vertex_state(),
+        fragment: Some(FragmentState {
+            shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "inject.wgsl"),
+            targets: vec![Some(ColorTargetState {
+                format: CAUSTIC_IRRADIANCE_FORMAT,
+                blend: None,
+                write_mask: ColorWrites::ALL,
+            })],
+            ..default()
+        }),
+        ..default()
+    });
+    commands.insert_resource(InjectPipeline { layout, pipeline });
+}
+
+/// Starts the view's buffer for this frame: the injected irradiance times exposure, or zero.
+fn inject_irradiance(
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewUniformOffset, Option<&InjectedIrradiance>)>,
+    images: Res<RenderAssets<GpuImage>>,
+    inject: Res<InjectPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    view_uniforms: Res<ViewUniforms>,
+    recorder: Res<PassRecorder>,
+    mut ctx: RenderContext,
+) {
+    let (buffer, view_offset, injected) = view.into_inner();
+    let source = injected.and_then(|i| images.get(&i.0));
+    let pipeline = pipeline_cache.get_render_pipeline(inject.pipeline);
+    let bind_group = match (source, view_uniforms.uniforms.binding()) {
+        (Some(image), Some(view_binding)) => Some(ctx.render_device().create_bind_group(
+            "caustic_inject_bind_group",
+            &pipeline_cache.get_bind_group_layout(&inject.layout),
+            &BindGroupEntries::sequential((&image.texture_view, view_binding)),
+        )),
+        _ => None,
+    };
+    let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+        label: Some("caustic_irradiance_inject"),
         color_attachments: &[Some(RenderPassColorAttachment {
-            view,
+            view: &buffer.texture.default_view,
             depth_slice: None,
             resolve_target: None,
             ops: Operations { load: LoadOp::Clear(Default::default()), store: StoreOp::Store },
         })],
         ..default()
     });
+    if let (Some(pipeline), Some(bind_group)) = (pipeline, bind_group) {
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
+        pass.draw(0..3, 0..1);
+        recorder.record("inject");
+    }
 }
