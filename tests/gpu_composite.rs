@@ -14,7 +14,10 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy::camera::Hdr;
 use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
-use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium};
+use bevy_caustics::{
+    CausticGenerator, CausticPassReport, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
+    TagCausticsFromMaterials,
+};
 use std::f32::consts::PI;
 
 const SIZE: u32 = 64;
@@ -82,7 +85,7 @@ fn world_at(x: u32, y: u32) -> Vec2 {
 }
 
 #[test]
-fn composite_adds_albedo_times_irradiance_on_visible_receivers_only() {
+fn composite_pass_report_validation_and_tagging_on_a_real_adapter() {
     let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     spawn_view(&mut renderer, true);
     let image = renderer.render(4).unwrap_or_else(|e| panic!("{e}"));
@@ -150,4 +153,29 @@ fn composite_adds_albedo_times_irradiance_on_visible_receivers_only() {
     world.entity_mut(bad_generator).insert(CausticGenerator::refractive(1.33));
     renderer.render(1).unwrap_or_else(|e| panic!("{e}"));
     assert!(renderer.world_mut().get::<InvalidCausticParams>(bad_generator).is_none());
+
+    // Opt-in tagging from materials, as a glTF scene arrives: glass refracts, smooth
+    // metal mirrors, the rest receives; meshes outside the marked root are left alone.
+    let world = renderer.world_mut();
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(Cuboid::default());
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let glass = materials.add(StandardMaterial { specular_transmission: 1.0, ior: 1.5, ..default() });
+    let metal = materials.add(StandardMaterial { metallic: 1.0, perceptual_roughness: 0.0, ..default() });
+    let wood = materials.add(StandardMaterial { perceptual_roughness: 0.8, ..default() });
+    let root = world.spawn((TagCausticsFromMaterials, Transform::default())).id();
+    let spawn = |w: &mut World, m: &Handle<StandardMaterial>, parent: Option<Entity>| {
+        let mut e = w.spawn((Mesh3d(mesh.clone()), MeshMaterial3d(m.clone()), Transform::default()));
+        if let Some(p) = parent {
+            e.insert(ChildOf(p));
+        }
+        e.id()
+    };
+    let (g, mirror, floor, outside) =
+        (spawn(world, &glass, Some(root)), spawn(world, &metal, Some(root)), spawn(world, &wood, Some(root)), spawn(world, &wood, None));
+    renderer.render(1).unwrap_or_else(|e| panic!("{e}"));
+    let world = renderer.world_mut();
+    assert_eq!(world.get::<CausticGenerator>(g), Some(&CausticGenerator::refractive(1.5)));
+    assert_eq!(world.get::<CausticGenerator>(mirror), Some(&CausticGenerator::mirror()));
+    assert!(world.get::<CausticReceiver>(floor).is_some());
+    assert!(world.get::<CausticReceiver>(outside).is_none() && world.get::<CausticGenerator>(outside).is_none());
 }

@@ -6,6 +6,7 @@
 //! `caustics_core`; this crate is a thin layer of components, systems and passes.
 
 pub mod components;
+pub mod gltf_tagging;
 pub mod headless;
 pub mod irradiance;
 pub mod report;
@@ -14,6 +15,7 @@ pub use components::{
     CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InvalidCausticParams,
     ParticipatingMedium,
 };
+pub use gltf_tagging::TagCausticsFromMaterials;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, InjectedIrradiance};
 pub use report::CausticPassReport;
 
@@ -30,6 +32,8 @@ impl Plugin for CausticsPlugin {
         app.register_type::<CausticGenerator>()
             .register_type::<CausticReceiver>()
             .register_type::<ParticipatingMedium>()
+            .register_type::<TagCausticsFromMaterials>()
+            .add_systems(Update, gltf_tagging::tag_from_materials)
             .add_systems(PostUpdate, components::validate_caustic_params);
         report::build(app);
         irradiance::build(app);
@@ -40,6 +44,6 @@ impl Plugin for CausticsPlugin {
 pub mod prelude {
     pub use crate::{
         CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsPlugin,
-        GeneratorInteraction, InjectedIrradiance, ParticipatingMedium,
+        GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };
 }
