@@ -10,20 +10,16 @@
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
-use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy::window::WindowResolution;
 use bevy_caustics::caustics_core::{
-    bvh::Surface,
     estimate::{PhotonList, PhotonMap},
-    glam,
-    mesh::TriMesh,
     scenes::wave_pool,
     tracer::{PhotonTracer, TraceSettings},
-    view::PinholeCamera,
 };
 use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
+use bevy_caustics::reference::{bevy_mesh, pinhole, view_irradiance};
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticsPlugin, InjectedIrradiance};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -99,7 +95,7 @@ fn run() -> Result<(), String> {
 }
 
 /// The view's caustic irradiance (lux), one value per pixel, from the ground-truth tracer.
-fn trace_caustics(photons: u64) -> Result<Vec<glam::Vec3>, String> {
+fn trace_caustics(photons: u64) -> Result<Vec<Vec3>, String> {
     let pool = wave_pool(129, 128);
     let tracer = PhotonTracer::new(&pool.scene).map_err(|e| e.to_string())?;
     let mut list = PhotonList::default();
@@ -111,41 +107,10 @@ fn trace_caustics(photons: u64) -> Result<Vec<glam::Vec3>, String> {
         }
     });
     let map = PhotonMap::new(list.0, 0.02);
-    let camera = PinholeCamera {
-        position: glam::Vec3::from_array(CAMERA_POSITION.to_array()),
-        look_at: glam::Vec3::from_array(CAMERA_TARGET.to_array()),
-        up: glam::Vec3::Y,
-        fov_y: FOV_Y,
-        width: WIDTH,
-        height: HEIGHT,
-    };
+    let camera = pinhole(&Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y), FOV_Y, WIDTH, HEIGHT);
     eprintln!("gathering caustic irradiance for {WIDTH}×{HEIGHT} pixels…");
-    use rayon::prelude::*;
-    Ok((0..WIDTH * HEIGHT)
-        .into_par_iter()
-        .map(|i| {
-            // The composite shades the receiver the depth buffer holds: the floor seen
-            // straight through the (transparent, unrefracting) water mesh.
-            let (mut origin, dir) = camera.ray(i % WIDTH, i / WIDTH);
-            for _ in 0..4 {
-                let Some(hit) = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY) else { break };
-                let p = origin + dir * hit.t;
-                if let Surface::Receiver(_) = hit.surface {
-                    return map.irradiance_at(p, hit.geometric_normal) * SUN_LUX;
-                }
-                origin = p + dir * 1e-4;
-            }
-            glam::Vec3::ZERO
-        })
-        .collect())
-}
-
-fn bevy_mesh(mesh: &TriMesh) -> Mesh {
-    let to = |v: &[glam::Vec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();
-    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, to(mesh.positions()))
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, to(mesh.normals()))
-        .with_inserted_indices(Indices::U32(mesh.triangles().iter().flatten().copied().collect()))
+    // The pool's light has irradiance 1; the sun here has SUN_LUX.
+    Ok(view_irradiance(&tracer, &map, &camera).into_iter().map(|e| e * SUN_LUX).collect())
 }
 
 /// Pool tiles: light cyan with dark grout, 16 tiles per metre-square texture repeat.
@@ -172,15 +137,11 @@ fn tile_texture() -> Image {
     image
 }
 
-fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<glam::Vec3>) {
+fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<Vec3>) {
     let pool = wave_pool(129, 128);
     let water = bevy_mesh(&pool.scene.generators[0].mesh);
     let tiles = world.resource_mut::<Assets<Image>>().add(tile_texture());
-    let injected = world.resource_mut::<Assets<Image>>().add(irradiance_image(
-        WIDTH,
-        HEIGHT,
-        &irradiance.iter().map(|v| Vec3::from_array(v.to_array())).collect::<Vec<_>>(),
-    ));
+    let injected = world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &irradiance));
     let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
     let floor_material = materials.add(StandardMaterial {
         base_color_texture: Some(tiles),

@@ -9,6 +9,7 @@ pub mod components;
 pub mod gltf_tagging;
 pub mod headless;
 pub mod irradiance;
+pub mod reference;
 pub mod report;
 
 pub use components::{

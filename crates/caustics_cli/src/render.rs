@@ -5,6 +5,9 @@ use crate::scenes::{LoadedScene, default_camera, open};
 use crate::{prepare_output, progress};
 use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
+use caustics_bevy::headless::HeadlessRenderer;
+use caustics_core::glam::Vec3;
+use caustics_core::scene::LightKind;
 use caustics_core::view::render_view;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -16,12 +19,25 @@ pub enum Method {
     Reference,
 }
 
+/// What draws the view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Renderer {
+    /// The CPU: direct light with shadows, caustics, and Whitted paths through the generators.
+    Cpu,
+    /// Bevy (headless, any wgpu adapter): its PBR lighting, and the caustics through the
+    /// plugin's injection and composite.
+    Bevy,
+}
+
 #[derive(Args)]
 pub struct RenderArgs {
     /// A .gltf/.glb file, a .json scene description, or a built-in scene: pool, sphere, ring.
     pub scene: String,
     #[arg(long, value_enum, default_value_t = Method::Reference)]
     pub method: Method,
+    /// What draws a camera view (ignored with --irradiance-plane).
+    #[arg(long, value_enum, default_value_t = Renderer::Cpu)]
+    pub renderer: Renderer,
     /// PNG to write (tone-mapped, sRGB).
     #[arg(long, default_value = "target/caustics/render.png")]
     pub out: PathBuf,
@@ -73,9 +89,21 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         let camera = camera.unwrap_or_else(|| default_camera(&bench, width, height));
         let camera = caustics_core::view::PinholeCamera { width, height, ..camera };
         eprintln!("shading {width}×{height} (kernel radius {radius:.4} m)");
-        (render_view(&tracer, &bench.scene, &camera, &map).radiance, width, height)
+        match args.renderer {
+            Renderer::Cpu => (render_view(&tracer, &bench.scene, &camera, &map).radiance, width, height),
+            Renderer::Bevy => {
+                let r = &bench.region;
+                let center = r.origin + 0.5 * (r.edge_u + r.edge_v);
+                (render_with_bevy(&tracer, center, &bench.scene, &camera, &map)?, width, height)
+            }
+        }
     };
-    write_png(&out, w, h, &pixels, 2.5 * percentile_white(&pixels, 0.5))?;
+    // Bevy's frame is already exposed (mid grey at 0.18); the CPU's is in light units.
+    let white = match (args.renderer, args.irradiance_plane) {
+        (Renderer::Bevy, false) => 1.0,
+        _ => 2.5 * percentile_white(&pixels, 0.5),
+    };
+    write_png(&out, w, h, &pixels, white)?;
     eprintln!("wrote {}", out.display());
     if let Some(exr) = &args.exr {
         let exr = prepare_output(exr)?;
@@ -83,6 +111,34 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
         eprintln!("wrote {}", exr.display());
     }
     Ok(())
+}
+
+/// The view drawn by Bevy, with the reference caustics injected into the plugin.
+fn render_with_bevy(
+    tracer: &PhotonTracer,
+    region_center: Vec3,
+    scene: &caustics_core::scene::Scene,
+    camera: &caustics_core::view::PinholeCamera,
+    map: &PhotonMap,
+) -> Result<Vec<Vec3>, String> {
+    use caustics_bevy::reference::{spawn_scene, view_irradiance};
+    let irradiance = view_irradiance(tracer, map, camera);
+    // Expose for the lights' own irradiance where the caustic lands.
+    let typical: f32 = scene
+        .lights
+        .iter()
+        .map(|light| match light.kind {
+            LightKind::Directional { irradiance, .. } => irradiance,
+            LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
+                intensity / (position - region_center).length_squared().max(1e-6)
+            }
+        })
+        .sum();
+    let mut renderer = HeadlessRenderer::new(camera.width, camera.height).map_err(|e| e.to_string())?;
+    let target = renderer.render_target();
+    spawn_scene(renderer.world_mut(), scene, camera, target, &irradiance, typical);
+    let image = renderer.render(8).map_err(|e| e.to_string())?;
+    Ok(image.pixels.iter().map(|p| Vec3::new(p.x, p.y, p.z)).collect())
 }
 
 /// A kernel radius that gathers about 64 photons where the caustic is average.

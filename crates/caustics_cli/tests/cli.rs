@@ -114,3 +114,21 @@ fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
     let out = caustics(&["render", broken.to_str().unwrap()]);
     assert_clean_failure(&out, "broken.gltf");
 }
+
+#[test]
+fn bevy_renders_the_view_with_reference_caustics_through_the_plugin() {
+    let dir = out_dir("bevy_view");
+    let png = dir.join("sphere.png");
+    let out = caustics(&[
+        "render", "sphere", "--renderer", "bevy", "--size", "96x72", "--photons", "400000",
+        "--out", png.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&png).unwrap().into_luma8();
+    let mut values: Vec<u8> = img.pixels().map(|p| p.0[0]).collect();
+    values.sort();
+    let (median, max) = (values[values.len() / 2], values[values.len() - 1]);
+    // The lit floor is mid grey; the glass ball's focal spot, composited into its own
+    // shadow, is far brighter.
+    assert!(median > 40 && max as f32 > 1.5 * median as f32, "median {median}, max {max}");
+}

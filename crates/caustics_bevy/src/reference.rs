@@ -1,0 +1,159 @@
+//! The ground-truth tracer as a caustics source for a Bevy view: core scenes as Bevy
+//! entities, and the tracer's caustic irradiance at the surface each pixel of a camera
+//! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
+//! --renderer bevy` show reference caustics through the plugin's own composite this way.
+
+use crate::{CausticGenerator, CausticReceiver, GeneratorInteraction, InjectedIrradiance};
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::{Exposure, Hdr, RenderTarget};
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use caustics_core::bvh::Surface;
+use caustics_core::estimate::PhotonMap;
+use caustics_core::glam;
+use caustics_core::mesh::TriMesh;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::{LightKind, Scene};
+use caustics_core::tracer::PhotonTracer;
+use caustics_core::view::PinholeCamera;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+fn to_bevy(v: glam::Vec3) -> Vec3 {
+    Vec3::from_array(v.to_array())
+}
+
+fn to_core(v: Vec3) -> glam::Vec3 {
+    glam::Vec3::from_array(v.to_array())
+}
+
+/// A core mesh as a Bevy triangle list with positions and normals.
+pub fn bevy_mesh(mesh: &TriMesh) -> Mesh {
+    let arrays = |v: &[glam::Vec3]| v.iter().map(|p| p.to_array()).collect::<Vec<_>>();
+    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, arrays(mesh.positions()))
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, arrays(mesh.normals()))
+        .with_inserted_indices(Indices::U32(mesh.triangles().iter().flatten().copied().collect()))
+}
+
+/// Caustic irradiance at the first receiver each pixel's ray meets, passing straight
+/// through generators — the surface the composite shades, since Bevy draws
+/// generators without refraction. Row-major, zero where no receiver is seen.
+pub fn view_irradiance(tracer: &PhotonTracer, photons: &PhotonMap, camera: &PinholeCamera) -> Vec<Vec3> {
+    (0..camera.width * camera.height)
+        .into_par_iter()
+        .map(|i| {
+            let (mut origin, dir) = camera.ray(i % camera.width, i / camera.width);
+            // A few generator layers at most (both faces of a closed glass object).
+            for _ in 0..8 {
+                let Some(hit) = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY) else { break };
+                let p = origin + dir * hit.t;
+                if let Surface::Receiver(_) = hit.surface {
+                    return to_bevy(photons.irradiance_at(p, hit.geometric_normal));
+                }
+                origin = p + dir * (1e-4 * (1.0 + p.abs().max_element()));
+            }
+            Vec3::ZERO
+        })
+        .collect()
+}
+
+/// The pinhole camera that matches a Bevy perspective camera at `transform`.
+pub fn pinhole(transform: &Transform, fov_y: f32, width: u32, height: u32) -> PinholeCamera {
+    PinholeCamera {
+        position: to_core(transform.translation),
+        look_at: to_core(transform.translation + transform.forward().as_vec3()),
+        up: to_core(transform.up().as_vec3()),
+        fov_y,
+        width,
+        height,
+    }
+}
+
+/// Spawns `scene` into `world`: receivers with their albedo and [`CausticReceiver`],
+/// generators as glass or mirror with [`CausticGenerator`], the lights (core
+/// intensities per steradian become Bevy's lumens, ×4π), and an HDR camera at `camera`
+/// rendering into `target`, showing `irradiance` through the composite. Ambient light is
+/// switched off, and exposure set so that `typical` lux on a white receiver comes out
+/// at mid grey.
+pub fn spawn_scene(
+    world: &mut World,
+    scene: &Scene,
+    camera: &PinholeCamera,
+    target: RenderTarget,
+    irradiance: &[Vec3],
+    typical: f32,
+) {
+    let injected = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
+    let injected = world.resource_mut::<Assets<Image>>().add(injected);
+    for receiver in &scene.receivers {
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&receiver.mesh));
+        let a = receiver.albedo;
+        let material = world
+            .resource_mut::<Assets<StandardMaterial>>()
+            .add(StandardMaterial { base_color: Color::linear_rgb(a.x, a.y, a.z), perceptual_roughness: 0.9, ..default() });
+        world.spawn((Mesh3d(mesh), MeshMaterial3d(material), CausticReceiver));
+    }
+    for generator in &scene.generators {
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&generator.mesh));
+        let (material, component) = match generator.interaction {
+            SpecularInteraction::Reflect => (
+                StandardMaterial { metallic: 1.0, perceptual_roughness: 0.02, ..default() },
+                CausticGenerator::mirror(),
+            ),
+            SpecularInteraction::Refract { ior, dispersion } => (
+                StandardMaterial {
+                    base_color: Color::srgba(0.9, 0.95, 1.0, 0.2),
+                    alpha_mode: AlphaMode::Blend,
+                    perceptual_roughness: 0.02,
+                    ior,
+                    ..default()
+                },
+                CausticGenerator {
+                    interaction: GeneratorInteraction::Refract { ior, dispersion: dispersion.map(|d| Vec2::new(d.a, d.b)) },
+                    ..CausticGenerator::refractive(ior)
+                },
+            ),
+        };
+        let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
+        world.spawn((Mesh3d(mesh), MeshMaterial3d(material), component));
+    }
+    for light in &scene.lights {
+        let color = Color::linear_rgb(light.color.x, light.color.y, light.color.z);
+        match light.kind {
+            LightKind::Directional { direction, irradiance } => world.spawn((
+                DirectionalLight { illuminance: irradiance, color, shadow_maps_enabled: true, ..default() },
+                Transform::default().looking_to(to_bevy(direction), Vec3::Y),
+            )),
+            LightKind::Point { position, intensity } => world.spawn((
+                PointLight { intensity: 4.0 * PI * intensity, color, range: 100.0, shadow_maps_enabled: true, ..default() },
+                Transform::from_translation(to_bevy(position)),
+            )),
+            LightKind::Spot { position, direction, intensity, inner_angle, outer_angle } => world.spawn((
+                SpotLight {
+                    intensity: 4.0 * PI * intensity,
+                    color,
+                    range: 100.0,
+                    inner_angle,
+                    outer_angle,
+                    shadow_maps_enabled: true,
+                    ..default()
+                },
+                Transform::from_translation(to_bevy(position)).looking_to(to_bevy(direction), Vec3::Y),
+            )),
+        };
+    }
+    // Core scenes are lit by their lights alone.
+    world.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
+    // exposure = 1 / (1.2 · 2^ev100); white at `typical` lux → radiance typical/π → 0.18.
+    let exposure = 0.18 * PI / typical.max(1e-6);
+    world.spawn((
+        Camera3d::default(),
+        Hdr,
+        target,
+        Exposure { ev100: (1.0 / (1.2 * exposure)).log2() },
+        Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),
+        Transform::from_translation(to_bevy(camera.position)).looking_at(to_bevy(camera.look_at), to_bevy(camera.up)),
+        InjectedIrradiance(injected),
+    ));
+}
