@@ -87,8 +87,10 @@ fn run() -> Result<(), String> {
             }),
             ..default()
         }))
-        .add_plugins(CausticsPlugin)
-        .add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()));
+        .add_plugins(CausticsPlugin);
+        #[cfg(feature = "egui")]
+        app.add_plugins(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
+        app.add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()));
         app.run();
     }
     Ok(())

@@ -6,6 +6,8 @@
 //! `caustics_core`; this crate is a thin layer of components, systems and passes.
 
 pub mod components;
+#[cfg(feature = "egui")]
+pub mod debug_panel;
 pub mod gltf_tagging;
 pub mod headless;
 pub mod irradiance;
