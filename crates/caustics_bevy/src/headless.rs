@@ -63,7 +63,7 @@ impl RenderedImage {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| err(e.to_string()))?;
         }
-        let mut image = Image::new(
+        let image = Image::new(
             Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
             TextureDimension::D2,
             self.pixels
@@ -76,7 +76,6 @@ impl RenderedImage {
             TextureFormat::Rgba8UnormSrgb,
             RenderAssetUsages::MAIN_WORLD,
         );
-        image.texture_descriptor.format = TextureFormat::Rgba8UnormSrgb;
         let dynamic = image.try_into_dynamic().map_err(|e| err(e.to_string()))?;
         dynamic.to_rgb8().save(path).map_err(|e| err(e.to_string()))
     }
