@@ -1,5 +1,5 @@
-//! The ground-truth tracer as a caustics source for a Bevy view: core scenes as Bevy
-//! entities, and the tracer's caustic irradiance at the surface each pixel of a camera
+//! The ground-truth tracer as a caustics source for a Bevy view: meshes between the
+//! two worlds, core scenes as Bevy entities, and the tracer's caustic irradiance at the surface each pixel of a camera
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
@@ -23,8 +23,32 @@ fn to_bevy(v: glam::Vec3) -> Vec3 {
     Vec3::from_array(v.to_array())
 }
 
-fn to_core(v: Vec3) -> glam::Vec3 {
+/// A Bevy vector as the core crate's (the same glam, re-exported at another path).
+pub fn to_core(v: Vec3) -> glam::Vec3 {
     glam::Vec3::from_array(v.to_array())
+}
+
+/// A Bevy mesh placed by `transform` as a world-space core mesh. Meshes without
+/// normals get smooth ones; malformed meshes (no positions, bad indices, NaN) are an
+/// error that says why.
+pub fn core_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, String> {
+    use bevy::mesh::VertexAttributeValues::Float32x3;
+    let positions = match mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) {
+        Ok(Float32x3(p)) => p.iter().map(|&p| glam::Vec3::from_array(p)).collect::<Vec<_>>(),
+        _ => return Err("has no Float32x3 positions".into()),
+    };
+    let indices: Vec<u32> = match mesh.indices() {
+        Some(Indices::U16(i)) => i.iter().map(|&i| i as u32).collect(),
+        Some(Indices::U32(i)) => i.clone(),
+        None => (0..positions.len() as u32).collect(),
+    };
+    let triangles: Vec<[u32; 3]> = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    let local = match mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL) {
+        Ok(Float32x3(n)) => TriMesh::new(positions, n.iter().map(|&n| glam::Vec3::from_array(n)).collect(), triangles),
+        _ => TriMesh::with_smooth_normals(positions, triangles),
+    }
+    .map_err(|e| e.to_string())?;
+    Ok(local.transformed(&glam::Affine3A::from_cols_array(&transform.affine().to_cols_array())))
 }
 
 /// A core mesh as a Bevy triangle list with positions and normals.

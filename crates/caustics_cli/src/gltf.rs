@@ -8,16 +8,16 @@ use bevy::asset::{AssetPlugin, LoadState, UnapprovedPathMode};
 use bevy::camera::{Camera, Projection};
 use bevy::gltf::GltfAssetLabel;
 use bevy::light::{DirectionalLight, PointLight, SpotLight};
-use bevy::mesh::{Indices, Mesh, Mesh3d, VertexAttributeValues};
+use bevy::mesh::{Mesh, Mesh3d};
 use bevy::pbr::{MeshMaterial3d, StandardMaterial};
 use bevy::prelude::*;
 use bevy::render::{RenderPlugin, settings::WgpuSettings};
 use bevy::window::ExitCondition;
 use bevy::winit::WinitPlugin;
 use bevy::world_serialization::WorldAsset;
+use caustics_bevy::reference::{core_mesh, to_core};
 use caustics_core::estimate::GridRegion;
 use caustics_core::glam;
-use caustics_core::mesh::TriMesh;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene, SurfaceRole, role_from_material};
 use caustics_core::scenes::BenchScene;
 use caustics_core::view::PinholeCamera;
@@ -83,34 +83,6 @@ fn global_transform(world: &World, entity: Entity) -> GlobalTransform {
     }
 }
 
-fn to_glam(v: Vec3) -> glam::Vec3 {
-    glam::Vec3::from_array(v.to_array())
-}
-
-/// A Bevy mesh in world space as a core mesh.
-fn tri_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, String> {
-    let positions = match mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) {
-        Ok(VertexAttributeValues::Float32x3(p)) => p.iter().map(|&p| glam::Vec3::from_array(p)).collect::<Vec<_>>(),
-        _ => return Err("has no Float32x3 positions".into()),
-    };
-    let indices: Vec<u32> = match mesh.indices() {
-        Some(Indices::U16(i)) => i.iter().map(|&i| i as u32).collect(),
-        Some(Indices::U32(i)) => i.clone(),
-        None => (0..positions.len() as u32).collect(),
-    };
-    let triangles: Vec<[u32; 3]> = indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-    let local = match mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL) {
-        Ok(VertexAttributeValues::Float32x3(n)) => {
-            TriMesh::new(positions, n.iter().map(|&n| glam::Vec3::from_array(n)).collect(), triangles)
-        }
-        _ => TriMesh::with_smooth_normals(positions, triangles),
-    }
-    .map_err(|e| e.to_string())?;
-    let affine = transform.affine();
-    let world = glam::Affine3A::from_cols_array(&affine.to_cols_array());
-    Ok(local.transformed(&world))
-}
-
 /// Converts the glTF scene's world; `app` holds its mesh and material assets.
 fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<LoadedScene, String> {
     let mut scene = Scene::default();
@@ -123,7 +95,7 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
         let (Some(mesh), Some(material)) = (meshes.get(&mesh.0), materials.get(&material.0)) else {
             return Err(format!("{name}: {label}: its mesh or material did not load"));
         };
-        let mesh = tri_mesh(mesh, transform).map_err(|e| format!("{name}: {label}: {e}"))?;
+        let mesh = core_mesh(mesh, transform).map_err(|e| format!("{name}: {label}: {e}"))?;
         let role = role_from_material(
             material.specular_transmission,
             material.ior,
@@ -146,8 +118,8 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
     let mut lights = world.query::<(Entity, Option<&DirectionalLight>, Option<&PointLight>, Option<&SpotLight>)>();
     for (entity, directional, point, spot) in lights.iter(world) {
         let t = global_transform(world, entity);
-        let position = to_glam(t.translation());
-        let forward = to_glam(t.forward().as_vec3());
+        let position = to_core(t.translation());
+        let forward = to_core(t.forward().as_vec3());
         // Bevy's point and spot intensities are luminous power (lm); the tracer wants
         // intensity per steradian: Φ / 4π (Bevy's own convention, also for spots).
         let light = match (directional, point, spot) {
@@ -179,9 +151,9 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
         _ => None,
     });
     let camera = camera.map(|(t, p)| PinholeCamera {
-            position: to_glam(t.translation()),
-            look_at: to_glam(t.translation() + t.forward().as_vec3()),
-            up: to_glam(t.up().as_vec3()),
+            position: to_core(t.translation()),
+            look_at: to_core(t.translation() + t.forward().as_vec3()),
+            up: to_core(t.up().as_vec3()),
             fov_y: p.fov,
             width: 0,
             height: 0,
