@@ -107,24 +107,32 @@ impl ParticipatingMedium {
 #[derive(Component, Clone, Debug, PartialEq)]
 pub struct InvalidCausticParams(pub ParamError);
 
-/// Checks generators and media when they are added or changed: an invalid one gets
-/// [`InvalidCausticParams`] and one warning; a fixed one loses the marker.
+/// Entities whose generator or medium was added or changed since the last check.
+type ParamsChanged = Or<(Changed<CausticGenerator>, Changed<ParticipatingMedium>)>;
+
+/// Checks generators and media when they are added, changed or removed, per entity (a
+/// water body may be both): an invalid one gets [`InvalidCausticParams`] and one
+/// warning; a fixed one, or one that no longer has either component, loses the marker.
 pub fn validate_caustic_params(
     mut commands: Commands,
-    generators: Query<(Entity, &CausticGenerator, Option<&InvalidCausticParams>), Changed<CausticGenerator>>,
-    media: Query<(Entity, &ParticipatingMedium, Option<&InvalidCausticParams>), Changed<ParticipatingMedium>>,
+    changed: Query<Entity, ParamsChanged>,
+    mut removed_generators: RemovedComponents<CausticGenerator>,
+    mut removed_media: RemovedComponents<ParticipatingMedium>,
+    params: Query<(Option<&CausticGenerator>, Option<&ParticipatingMedium>, Option<&InvalidCausticParams>)>,
 ) {
-    let results = generators
-        .iter()
-        .map(|(e, g, m)| (e, "CausticGenerator", g.specular_interaction().validate(), m))
-        .chain(media.iter().map(|(e, m, marker)| (e, "ParticipatingMedium", m.coefficients().validate(), marker)));
-    for (entity, kind, result, marker) in results {
-        match (result, marker) {
-            (Err(err), previous) if previous.map(|p| &p.0) != Some(&err) => {
+    let candidates: bevy::platform::collections::HashSet<Entity> =
+        changed.iter().chain(removed_generators.read()).chain(removed_media.read()).collect();
+    for entity in candidates {
+        let Ok((generator, medium, marker)) = params.get(entity) else { continue };
+        let error = generator
+            .and_then(|g| g.specular_interaction().validate().err().map(|e| ("CausticGenerator", e)))
+            .or_else(|| medium.and_then(|m| m.coefficients().validate().err().map(|e| ("ParticipatingMedium", e))));
+        match (error, marker) {
+            (Some((kind, err)), previous) if previous.map(|p| &p.0) != Some(&err) => {
                 warn!("bevy_caustics: {kind} on {entity} is skipped: {err}");
                 commands.entity(entity).insert(InvalidCausticParams(err));
             }
-            (Ok(()), Some(_)) => {
+            (None, Some(_)) => {
                 commands.entity(entity).remove::<InvalidCausticParams>();
             }
             _ => {}
