@@ -20,17 +20,20 @@ pub struct TagCausticsFromMaterials;
 #[derive(Component)]
 pub struct CausticsTagged;
 
+/// Meshes with a `StandardMaterial` that neither the tagging nor the user has tagged.
+type Untagged = (With<Mesh3d>, Without<CausticsTagged>, Without<CausticGenerator>, Without<CausticReceiver>);
+
 /// Tags untagged meshes below a [`TagCausticsFromMaterials`] root.
 pub fn tag_from_materials(
     mut commands: Commands,
-    candidates: Query<
-        (Entity, &MeshMaterial3d<StandardMaterial>, Option<&Name>),
-        (With<Mesh3d>, Without<CausticsTagged>, Without<CausticGenerator>, Without<CausticReceiver>),
-    >,
+    candidates: Query<(Entity, &MeshMaterial3d<StandardMaterial>, Option<&Name>), Untagged>,
     roots: Query<(), With<TagCausticsFromMaterials>>,
     parents: Query<&ChildOf>,
     materials: Res<Assets<StandardMaterial>>,
 ) {
+    if roots.is_empty() {
+        return;
+    }
     for (entity, material, name) in &candidates {
         let under_root = roots.contains(entity) || parents.iter_ancestors(entity).any(|a| roots.contains(a));
         if !under_root {

@@ -147,7 +147,10 @@ struct ReceiverUniform {
 #[derive(Resource, Default)]
 pub(super) struct ReceiverBindGroups(HashMap<MainEntity, BindGroup>);
 
+/// Builds each receiver's albedo bind group, when some view has caustics work.
+#[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_receiver_bind_groups(
+    views: Query<(), With<ViewCausticWork>>,
     receivers: Res<ExtractedReceivers>,
     mut bind_groups: ResMut<ReceiverBindGroups>,
     pipeline: Res<CausticCompositePipeline>,
@@ -158,6 +161,9 @@ pub(super) fn prepare_receiver_bind_groups(
     queue: Res<RenderQueue>,
 ) {
     bind_groups.0.clear();
+    if views.is_empty() {
+        return;
+    }
     let layout = pipeline_cache.get_bind_group_layout(&pipeline.material_layout);
     for (entity, albedo) in &receivers.0 {
         let image = match albedo.texture {
@@ -185,7 +191,7 @@ pub(super) fn prepare_receiver_bind_groups(
 
 /// Queues every visible receiver of every view with caustics work into the view's
 /// transparent phase.
-#[allow(clippy::too_many_arguments)]
+#[expect(clippy::too_many_arguments)]
 pub(super) fn queue(
     draw_functions: Res<DrawFunctions<Transparent3d>>,
     pipeline: Res<CausticCompositePipeline>,

@@ -2,12 +2,13 @@
 //!
 //! Every technique accumulates caustic irradiance `E` (the light's units per m², lux
 //! for Bevy's lights) into an HDR buffer the size of the view, at the surface each
-//! pixel sees, stored as `E · exposure` (the view's exposure, as `bevy_pbr` applies it
-//! to lights) so that sunlight focused a hundredfold still fits in half floats. The composite then draws the [`CausticReceiver`] meshes once more, after
-//! the opaque pass and depth-tested against it, adding the Lambertian radiance
-//! `albedo/π · E` scaled by the view's exposure — exactly what `bevy_pbr` adds for the
-//! same irradiance from a light — so caustics land on receivers only, with their
-//! unmodified `StandardMaterial` colour and texture, and only where they are visible.
+//! pixel sees. It is stored as `E · exposure` (the view's exposure, as `bevy_pbr`
+//! applies it to lights) so that sunlight focused a hundredfold still fits in half
+//! floats. The composite then draws the [`CausticReceiver`] meshes once more, after the
+//! opaque pass and depth-tested against it, adding the Lambertian radiance
+//! `albedo/π · E · exposure` — what `bevy_pbr` adds for the same irradiance from a
+//! light — so caustics land on receivers only, with their unmodified
+//! `StandardMaterial` colour and texture, and only where they are visible.
 //!
 //! An application can supply the buffer itself with [`InjectedIrradiance`] (the demo
 //! injects the CPU reference tracer's irradiance this way). Caustics views need
@@ -17,21 +18,24 @@ mod composite;
 
 use crate::components::{CausticReceiver, InvalidCausticParams};
 use crate::report::PassRecorder;
-use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
 use bevy::camera::Hdr;
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
 use bevy::pbr::{MeshMaterial3d, StandardMaterial};
-use bevy::platform::collections::HashMap;
+use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     camera::ExtractedCamera,
     extract_component::{ExtractComponent, ExtractComponentPlugin},
     render_asset::RenderAssets,
-    render_resource::{binding_types::{texture_2d, uniform_buffer}, *},
+    render_resource::{
+        binding_types::{texture_2d, uniform_buffer},
+        *,
+    },
     renderer::{RenderContext, RenderDevice, ViewQuery},
-    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
-    sync_world::MainEntity,
+    sync_world::{MainEntity, RenderEntity},
     texture::{CachedTexture, GpuImage, TextureCache},
+    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
 };
 
 pub use composite::CausticCompositePipeline;
@@ -99,9 +103,17 @@ pub(crate) fn build(app: &mut App) {
     composite::build(render_app);
 }
 
+/// Valid receivers, with their material if they have one.
+type ReceiverQuery = Query<
+    'static,
+    'static,
+    (Entity, Option<&'static MeshMaterial3d<StandardMaterial>>),
+    (With<CausticReceiver>, Without<InvalidCausticParams>),
+>;
+
 fn extract_receivers(
     mut extracted: ResMut<ExtractedReceivers>,
-    receivers: Extract<Query<(Entity, Option<&MeshMaterial3d<StandardMaterial>>), (With<CausticReceiver>, Without<InvalidCausticParams>)>>,
+    receivers: Extract<ReceiverQuery>,
     materials: Extract<Res<Assets<StandardMaterial>>>,
 ) {
     extracted.0.clear();
@@ -119,14 +131,18 @@ fn extract_receivers(
     }
 }
 
+/// 3D cameras, whether they have injected irradiance and whether they render HDR.
+type CameraQuery =
+    Query<'static, 'static, (Entity, RenderEntity, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>;
+
 /// A view has caustics work when the application injects irradiance into it (and,
 /// with techniques, when a valid generator lights one of its receivers). Caustics are
 /// added to the linear HDR image before tonemapping, so the camera needs [`Hdr`] (as
 /// bloom does); a camera without it is reported once and skipped.
 fn mark_views_with_work(
     mut commands: Commands,
-    views: Extract<Query<(Entity, bevy::render::sync_world::RenderEntity, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>>,
-    mut warned: Local<bevy::platform::collections::HashSet<Entity>>,
+    views: Extract<CameraQuery>,
+    mut warned: Local<HashSet<Entity>>,
 ) {
     for (main_entity, render_entity, injected, hdr) in &views {
         let mut entity = commands.entity(render_entity);
