@@ -6,16 +6,15 @@
 //! One test function: a process holds one Bevy app with a render device at a time.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::camera::Exposure;
+use bevy::camera::{Exposure, Hdr};
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::image::{ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy::camera::Hdr;
 use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
 use bevy_caustics::{
-    CausticGenerator, CausticPassReport, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
+    CausticGenerator, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
     TagCausticsFromMaterials,
 };
 use std::f32::consts::PI;
@@ -61,7 +60,6 @@ fn spawn_view(renderer: &mut HeadlessRenderer, inject: bool) {
     world.spawn((Mesh3d(plane), MeshMaterial3d(plain), Transform::from_xyz(2.0, 0.0, 0.0)));
     let mut camera = world.spawn((
         Camera3d::default(),
-        Camera { ..default() },
         target,
         Hdr,
         Tonemapping::None,
@@ -90,27 +88,28 @@ fn composite_pass_report_validation_and_tagging_on_a_real_adapter() {
     spawn_view(&mut renderer, true);
     let image = renderer.render(4).unwrap_or_else(|e| panic!("{e}"));
     image.save_png(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_composite.png"), 1.0).unwrap();
-    let report = renderer.world_mut().resource::<CausticPassReport>().clone();
+    let report = renderer.pass_report();
     assert_eq!(report.views("inject"), 1, "{report:?}");
     assert_eq!(report.views("composite"), 1, "{report:?}");
 
     let exposure = 1.0 / (1.2 * 2f32.powf(EV100));
-    let (mut seen, mut checked) = ([false; 2], 0);
+    let (mut seen, mut checked, mut dark) = ([false; 2], 0, [0; 2]);
     for y in 0..SIZE {
         for x in 0..SIZE {
             let p = world_at(x, y);
             let got = image.pixel(x, y).truncate();
-            let on_receiver = p.x.abs() < 0.97 && p.y.abs() < 0.97;
-            let under_cube = (p.x - 0.5).abs() < 0.25 && (p.y - 0.5).abs() < 0.25;
-            let on_texel_edge = p.x.abs() < 0.05;
-            if !on_receiver || under_cube {
-                // Nothing lights the scene but the caustics: anything else stays black.
-                if (p.x.abs() > 1.03 || p.y.abs() > 1.03) && !((p.x - 0.5).abs() < 0.27 && (p.y - 0.5).abs() < 0.27) {
-                    assert!(got.max_element() < 1e-4, "pixel ({x},{y}) at {p} off the receiver got {got}");
-                }
+            // Pixel centres within 0.03 m (< a pixel) of an edge are left out.
+            let off_receiver = p.abs().max_element() > 1.03;
+            let cube_distance = (p - Vec2::splat(0.5)).abs().max_element();
+            if off_receiver || cube_distance < 0.17 {
+                // The plain plane, the background and the cube's top, which occludes the
+                // receiver: nothing lights the scene but the caustics, so all stay black.
+                assert!(got.max_element() < 1e-4, "pixel ({x},{y}) at {p} is not a visible receiver but got {got}");
+                dark[usize::from(!off_receiver)] += 1;
                 continue;
             }
-            if on_texel_edge {
+            let on_edge = p.abs().max_element() > 0.97 || cube_distance < 0.23 || p.x.abs() < 0.05;
+            if on_edge {
                 continue;
             }
             let e = irradiance(x, y) / PI * exposure;
@@ -125,6 +124,7 @@ fn composite_pass_report_validation_and_tagging_on_a_real_adapter() {
             checked += 1;
         }
     }
+    assert!(dark[0] > 500 && dark[1] > 30, "too few dark pixels checked (off receiver, on cube): {dark:?}");
     assert!(seen[0] && seen[1], "both texels of the base-colour texture must show");
     assert!(checked > 1500, "only {checked} receiver pixels checked");
 
@@ -134,25 +134,51 @@ fn composite_pass_report_validation_and_tagging_on_a_real_adapter() {
         renderer.world_mut().entity_mut(camera).remove::<InjectedIrradiance>();
     }
     let image = renderer.render(3).unwrap_or_else(|e| panic!("{e}"));
-    let report = renderer.world_mut().resource::<CausticPassReport>().clone();
+    let report = renderer.pass_report();
     assert!(report.is_empty(), "a scene with nothing to do ran {report:?}");
     assert!(image.pixels.iter().all(|p| p.truncate().max_element() < 1e-4), "no caustics, no light");
 
-    // Invalid parameters: reported and skipped, never a panic.
+    // Invalid parameters: reported once (one warning per marker insertion) and skipped,
+    // never a panic.
+    #[derive(Resource, Default)]
+    struct Reported(Vec<Entity>);
     let world = renderer.world_mut();
+    world.init_resource::<Reported>();
+    world.add_observer(|insert: On<Insert, InvalidCausticParams>, mut reported: ResMut<Reported>| {
+        reported.0.push(insert.entity);
+    });
     let bad_generator = world.spawn(CausticGenerator::refractive(0.5)).id();
     let bad_medium = world.spawn(ParticipatingMedium { scattering: -1.0, absorption: f32::NAN, asymmetry: 0.0 }).id();
-    let good = world.spawn(CausticGenerator::refractive(1.5)).id();
+    let nan_medium = world.spawn(ParticipatingMedium { scattering: 0.1, absorption: f32::NAN, asymmetry: 0.0 }).id();
+    let water = ParticipatingMedium { scattering: 0.05, absorption: 0.1, asymmetry: 0.9 };
+    let bad_water = world.spawn((CausticGenerator::refractive(0.9), water)).id();
+    let good = world.spawn((CausticGenerator::refractive(1.5), water)).id();
     renderer.render(2).unwrap_or_else(|e| panic!("{e}"));
     let world = renderer.world_mut();
-    let marker = |e: Entity| world.get::<InvalidCausticParams>(e).map(|m| m.0.to_string());
-    assert!(marker(bad_generator).unwrap().contains("index of refraction 0.5"));
-    assert!(marker(bad_medium).unwrap().contains("scattering"));
-    assert_eq!(marker(good), None);
-    // Fixing the value clears the marker.
+    // Setting the same invalid value again, or changing a valid component beside an
+    // invalid one, warns no more and keeps the marker.
+    world.entity_mut(bad_generator).insert(CausticGenerator::refractive(0.5));
+    world.entity_mut(bad_water).insert(ParticipatingMedium { asymmetry: 0.8, ..water });
+    renderer.render(2).unwrap_or_else(|e| panic!("{e}"));
+    let world = renderer.world_mut();
+    let marker = |w: &World, e: Entity| w.get::<InvalidCausticParams>(e).map(|m| m.0.to_string());
+    assert!(marker(world, bad_generator).unwrap().contains("index of refraction 0.5"));
+    assert!(marker(world, bad_medium).unwrap().contains("scattering"));
+    assert!(marker(world, nan_medium).unwrap().contains("absorption"));
+    assert!(marker(world, bad_water).unwrap().contains("index of refraction 0.9"));
+    assert_eq!(marker(world, good), None);
+    let mut reported = world.resource::<Reported>().0.clone();
+    reported.sort();
+    let mut expected = vec![bad_generator, bad_medium, nan_medium, bad_water];
+    expected.sort();
+    assert_eq!(reported, expected, "one report per invalid entity");
+    // Fixing the value, or removing the invalid component, clears the marker.
     world.entity_mut(bad_generator).insert(CausticGenerator::refractive(1.33));
+    world.entity_mut(bad_water).remove::<CausticGenerator>();
     renderer.render(1).unwrap_or_else(|e| panic!("{e}"));
-    assert!(renderer.world_mut().get::<InvalidCausticParams>(bad_generator).is_none());
+    let world = renderer.world_mut();
+    assert_eq!(marker(world, bad_generator), None);
+    assert_eq!(marker(world, bad_water), None);
 
     // Opt-in tagging from materials, as a glTF scene arrives: glass refracts, smooth
     // metal mirrors, the rest receives; meshes outside the marked root are left alone.

@@ -2,7 +2,7 @@
 //! pixels back as linear floats. Used by the tests, the examples' headless mode and the
 //! CLI. Runs on any wgpu adapter, Mesa's software Vulkan (lavapipe) included.
 
-use crate::CausticsPlugin;
+use crate::{CausticPassReport, CausticsPlugin};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::prelude::*;
@@ -120,7 +120,13 @@ impl HeadlessRenderer {
         self.app.world_mut()
     }
 
-    /// Runs `frames` updates, then reads the last frame back.
+    /// The caustics passes that ran in the last frame rendered.
+    pub fn pass_report(&self) -> CausticPassReport {
+        self.app.world().resource::<CausticPassReport>().clone()
+    }
+
+    /// Runs `frames` updates, then reads back the next frame that reaches the image
+    /// (a few more updates: rendering is pipelined and readback asynchronous).
     pub fn render(&mut self, frames: u32) -> Result<RenderedImage, HeadlessError> {
         for _ in 0..frames {
             self.app.update();
