@@ -122,7 +122,7 @@ impl TriMesh {
             normals: self
                 .normals
                 .iter()
-                .map(|&n| Vec3::from(normal_matrix * n).normalize_or(n))
+                .map(|&n| (normal_matrix * n).normalize_or(n))
                 .collect(),
             triangles: self.triangles.clone(),
         }

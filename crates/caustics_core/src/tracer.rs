@@ -350,7 +350,7 @@ impl<'a> PhotonTracer<'a> {
         let mut rng = Pcg32::for_photon(settings.seed, light_index, index);
         let (origin, dir, flux) = emitter.sample(light, index, settings.photons_per_light, &mut rng);
         // Dispersive scenes: each photon carries one channel, three times as strong.
-        let channel = self.dispersive.then(|| (index % 3) as usize);
+        let channel = self.dispersive.then_some((index % 3) as usize);
         let color = match channel {
             Some(c) => Vec3::from_array(std::array::from_fn(|i| if i == c { 3.0 } else { 0.0 })) * light.color,
             None => light.color,
