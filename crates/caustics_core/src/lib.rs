@@ -15,5 +15,6 @@ pub mod scene;
 pub mod scenes;
 pub mod tracer;
 pub mod view;
+pub mod volumes;
 
 pub use glam;

@@ -1,0 +1,428 @@
+//! Building caustic volumes from generator meshes and lights (§3, §3.4).
+
+use super::{BoundingShape, CausticVolume, VolumeSettings};
+use crate::mesh::TriMesh;
+use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
+use crate::params::SpecularInteraction;
+use crate::scene::{Light, LightKind, Scene};
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
+
+/// The triangles around each vertex of a mesh (compressed rows), for the fans of §3.4.
+/// Depends on the topology only: an animated generator keeps its fans.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VertexFans {
+    start: Vec<u32>,
+    triangles: Vec<u32>,
+}
+
+impl VertexFans {
+    pub fn new(mesh: &TriMesh) -> Self {
+        let vertices = mesh.positions().len();
+        let mut count = vec![0u32; vertices + 1];
+        for tri in mesh.triangles() {
+            for &v in tri {
+                count[v as usize + 1] += 1;
+            }
+        }
+        for i in 0..vertices {
+            count[i + 1] += count[i];
+        }
+        let mut next = count.clone();
+        let mut triangles = vec![0u32; count[vertices] as usize];
+        for (t, tri) in mesh.triangles().iter().enumerate() {
+            for &v in tri {
+                triangles[next[v as usize] as usize] = t as u32;
+                next[v as usize] += 1;
+            }
+        }
+        Self { start: count, triangles }
+    }
+
+    /// Whether these fans were built for a mesh with this many vertices and triangles.
+    pub fn fits(&self, mesh: &TriMesh) -> bool {
+        self.start.len() == mesh.positions().len() + 1 && self.triangles.len() == 3 * mesh.triangles().len()
+    }
+
+    fn around(&self, vertex: u32) -> &[u32] {
+        &self.triangles[self.start[vertex as usize] as usize..self.start[vertex as usize + 1] as usize]
+    }
+}
+
+/// Counts of what a build kept and dropped, and the flux on each side.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildStats {
+    pub volumes: usize,
+    /// Triangles facing away from the light, or outside a spot light's cone.
+    pub unlit: usize,
+    /// Triangles with a vertex ray lost to total internal reflection.
+    pub total_internal_reflection: usize,
+    /// Triangles with a vertex ray too close to the triangle's plane (grazing light).
+    pub grazing: usize,
+    /// Zero-area triangles, or volumes with no receiver ahead of them.
+    pub degenerate: usize,
+    /// Flux of the kept volumes.
+    pub flux: DVec3,
+    /// Flux of lit triangles that were dropped (TIR, grazing, degenerate).
+    pub dropped_flux: DVec3,
+}
+
+impl BuildStats {
+    fn add(mut self, o: Self) -> Self {
+        self.volumes += o.volumes;
+        self.unlit += o.unlit;
+        self.total_internal_reflection += o.total_internal_reflection;
+        self.grazing += o.grazing;
+        self.degenerate += o.degenerate;
+        self.flux += o.flux;
+        self.dropped_flux += o.dropped_flux;
+        self
+    }
+}
+
+/// Smallest cosine between a shared slicing axis and a triangle's rays and normal.
+const SHARED_AXIS_MIN_COS: f32 = 0.25;
+
+/// Light arriving at a vertex: travel direction and irradiance perpendicular to it.
+fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
+    match light.kind {
+        LightKind::Directional { direction, irradiance } => (direction.normalize(), irradiance),
+        LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
+            let d = p - position;
+            let r2 = d.length_squared().max(1e-12);
+            let dir = d / r2.sqrt();
+            (dir, intensity / r2 * light.cone_attenuation(dir))
+        }
+    }
+}
+
+/// A vertex ray: unit direction and the fraction of flux it carries (Fresnel).
+#[derive(Clone, Copy)]
+enum VertexRay {
+    Ray { direction: Vec3, fresnel: f32, irradiance: f32, incident: Vec3 },
+    TotalInternalReflection { irradiance: f32, incident: Vec3 },
+}
+
+fn vertex_ray(light: &Light, interaction: &SpecularInteraction, ior: Option<f32>, p: Vec3, n: Vec3) -> VertexRay {
+    let (l, irradiance) = incident(light, p);
+    match interaction {
+        SpecularInteraction::Reflect => {
+            VertexRay::Ray { direction: reflect(l, n).normalize_or(l), fresnel: 1.0, irradiance, incident: l }
+        }
+        SpecularInteraction::Refract { .. } => {
+            let ior = ior.unwrap_or(1.0);
+            // The inside (index `ior`) is opposite the normal (see SpecularInteraction).
+            let eta = if l.dot(n) < 0.0 { 1.0 / ior } else { ior };
+            match refract(l, n, eta).direction() {
+                Some(direction) => VertexRay::Ray {
+                    direction,
+                    fresnel: 1.0 - fresnel_reflectance(l.dot(n), eta),
+                    irradiance,
+                    incident: l,
+                },
+                None => VertexRay::TotalInternalReflection { irradiance, incident: l },
+            }
+        }
+    }
+}
+
+/// The local frame of a triangle: origin, axes (x along the first edge, y the normal
+/// on the side the rays leave to, z completing it so that the triangle's own area
+/// coefficient `a` is positive).
+struct Frame {
+    origin: Vec3,
+    axes: [Vec3; 3],
+}
+
+impl Frame {
+    fn local(&self, p: Vec3) -> Vec3 {
+        let d = p - self.origin;
+        Vec3::new(d.dot(self.axes[0]), d.dot(self.axes[1]), d.dot(self.axes[2]))
+    }
+
+    fn local_dir(&self, d: Vec3) -> Vec3 {
+        Vec3::new(d.dot(self.axes[0]), d.dot(self.axes[1]), d.dot(self.axes[2]))
+    }
+
+    fn world(&self, p: Vec3) -> Vec3 {
+        self.origin + self.axes[0] * p.x + self.axes[1] * p.y + self.axes[2] * p.z
+    }
+}
+
+/// Area coefficients (a, b, c) of `A(α) = a + bα + cα²` for vertices `v` (y = 0) and
+/// rays `r` (y = 1) in one local frame (§3.4).
+fn area_coefficients(v: [Vec3; 3], r: [Vec3; 3]) -> Vec3 {
+    let (k1, k2) = (v[1] - v[0], v[2] - v[0]);
+    let (l1, l2) = (r[1] - r[0], r[2] - r[0]);
+    Vec3::new(
+        k1.z * k2.x - k1.x * k2.z,
+        k1.z * l2.x - k1.x * l2.z + l1.z * k2.x - l1.x * k2.z,
+        l1.z * l2.x - l1.x * l2.z,
+    )
+}
+
+/// Vertex and ray of one mesh vertex in a frame: the ray scaled to `r_y = 1` and the
+/// vertex moved along it into the plane `y = 0` (the flattening of Fig. 5). `None`
+/// when the ray does not leave the plane steeply enough.
+fn flattened(frame: &Frame, p: Vec3, ray: Vec3, min_cos: f32) -> Option<(Vec3, Vec3)> {
+    let r = frame.local_dir(ray);
+    if r.y < min_cos {
+        return None;
+    }
+    let r = r / r.y;
+    let v = frame.local(p);
+    Some((v - v.y * r, r))
+}
+
+/// Builds the caustic volumes of one generator mesh under one light, for one colour
+/// channel (`ior` overrides a refractor's index, for dispersion). `depth_bounds` are
+/// the world bounds of the receivers: every volume ends beyond them. Volumes are
+/// appended to `out`; triangles run in parallel.
+#[allow(clippy::too_many_arguments)]
+pub fn build_generator_volumes(
+    mesh: &TriMesh,
+    fans: &VertexFans,
+    interaction: &SpecularInteraction,
+    ior: Option<f32>,
+    light: &Light,
+    color: Vec3,
+    depth_bounds: (Vec3, Vec3),
+    settings: &VolumeSettings,
+    out: &mut Vec<CausticVolume>,
+) -> BuildStats {
+    let own_fans;
+    let fans = if fans.fits(mesh) {
+        fans
+    } else {
+        own_fans = VertexFans::new(mesh);
+        &own_fans
+    };
+    let two_sided = matches!(interaction, SpecularInteraction::Refract { .. });
+    let rays: Vec<VertexRay> = mesh
+        .positions()
+        .par_iter()
+        .zip(mesh.normals().par_iter())
+        .map(|(&p, &n)| vertex_ray(light, interaction, ior, p, n))
+        .collect();
+    // The mean ray direction: a slicing axis shared by the triangles whose rays all
+    // leave steeply enough along it.
+    let slicing_axis = rays
+        .iter()
+        .map(|r| match r {
+            VertexRay::Ray { direction, .. } => *direction,
+            VertexRay::TotalInternalReflection { .. } => Vec3::ZERO,
+        })
+        .sum::<Vec3>()
+        .try_normalize();
+    let results: Vec<(Option<CausticVolume>, BuildStats)> = (0..mesh.triangles().len())
+        .into_par_iter()
+        .map(|t| triangle_volume(mesh, fans, &rays, t, two_sided, slicing_axis, color, depth_bounds, settings))
+        .collect();
+    let mut stats = BuildStats::default();
+    out.reserve(results.len());
+    for (volume, s) in results {
+        stats = stats.add(s);
+        out.extend(volume);
+    }
+    stats
+}
+
+fn triangle_volume(
+    mesh: &TriMesh,
+    fans: &VertexFans,
+    rays: &[VertexRay],
+    t: usize,
+    two_sided: bool,
+    slicing_axis: Option<Vec3>,
+    color: Vec3,
+    (lo, hi): (Vec3, Vec3),
+    settings: &VolumeSettings,
+) -> (Option<CausticVolume>, BuildStats) {
+    let tri = mesh.triangles()[t];
+    let p = mesh.corners(t);
+    let mut stats = BuildStats::default();
+    let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+    let longest = (p[1] - p[0]).length_squared().max((p[2] - p[0]).length_squared()).max((p[2] - p[1]).length_squared());
+    if cross.length_squared() <= (1e-12 * longest) * longest || !cross.is_finite() {
+        stats.degenerate = 1;
+        return (None, stats);
+    }
+    let geometric = cross.normalize();
+    // A mirror is lit on its front, the side its vertex normals face; an interface
+    // between two media transmits light from either side.
+    let front = tri.iter().map(|&i| mesh.normals()[i as usize]).sum::<Vec3>();
+    let mut unit = [Vec3::ZERO; 3];
+    let mut weight = Vec3::ZERO;
+    let mut lit = false;
+    let mut tir = false;
+    for i in 0..3 {
+        let (irradiance, incident, fresnel) = match rays[tri[i] as usize] {
+            VertexRay::Ray { direction, fresnel, irradiance, incident } => {
+                unit[i] = direction;
+                (irradiance, incident, fresnel)
+            }
+            VertexRay::TotalInternalReflection { irradiance, incident } => {
+                tir = true;
+                (irradiance, incident, 1.0)
+            }
+        };
+        // Irradiance on the triangle's plane at the vertex, after Fresnel (with TIR:
+        // the flux that the dropped volume would have carried).
+        let cos = incident.dot(geometric).abs();
+        weight[i] = irradiance * cos * fresnel;
+        lit |= irradiance * cos > 0.0 && (two_sided || incident.dot(front) < 0.0);
+    }
+    let flux_estimate = |w: Vec3| DVec3::from((color * ((w.x + w.y + w.z) / 3.0 * 0.5 * cross.length())).as_dvec3());
+    if !lit {
+        stats.unlit = 1;
+        return (None, stats);
+    }
+    if tir {
+        stats.total_internal_reflection = 1;
+        stats.dropped_flux = flux_estimate(weight);
+        return (None, stats);
+    }
+    let mut normal = geometric;
+    let mean_ray = unit[0] + unit[1] + unit[2];
+    if mean_ray.dot(normal) < 0.0 {
+        normal = -normal;
+    }
+    // Slice along the generator's shared axis where it fits this triangle, so that
+    // neighbours pair their rays identically and their volumes leave no gaps or
+    // overlaps; otherwise along the triangle's own normal, as §3.2 does.
+    let shared = slicing_axis.filter(|&a| unit.iter().all(|u| u.dot(a) >= SHARED_AXIS_MIN_COS) && normal.dot(a) >= SHARED_AXIS_MIN_COS);
+    let y = shared.unwrap_or(normal);
+    // The origin is the vertex lowest along y, so the whole triangle lies at y ≥ 0.
+    let lowest = (0..3).min_by(|&i, &j| p[i].dot(y).total_cmp(&p[j].dot(y))).unwrap_or(0);
+    let edge = (p[(lowest + 1) % 3] - p[lowest]).reject_from_normalized(y);
+    let x = edge.try_normalize().unwrap_or_else(|| crate::tracer::orthonormal_basis(y).0);
+    let mut frame = Frame { origin: p[lowest], axes: [x, y, x.cross(y)] };
+    let own = |frame: &Frame| -> Option<([Vec3; 3], [Vec3; 3])> {
+        let mut v = [Vec3::ZERO; 3];
+        let mut r = [Vec3::ZERO; 3];
+        for i in 0..3 {
+            (v[i], r[i]) = flattened(frame, p[i], unit[i], settings.min_ray_cosine)?;
+        }
+        Some((v, r))
+    };
+    let Some((mut v, mut r)) = own(&frame) else {
+        stats.grazing = 1;
+        stats.dropped_flux = flux_estimate(weight);
+        return (None, stats);
+    };
+    let mut abc = area_coefficients(v, r);
+    if abc.x < 0.0 {
+        frame.axes[2] = -frame.axes[2];
+        (v, r) = own(&frame).expect("mirroring z keeps ray heights");
+        abc = area_coefficients(v, r);
+    }
+    // The flux crossing the triangle crosses its flattened image too: scale the
+    // per-vertex irradiance from the triangle's plane to the slicing plane.
+    weight *= cross.length() / abc.x;
+    let depth = (0..8)
+        .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
+        .map(|c| frame.local(c).y)
+        .fold(f32::NEG_INFINITY, f32::max);
+    if !(depth > 0.0) || !(abc.x > 0.0) || !abc.is_finite() {
+        stats.degenerate = 1;
+        stats.dropped_flux = flux_estimate(weight);
+        return (None, stats);
+    }
+    // Per-vertex coefficients from the fan around each vertex, flattened into this
+    // triangle's plane and summed (§3.4, Fig. 5); the triangle's own when the fan
+    // cannot be flattened.
+    let mut fan = [abc; 3];
+    for (i, coefficients) in fan.iter_mut().enumerate() {
+        let mut sum = Vec3::ZERO;
+        let mut complete = true;
+        for &f in fans.around(tri[i]) {
+            let ft = mesh.triangles()[f as usize];
+            let mut fv = [Vec3::ZERO; 3];
+            let mut fr = [Vec3::ZERO; 3];
+            for j in 0..3 {
+                let k = ft[j] as usize;
+                let ray = match rays[k] {
+                    VertexRay::Ray { direction, .. } => direction,
+                    VertexRay::TotalInternalReflection { .. } => Vec3::ZERO,
+                };
+                match flattened(&frame, mesh.positions()[k], ray, settings.min_ray_cosine) {
+                    Some(vr) => (fv[j], fr[j]) = vr,
+                    None => complete = false,
+                }
+            }
+            if !complete {
+                break;
+            }
+            sum += area_coefficients(fv, fr);
+        }
+        if complete && sum.x > 0.0 && sum.is_finite() {
+            *coefficients = sum;
+        }
+    }
+    let volume = CausticVolume {
+        origin: frame.origin,
+        axes: frame.axes,
+        vertex_x: Vec3::new(v[0].x, v[1].x, v[2].x),
+        vertex_z: Vec3::new(v[0].z, v[1].z, v[2].z),
+        ray_x: Vec3::new(r[0].x, r[1].x, r[2].x),
+        ray_z: Vec3::new(r[0].z, r[1].z, r[2].z),
+        fan_a: Vec3::new(fan[0].x, fan[1].x, fan[2].x),
+        fan_b: Vec3::new(fan[0].y, fan[1].y, fan[2].y),
+        fan_c: Vec3::new(fan[0].z, fan[1].z, fan[2].z),
+        triangle_abc: abc,
+        surface_normal: normal,
+        flux: weight,
+        color,
+        depth,
+        bounds: BoundingShape::new(v, r, depth, |q| frame.world(q)),
+    };
+    stats.volumes = 1;
+    stats.flux = volume.flux().as_dvec3();
+    (Some(volume), stats)
+}
+
+/// Builds every volume of a scene: each light × generator, and one set per RGB
+/// channel for a dispersive refractor (its Cauchy index at the channel's wavelength,
+/// the flux in that channel only — Ernst et al. render one pass per colour, §5).
+/// Volumes end beyond the bounds of all receivers.
+pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::VolumeSet {
+    let bounds = scene
+        .receivers
+        .iter()
+        .map(|r| r.mesh.bounds())
+        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let mut volumes = Vec::new();
+    let mut stats = BuildStats::default();
+    for generator in &scene.generators {
+        let fans = VertexFans::new(&generator.mesh);
+        for light in &scene.lights {
+            for (ior, color) in channels(&generator.interaction, light.color) {
+                stats = stats.add(build_generator_volumes(
+                    &generator.mesh,
+                    &fans,
+                    &generator.interaction,
+                    ior,
+                    light,
+                    color,
+                    bounds,
+                    settings,
+                    &mut volumes,
+                ));
+            }
+        }
+    }
+    super::VolumeSet::new(volumes, stats)
+}
+
+/// The colour channels a generator is built in: one with the light's colour, or three
+/// (red, green, blue, each with its own index) for a dispersive refractor.
+pub(crate) fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f32>, Vec3)> {
+    match interaction {
+        SpecularInteraction::Refract { dispersion: Some(d), .. } => (0..3)
+            .map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c]))
+            .collect(),
+        SpecularInteraction::Refract { ior, dispersion: None } => vec![(Some(*ior), color)],
+        SpecularInteraction::Reflect => vec![(None, color)],
+    }
+}
