@@ -84,8 +84,12 @@ pub struct CausticReceiver;
 /// light that generators focus, and its coefficients are physical: σₛ and σₐ per metre
 /// and a Henyey–Greenstein phase. Use both together: fog for sunbeams, this for the
 /// caustic shafts under waves.
+///
+/// The medium fills the unit cube `[-½, ½]³` of its entity's transform (as a
+/// `FogVolume` does): scale the transform to the water body or the room.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component)]
+#[require(Transform, Visibility)]
 pub struct ParticipatingMedium {
     /// Scattering coefficient σₛ (1/m).
     pub scattering: f32,

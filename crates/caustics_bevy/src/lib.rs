@@ -13,6 +13,8 @@ pub mod headless;
 pub mod irradiance;
 pub mod reference;
 pub mod report;
+#[cfg(feature = "warped-volumes")]
+pub mod warped_volumes;
 
 pub use components::{
     CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InvalidCausticParams,
@@ -40,6 +42,8 @@ impl Plugin for CausticsPlugin {
             .add_systems(PostUpdate, components::validate_caustic_params);
         report::build(app);
         irradiance::build(app);
+        #[cfg(feature = "warped-volumes")]
+        warped_volumes::build(app);
     }
 }
 

@@ -53,6 +53,20 @@ pub const CAUSTIC_IRRADIANCE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 #[reflect(Component)]
 pub struct InjectedIrradiance(pub Handle<Image>);
 
+/// Main world: which techniques have something to draw this frame (set by the
+/// techniques' own systems). A view has caustics work when any has, or when the
+/// application injects irradiance into it.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ActiveCausticTechniques {
+    pub warped_volumes: bool,
+}
+
+impl ActiveCausticTechniques {
+    pub fn any(&self) -> bool {
+        self.warped_volumes
+    }
+}
+
 /// Render world: this view has caustics work this frame.
 #[derive(Component)]
 pub struct ViewCausticWork;
@@ -80,6 +94,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "composite.wgsl");
     bevy::asset::embedded_asset!(app, "inject.wgsl");
     app.register_type::<InjectedIrradiance>()
+        .init_resource::<ActiveCausticTechniques>()
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -135,23 +150,25 @@ fn extract_receivers(
 type CameraQuery =
     Query<'static, 'static, (Entity, RenderEntity, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>;
 
-/// A view has caustics work when the application injects irradiance into it (and,
-/// with techniques, when a valid generator lights one of its receivers). Caustics are
-/// added to the linear HDR image before tonemapping, so the camera needs [`Hdr`] (as
-/// bloom does); a camera without it is reported once and skipped.
+/// A view has caustics work when the application injects irradiance into it, or when
+/// a technique has something to draw. Caustics are added to the linear HDR image
+/// before tonemapping, so the camera needs [`Hdr`] (as bloom does); a camera without
+/// it is reported once and skipped.
 fn mark_views_with_work(
     mut commands: Commands,
     views: Extract<CameraQuery>,
+    active: Extract<Res<ActiveCausticTechniques>>,
     mut warned: Local<HashSet<Entity>>,
 ) {
     for (main_entity, render_entity, injected, hdr) in &views {
         let mut entity = commands.entity(render_entity);
-        if injected && hdr {
+        let has_work = injected || active.any();
+        if has_work && hdr {
             entity.insert(ViewCausticWork);
         } else {
             entity.remove::<(ViewCausticWork, ViewCausticIrradiance)>();
         }
-        if injected && !hdr && warned.insert(main_entity) {
+        if has_work && !hdr && warned.insert(main_entity) {
             warn!("bevy_caustics: camera {main_entity} has caustics but no `Hdr` component; add `Hdr` to see them");
         }
     }
@@ -193,7 +210,7 @@ fn prepare_irradiance_buffers(
 
 /// The pipeline that starts a view's buffer from [`InjectedIrradiance`].
 #[derive(Resource)]
-struct InjectPipeline {
+pub(crate) struct InjectPipeline {
     layout: BindGroupLayoutDescriptor,
     pipeline: CachedRenderPipelineId,
 }
@@ -230,7 +247,7 @@ fn init_inject_pipeline(
 }
 
 /// Starts the view's buffer for this frame: the injected irradiance times exposure, or zero.
-fn inject_irradiance(
+pub(crate) fn inject_irradiance(
     view: ViewQuery<(&ViewCausticIrradiance, &ViewUniformOffset, Option<&InjectedIrradiance>)>,
     images: Res<RenderAssets<GpuImage>>,
     inject: Res<InjectPipeline>,

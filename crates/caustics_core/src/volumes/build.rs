@@ -68,7 +68,8 @@ pub struct BuildStats {
 }
 
 impl BuildStats {
-    fn add(mut self, o: Self) -> Self {
+    /// The sum of two builds' counts and fluxes.
+    pub fn add(mut self, o: Self) -> Self {
         self.volumes += o.volumes;
         self.unlit += o.unlit;
         self.total_internal_reflection += o.total_internal_reflection;
@@ -417,7 +418,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
 
 /// The colour channels a generator is built in: one with the light's colour, or three
 /// (red, green, blue, each with its own index) for a dispersive refractor.
-pub(crate) fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f32>, Vec3)> {
+pub fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f32>, Vec3)> {
     match interaction {
         SpecularInteraction::Refract { dispersion: Some(d), .. } => (0..3)
             .map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c]))

@@ -38,8 +38,8 @@ impl MediumBox {
 /// The pieces `[t0, t1]` of the ray `o + t·d` (local frame) inside the warped volume,
 /// within `[start, end]`: the βᵢ along the ray are quadratics in t (the caustic
 /// triangle's corners move linearly with depth), so the boundary crossings are their
-/// roots. Up to four pieces (a self-intersecting volume can be entered twice).
-pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32) -> ([(f32, f32); 4], usize) {
+/// roots. The pieces between consecutive crossings, at most nine.
+pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32) -> ([(f32, f32); 9], usize) {
     let mut cuts = [0.0f32; 10];
     let mut n = 0;
     cuts[n] = start;
@@ -73,20 +73,13 @@ pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32
     n += 1;
     let cuts = &mut cuts[..n];
     cuts.sort_by(f32::total_cmp);
-    let mut pieces = [(0.0, 0.0); 4];
+    let mut pieces = [(0.0, 0.0); 9];
     let mut count = 0;
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
-        if b <= a || count == pieces.len() {
-            continue;
-        }
-        if volume.barycentric(o + 0.5 * (a + b) * d).is_some() {
-            if count > 0 && pieces[count - 1].1 == a {
-                pieces[count - 1].1 = b;
-            } else {
-                pieces[count] = (a, b);
-                count += 1;
-            }
+        if b > a && volume.barycentric(o + 0.5 * (a + b) * d).is_some() {
+            pieces[count] = (a, b);
+            count += 1;
         }
     }
     (pieces, count)

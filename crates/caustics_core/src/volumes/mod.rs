@@ -33,7 +33,7 @@ mod build;
 mod medium;
 mod prism;
 
-pub use build::{BuildStats, VertexFans, build_generator_volumes, build_scene_volumes};
+pub use build::{BuildStats, VertexFans, build_generator_volumes, build_scene_volumes, channels};
 pub use medium::{MediumBox, in_scattered_radiance, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
 

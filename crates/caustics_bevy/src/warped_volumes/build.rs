@@ -1,0 +1,233 @@
+//! Main world: caustic volumes from the ECS, rebuilt only when something they depend
+//! on changed.
+
+use super::WarpedVolumesSettings;
+use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
+use crate::irradiance::ActiveCausticTechniques;
+use crate::reference::{core_mesh, to_core};
+use bevy::camera::primitives::Aabb;
+use bevy::camera::visibility::VisibilitySystems;
+use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
+use bevy::camera::Hdr;
+use bevy::platform::collections::{HashMap, HashSet};
+use bevy::prelude::*;
+use bevy::transform::TransformSystems;
+use caustics_core::scene::{Light, LightKind};
+use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes};
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+/// The caustic volumes of the current scene, shared with the render world. A new
+/// `generation` means new contents.
+#[derive(Resource, Clone, Default)]
+pub struct CausticVolumes {
+    pub volumes: Arc<Vec<CausticVolume>>,
+    /// What the last build kept and dropped (TIR, grazing, degenerate), and the flux.
+    pub stats: BuildStats,
+    pub generation: u64,
+}
+
+pub(super) fn build(app: &mut App) {
+    app.init_resource::<CausticVolumes>().add_systems(
+        PostUpdate,
+        (build_volumes, add_prepasses)
+            .chain()
+            .after(TransformSystems::Propagate)
+            .after(VisibilitySystems::CalculateBounds)
+            .after(VisibilitySystems::VisibilityPropagate)
+            .after(crate::components::validate_caustic_params),
+    );
+}
+
+/// A Bevy light placed by `transform` as the core crate's light. Bevy's point and spot
+/// intensities are luminous power (lm); the core wants intensity per steradian, Φ/4π
+/// (Bevy's own convention, spots included).
+pub fn core_light(
+    directional: Option<&DirectionalLight>,
+    point: Option<&PointLight>,
+    spot: Option<&SpotLight>,
+    transform: &GlobalTransform,
+) -> Option<Light> {
+    let color = |c: Color| {
+        let c = c.to_linear();
+        caustics_core::glam::Vec3::new(c.red, c.green, c.blue)
+    };
+    let position = to_core(transform.translation());
+    let forward = to_core(transform.forward().as_vec3());
+    Some(match (directional, point, spot) {
+        (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
+        (_, Some(p), _) => {
+            Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) }
+        }
+        (_, _, Some(s)) => Light {
+            kind: LightKind::Spot {
+                position,
+                direction: forward,
+                intensity: s.intensity / (4.0 * PI),
+                inner_angle: s.inner_angle,
+                outer_angle: s.outer_angle,
+            },
+            color: color(s.color),
+        },
+        _ => return None,
+    })
+}
+
+type LightComponents = (
+    Option<&'static DirectionalLight>,
+    Option<&'static PointLight>,
+    Option<&'static SpotLight>,
+    &'static GlobalTransform,
+    &'static InheritedVisibility,
+);
+type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
+type LightChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<DirectionalLight>,
+    Changed<PointLight>,
+    Changed<SpotLight>,
+    Changed<InheritedVisibility>,
+)>;
+type GeneratorChanged =
+    Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<CausticGenerator>, Changed<InheritedVisibility>)>;
+type Generators<'w, 's> = Query<
+    'w,
+    's,
+    (Entity, &'static CausticGenerator, &'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility),
+    Without<InvalidCausticParams>,
+>;
+
+/// What the last build saw, to tell when to rebuild.
+#[derive(Default)]
+struct BuildCache {
+    fans: HashMap<Entity, VertexFans>,
+    meshes: HashSet<AssetId<Mesh>>,
+    warned: HashSet<Entity>,
+}
+
+/// Rebuilds every caustic volume when a generator, light, receiver or the settings
+/// changed, or a generator's mesh asset was modified (an animated ocean: every frame).
+#[allow(clippy::too_many_arguments)]
+fn build_volumes(
+    generators: Generators<'_, '_>,
+    changed_generators: Query<(), (With<CausticGenerator>, GeneratorChanged)>,
+    lights: Query<LightComponents, AnyLight>,
+    changed_lights: Query<(), (AnyLight, LightChanged)>,
+    receivers: Query<(&GlobalTransform, Option<&Aabb>), With<CausticReceiver>>,
+    changed_receivers: Query<(), (With<CausticReceiver>, Or<(Changed<GlobalTransform>, Changed<Aabb>)>)>,
+    mut removed: RemovedComponents<CausticGenerator>,
+    mut removed_invalid: RemovedComponents<InvalidCausticParams>,
+    mut removed_receivers: RemovedComponents<CausticReceiver>,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    meshes: Res<Assets<Mesh>>,
+    settings: Res<WarpedVolumesSettings>,
+    mut volumes: ResMut<CausticVolumes>,
+    mut active: ResMut<ActiveCausticTechniques>,
+    mut cache: Local<BuildCache>,
+) {
+    let mesh_changed = mesh_events.read().any(|e| match e {
+        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => {
+            cache.meshes.contains(id)
+        }
+        _ => false,
+    });
+    let dirty = mesh_changed
+        || settings.is_changed()
+        || !changed_generators.is_empty()
+        || !changed_lights.is_empty()
+        || !changed_receivers.is_empty()
+        || removed.read().count() > 0
+        || removed_invalid.read().count() > 0
+        || removed_receivers.read().count() > 0
+        // A mesh that had not loaded at the last build.
+        || generators.iter().any(|(_, _, m, ..)| !cache.meshes.contains(&m.id()));
+    if !dirty {
+        return;
+    }
+    let core_settings = settings.core();
+    let lights: Vec<Light> = lights
+        .iter()
+        .filter(|(.., visible)| visible.get())
+        .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
+        .filter(|l| l.validate().is_ok())
+        .collect();
+    // Volumes end beyond the receivers' world bounds.
+    let bounds = receivers
+        .iter()
+        .filter_map(|(t, aabb)| aabb.map(|a| world_aabb(t, a)))
+        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)));
+    let mut built = Vec::new();
+    let mut stats = BuildStats::default();
+    cache.meshes.clear();
+    let mut live = HashSet::new();
+    for (entity, generator, mesh3d, transform, visible) in &generators {
+        cache.meshes.insert(mesh3d.id());
+        let uses_volumes = matches!(generator.technique, CausticTechnique::Auto | CausticTechnique::WarpedVolumes);
+        let (Some(mesh), Some((lo, hi)), true, true) = (meshes.get(&mesh3d.0), bounds, visible.get(), uses_volumes) else {
+            continue;
+        };
+        let mesh = match core_mesh(mesh, transform) {
+            Ok(mesh) => mesh,
+            Err(e) => {
+                if cache.warned.insert(entity) {
+                    warn!("bevy_caustics: the mesh of CausticGenerator {entity} is skipped: it {e}");
+                }
+                continue;
+            }
+        };
+        cache.warned.remove(&entity);
+        live.insert(entity);
+        let fans = cache.fans.entry(entity).or_default();
+        if !fans.fits(&mesh) {
+            *fans = VertexFans::new(&mesh);
+        }
+        let interaction = generator.specular_interaction();
+        for light in &lights {
+            for (ior, color) in caustics_core::volumes::channels(&interaction, light.color) {
+                let s = build_generator_volumes(
+                    &mesh,
+                    fans,
+                    &interaction,
+                    ior,
+                    light,
+                    color,
+                    (to_core(lo), to_core(hi)),
+                    &core_settings,
+                    &mut built,
+                );
+                stats = stats.add(s);
+            }
+        }
+    }
+    cache.fans.retain(|e, _| live.contains(e));
+    active.warped_volumes = !built.is_empty();
+    *volumes = CausticVolumes { volumes: Arc::new(built), stats, generation: volumes.generation + 1 };
+}
+
+fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
+    let (c, h) = (Vec3::from(aabb.center), Vec3::from(aabb.half_extents));
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let corner = c + h * Vec3::new([-1.0, 1.0][i & 1], [-1.0, 1.0][(i >> 1) & 1], [-1.0, 1.0][i >> 2]);
+        let p = transform.transform_point(corner);
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    (lo, hi)
+}
+
+/// The surface pass reads receiver positions and normals from Bevy's prepasses: HDR
+/// 3D cameras get them while the scene has caustic volumes.
+fn add_prepasses(
+    mut commands: Commands,
+    volumes: Res<CausticVolumes>,
+    cameras: Query<Entity, (With<Camera3d>, With<Hdr>, Or<(Without<DepthPrepass>, Without<NormalPrepass>)>)>,
+) {
+    if volumes.volumes.is_empty() {
+        return;
+    }
+    for camera in &cameras {
+        commands.entity(camera).insert((DepthPrepass, NormalPrepass));
+    }
+}

@@ -1,0 +1,81 @@
+//! Warped caustic volumes (Ernst, Akenine-Möller & Jensen 2005) on the GPU.
+//!
+//! Every frame in which a generator, a light or a receiver changed, the main world
+//! rebuilds one caustic volume per lit generator triangle and light (and per colour
+//! channel for a dispersive refractor) with `caustics_core::volumes`, in parallel on
+//! the CPU (§3: "caustic volumes are computed by the CPU for every frame"); an
+//! unchanged scene costs nothing. The render world uploads them once per change and,
+//! for each caustics view:
+//!
+//! 1. **surface pass** (between the prepass and the main pass): every volume's
+//!    bounding prism (§4.3) is drawn, back faces only and without depth test, so each
+//!    pixel whose view ray crosses it runs the fragment shader exactly once. The shader
+//!    rebuilds the pixel's receiver point from the depth prepass, runs the exact
+//!    point-in-volume test (§3.3) and adds the interpolated irradiance (§3.4), times
+//!    the receiver's cosine from the normal prepass, to the view's caustic irradiance
+//!    buffer with additive blending; the composite then shows it on receivers;
+//! 2. **volumetric pass** (after the main pass), only for views that see a
+//!    [`crate::ParticipatingMedium`]: the same prisms, with the eye ray's exact path
+//!    through each warped volume and the single-scattering term of §3.5 added to the
+//!    view's HDR image.
+//!
+//! Caustics views get Bevy's `DepthPrepass` and `NormalPrepass` added for them. The
+//! WGSL in `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU test
+//! holds the two together.
+
+mod build;
+mod pass;
+mod render;
+
+pub use build::{CausticVolumes, core_light};
+
+use bevy::prelude::*;
+use caustics_core::volumes::{IntensityMode, VolumeSettings};
+
+/// How the caustic volumes pass computes irradiance: a resource, shared by all views.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Resource)]
+pub struct WarpedVolumesSettings {
+    pub intensity: VolumeIntensity,
+    /// Upper bound of the magnification `a/A(α)` near focal points; see
+    /// [`VolumeSettings::max_magnification`].
+    pub max_magnification: f32,
+}
+
+impl Default for WarpedVolumesSettings {
+    fn default() -> Self {
+        let core = VolumeSettings::default();
+        Self { intensity: VolumeIntensity::Conserving, max_magnification: core.max_magnification }
+    }
+}
+
+/// [`IntensityMode`] for the ECS: how irradiance varies inside a caustic triangle.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
+pub enum VolumeIntensity {
+    /// Smooth and energy-conserving (the default).
+    #[default]
+    Conserving,
+    /// The paper's §3.4 formula.
+    Interpolated,
+    /// One value per caustic triangle.
+    Constant,
+}
+
+impl WarpedVolumesSettings {
+    /// The core crate's settings.
+    pub fn core(&self) -> VolumeSettings {
+        let intensity = match self.intensity {
+            VolumeIntensity::Conserving => IntensityMode::Conserving,
+            VolumeIntensity::Interpolated => IntensityMode::Interpolated,
+            VolumeIntensity::Constant => IntensityMode::Constant,
+        };
+        VolumeSettings { intensity, max_magnification: self.max_magnification, ..VolumeSettings::default() }
+    }
+}
+
+pub(crate) fn build(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "volumes.wgsl");
+    app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
+    build::build(app);
+    render::build(app);
+}

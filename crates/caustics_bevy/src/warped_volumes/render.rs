@@ -1,0 +1,325 @@
+//! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
+
+use super::{CausticVolumes, WarpedVolumesSettings, pass};
+use crate::components::{InvalidCausticParams, ParticipatingMedium};
+use crate::irradiance::ViewCausticWork;
+use bevy::camera::primitives::{Aabb, Frustum};
+use bevy::core_pipeline::{Core3dSystems, prepass::ViewPrepassTextures, schedule::Core3d};
+use bevy::prelude::*;
+use bevy::render::{
+    Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    render_resource::{
+        binding_types::{
+            storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
+            texture_depth_2d_multisampled, uniform_buffer,
+        },
+        *,
+    },
+    renderer::{RenderDevice, RenderQueue},
+    sync_world::RenderEntity,
+    view::{ExtractedView, Msaa, ViewUniform},
+};
+use caustics_core::volumes::{CausticVolume, IntensityMode};
+use std::sync::Arc;
+
+/// One caustic volume as `volumes.wgsl` reads it (`CausticVolume` there).
+#[derive(Clone, Copy, ShaderType)]
+pub(super) struct GpuCausticVolume {
+    /// xyz: origin, w: depth.
+    origin: Vec4,
+    axis_x: Vec4,
+    axis_y: Vec4,
+    axis_z: Vec4,
+    surface_normal: Vec4,
+    vertex_x: Vec4,
+    vertex_z: Vec4,
+    ray_x: Vec4,
+    ray_z: Vec4,
+    fan_a: Vec4,
+    fan_b: Vec4,
+    fan_c: Vec4,
+    triangle_abc: Vec4,
+    flux: Vec4,
+    color: Vec4,
+    corners: [Vec4; 8],
+}
+
+impl From<&CausticVolume> for GpuCausticVolume {
+    fn from(v: &CausticVolume) -> Self {
+        let p = |v: caustics_core::glam::Vec3| Vec4::new(v.x, v.y, v.z, 0.0);
+        Self {
+            origin: p(v.origin).with_w(v.depth),
+            axis_x: p(v.axes[0]),
+            axis_y: p(v.axes[1]),
+            axis_z: p(v.axes[2]),
+            surface_normal: p(v.surface_normal),
+            vertex_x: p(v.vertex_x),
+            vertex_z: p(v.vertex_z),
+            ray_x: p(v.ray_x),
+            ray_z: p(v.ray_z),
+            fan_a: p(v.fan_a),
+            fan_b: p(v.fan_b),
+            fan_c: p(v.fan_c),
+            triangle_abc: p(v.triangle_abc),
+            flux: p(v.flux),
+            color: p(v.color),
+            corners: v.bounds.corners.map(|c| p(c).with_w(1.0)),
+        }
+    }
+}
+
+/// The most media one view scatters in.
+pub(super) const MAX_MEDIA: usize = 4;
+
+/// A [`ParticipatingMedium`] as the shader reads it: the unit cube `[-½, ½]³` of its
+/// entity's transform, and (σₛ, σₐ, g).
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuMedium {
+    local_from_world: Mat4,
+    coefficients: Vec4,
+}
+
+/// `VolumeSettings` in `volumes.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuVolumeSettings {
+    intensity_mode: u32,
+    max_magnification: f32,
+    medium_count: u32,
+    volume_count: u32,
+    media: [GpuMedium; MAX_MEDIA],
+}
+
+/// Render world: the volumes of the main world, by generation.
+#[derive(Resource, Default)]
+struct ExtractedVolumes {
+    generation: u64,
+    volumes: Arc<Vec<CausticVolume>>,
+    settings: WarpedVolumesSettings,
+    media: Vec<GpuMedium>,
+}
+
+/// Render world: the volumes and settings on the GPU.
+#[derive(Resource, Default)]
+pub(super) struct VolumeBuffers {
+    generation: Option<u64>,
+    pub volumes: StorageBuffer<Vec<GpuCausticVolume>>,
+    pub count: u32,
+    pub settings: UniformBuffer<GpuVolumeSettings>,
+}
+
+/// Render world: this view sees a participating medium (and so runs the volumetric pass).
+#[derive(Component)]
+pub(super) struct ViewSeesMedium;
+
+/// Render world: a view's pipelines for the two passes.
+#[derive(Component)]
+pub(super) struct ViewVolumePipelines {
+    pub surface: CachedRenderPipelineId,
+    pub volumetric: CachedRenderPipelineId,
+    pub multisampled: bool,
+}
+
+pub(super) fn build(app: &mut App) {
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<ExtractedVolumes>()
+        .init_resource::<VolumeBuffers>()
+        .init_resource::<SpecializedRenderPipelines<VolumesPipeline>>()
+        .add_systems(RenderStartup, init_pipeline)
+        .add_systems(ExtractSchedule, (extract_volumes, mark_views_seeing_media))
+        .add_systems(
+            Render,
+            (
+                prepare_buffers.in_set(RenderSystems::PrepareResources),
+                prepare_pipelines.in_set(RenderSystems::Prepare),
+            ),
+        )
+        .add_systems(
+            Core3d,
+            (
+                pass::surface_pass
+                    .after(crate::irradiance::inject_irradiance)
+                    .after(Core3dSystems::Prepass)
+                    .before(Core3dSystems::MainPass),
+                pass::volumetric_pass.after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess),
+            ),
+        );
+}
+
+type MediumQuery = Query<'static, 'static, (&'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility), Without<InvalidCausticParams>>;
+
+fn extract_volumes(
+    mut extracted: ResMut<ExtractedVolumes>,
+    volumes: Extract<Res<CausticVolumes>>,
+    settings: Extract<Res<WarpedVolumesSettings>>,
+    media: Extract<MediumQuery>,
+) {
+    if extracted.generation != volumes.generation {
+        extracted.generation = volumes.generation;
+        extracted.volumes = volumes.volumes.clone();
+    }
+    extracted.settings = **settings;
+    extracted.media = media
+        .iter()
+        .filter(|(.., visible)| visible.get())
+        .take(MAX_MEDIA)
+        .map(|(m, t, _)| GpuMedium {
+            local_from_world: t.to_matrix().inverse(),
+            coefficients: Vec4::new(m.scattering, m.absorption, m.asymmetry, 0.0),
+        })
+        .collect();
+}
+
+/// Marks the caustics views whose frustum meets a medium's box.
+fn mark_views_seeing_media(
+    mut commands: Commands,
+    views: Extract<Query<(RenderEntity, &Frustum), With<Camera3d>>>,
+    media: Extract<MediumQuery>,
+) {
+    let unit_cube = Aabb { center: Vec3::ZERO.into(), half_extents: Vec3::splat(0.5).into() };
+    for (view, frustum) in &views {
+        let sees = media
+            .iter()
+            .any(|(_, t, visible)| visible.get() && frustum.intersects_obb(&unit_cube, &t.affine(), true, true));
+        if sees {
+            commands.entity(view).insert(ViewSeesMedium);
+        } else {
+            commands.entity(view).remove::<ViewSeesMedium>();
+        }
+    }
+}
+
+fn prepare_buffers(
+    extracted: Res<ExtractedVolumes>,
+    mut buffers: ResMut<VolumeBuffers>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    if buffers.generation != Some(extracted.generation) {
+        buffers.generation = Some(extracted.generation);
+        buffers.count = extracted.volumes.len() as u32;
+        let gpu: Vec<GpuCausticVolume> = extracted.volumes.iter().map(GpuCausticVolume::from).collect();
+        buffers.volumes.set(gpu);
+        buffers.volumes.write_buffer(&device, &queue);
+    }
+    let settings = extracted.settings.core();
+    let mut media = [GpuMedium::default(); MAX_MEDIA];
+    media[..extracted.media.len()].copy_from_slice(&extracted.media);
+    let count = buffers.count;
+    buffers.settings.set(GpuVolumeSettings {
+        intensity_mode: match settings.intensity {
+            IntensityMode::Conserving => 0,
+            IntensityMode::Interpolated => 1,
+            IntensityMode::Constant => 2,
+        },
+        max_magnification: settings.max_magnification,
+        medium_count: extracted.media.len() as u32,
+        volume_count: count,
+        media,
+    });
+    buffers.settings.write_buffer(&device, &queue);
+}
+
+/// The bind group layouts (single-sampled and multisampled prepass) and the shader.
+#[derive(Resource)]
+pub(super) struct VolumesPipeline {
+    pub layouts: [BindGroupLayoutDescriptor; 2],
+    shader: Handle<Shader>,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub(super) struct VolumesPipelineKey {
+    volumetric: bool,
+    multisampled: bool,
+    /// The colour target: the irradiance buffer's format for the surface pass, the
+    /// view's (resolved, single-sampled) HDR image for the volumetric pass.
+    target_format: TextureFormat,
+}
+
+fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
+    let layout = |multisampled: bool| {
+        BindGroupLayoutDescriptor::new(
+            if multisampled { "caustic_volumes_layout_msaa" } else { "caustic_volumes_layout" },
+            &BindGroupLayoutEntries::sequential(
+                ShaderStages::VERTEX_FRAGMENT,
+                (
+                    uniform_buffer::<ViewUniform>(true),
+                    storage_buffer_read_only::<GpuCausticVolume>(false),
+                    uniform_buffer::<GpuVolumeSettings>(false),
+                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                    if multisampled {
+                        texture_2d_multisampled(TextureSampleType::Float { filterable: false })
+                    } else {
+                        texture_2d(TextureSampleType::Float { filterable: false })
+                    },
+                ),
+            ),
+        )
+    };
+    commands.insert_resource(VolumesPipeline {
+        layouts: [layout(false), layout(true)],
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl"),
+    });
+}
+
+impl SpecializedRenderPipeline for VolumesPipeline {
+    type Key = VolumesPipelineKey;
+
+    fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
+        let mut shader_defs = Vec::new();
+        if key.multisampled {
+            shader_defs.push("MULTISAMPLED".into());
+        }
+        let (label, entry) =
+            if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
+        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        RenderPipelineDescriptor {
+            label: Some(label.into()),
+            layout: vec![self.layouts[key.multisampled as usize].clone()],
+            vertex: VertexState {
+                shader: self.shader.clone(),
+                shader_defs: shader_defs.clone(),
+                entry_point: Some("vertex".into()),
+                buffers: vec![],
+            },
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                shader_defs,
+                entry_point: Some(entry.into()),
+                targets: vec![Some(ColorTargetState {
+                    format: key.target_format,
+                    blend: Some(BlendState { color: additive, alpha: additive }),
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            // Back faces only, no depth test: each pixel whose ray crosses a volume's
+            // convex bounding prism runs the exact test once (§4.3).
+            primitive: PrimitiveState { cull_mode: Some(Face::Front), front_face: FrontFace::Ccw, ..default() },
+            depth_stencil: None,
+            ..default()
+        }
+    }
+}
+
+fn prepare_pipelines(
+    mut commands: Commands,
+    views: Query<(Entity, &ExtractedView, &Msaa, &ViewPrepassTextures), With<ViewCausticWork>>,
+    pipeline: Res<VolumesPipeline>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<VolumesPipeline>>,
+    cache: Res<PipelineCache>,
+) {
+    for (entity, view, msaa, prepass) in &views {
+        if prepass.depth.is_none() || prepass.normal.is_none() {
+            continue;
+        }
+        let multisampled = msaa.samples() > 1;
+        let mut specialize = |volumetric, target_format| {
+            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, target_format })
+        };
+        let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT);
+        let volumetric = specialize(true, view.target_format);
+        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, multisampled });
+    }
+}

@@ -1,0 +1,310 @@
+// Warped caustic volumes (Ernst, Akenine-Möller & Jensen 2005): the GPU twin of
+// `caustics_core::volumes`. One instance per volume draws the back faces of its
+// bounding prism (§4.3); the fragment runs the exact point-in-volume test (§3.3) and
+// the interpolated intensity (§3.4) at the receiver point from the depth prepass
+// (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
+
+#import bevy_render::view::View
+
+struct CausticVolume {
+    origin: vec4<f32>,          // xyz: origin (a generator vertex), w: depth
+    axis_x: vec4<f32>,
+    axis_y: vec4<f32>,          // slicing axis: the caustic triangle lies at y = α
+    axis_z: vec4<f32>,
+    surface_normal: vec4<f32>,  // the generator triangle's normal, rays' side
+    vertex_x: vec4<f32>,        // §4.1 vertical layout: x of the three vertices
+    vertex_z: vec4<f32>,
+    ray_x: vec4<f32>,           // rays scaled to r_y = 1
+    ray_z: vec4<f32>,
+    fan_a: vec4<f32>,           // per-vertex fan area coefficients ā, b̄, c̄ (Fig. 5)
+    fan_b: vec4<f32>,
+    fan_c: vec4<f32>,
+    triangle_abc: vec4<f32>,    // the triangle's own a, b, c
+    flux: vec4<f32>,            // per-vertex irradiance on the slicing plane
+    color: vec4<f32>,
+    corners: array<vec4<f32>, 8>,
+}
+
+struct Medium {
+    local_from_world: mat4x4<f32>,
+    coefficients: vec4<f32>,    // σs, σa, g
+}
+
+struct VolumeSettings {
+    intensity_mode: u32,        // 0 conserving, 1 the paper's interpolation, 2 constant
+    max_magnification: f32,
+    medium_count: u32,
+    volume_count: u32,
+    media: array<Medium, 4>,
+}
+
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var<storage, read> volumes: array<CausticVolume>;
+@group(0) @binding(2) var<uniform> settings: VolumeSettings;
+#ifdef MULTISAMPLED
+@group(0) @binding(3) var depth_prepass: texture_depth_multisampled_2d;
+@group(0) @binding(4) var normal_prepass: texture_multisampled_2d<f32>;
+#else
+@group(0) @binding(3) var depth_prepass: texture_depth_2d;
+@group(0) @binding(4) var normal_prepass: texture_2d<f32>;
+#endif
+
+const PI: f32 = 3.141592653589793;
+
+struct VertexOutput {
+    @builtin(position) position: vec4<f32>,
+    @location(0) @interpolate(flat) volume: u32,
+}
+
+@vertex
+fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance: u32) -> VertexOutput {
+    // `HEXAHEDRON_TRIANGLES` of caustics_core: outward, counter-clockwise.
+    var triangles = array<u32, 36>(
+        0u, 1u, 2u, 0u, 2u, 3u, 4u, 6u, 5u, 4u, 7u, 6u, 0u, 4u, 5u, 0u, 5u, 1u,
+        1u, 5u, 6u, 1u, 6u, 2u, 2u, 6u, 7u, 2u, 7u, 3u, 3u, 7u, 4u, 3u, 4u, 0u,
+    );
+    let corner = volumes[instance].corners[triangles[vertex_index]];
+    var out: VertexOutput;
+    out.position = view.clip_from_world * vec4(corner.xyz, 1.0);
+    out.volume = instance;
+    return out;
+}
+
+fn to_local(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
+    let d = p - v.origin.xyz;
+    return vec3(dot(d, v.axis_x.xyz), dot(d, v.axis_y.xyz), dot(d, v.axis_z.xyz));
+}
+
+// Unnormalised barycentric coordinates βᵢ in the caustic triangle at depth α = y (§3.3, §4.1).
+fn beta(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
+    let cx = v.vertex_x.xyz + p.y * v.ray_x.xyz;
+    let cz = v.vertex_z.xyz + p.y * v.ray_z.xyz;
+    return p.x * (cz.zxy - cz.yzx) + p.z * (cx.yzx - cx.zxy) + cz.yzx * cx.zxy - cx.yzx * cz.zxy;
+}
+
+// Normalised barycentric coordinates in .xyz; .w = 1 inside the volume, 0 outside.
+fn barycentric(v: CausticVolume, p: vec3<f32>) -> vec4<f32> {
+    if !(p.y >= 0.0 && p.y <= v.origin.w) {
+        return vec4(0.0);
+    }
+    let n = v.surface_normal.xyz;
+    let height = p.x * dot(v.axis_x.xyz, n) + p.y * dot(v.axis_y.xyz, n) + p.z * dot(v.axis_z.xyz, n);
+    if height < 0.0 {
+        return vec4(0.0);
+    }
+    let b = beta(v, p);
+    let sum = b.x + b.y + b.z;
+    if sum == 0.0 {
+        return vec4(0.0);
+    }
+    let lambda = b / sum;
+    return vec4(lambda, select(0.0, 1.0, min(lambda.x, min(lambda.y, lambda.z)) >= 0.0));
+}
+
+struct VolumeSample {
+    inside: bool,
+    plane_irradiance: f32,
+    ray: vec3<f32>,  // world, unit height along the slicing axis
+    depth: f32,
+}
+
+// `CausticVolume::sample`: irradiance on the slicing plane and the interpolated ray.
+fn sample_volume(v: CausticVolume, world: vec3<f32>) -> VolumeSample {
+    var s: VolumeSample;
+    s.inside = false;
+    let p = to_local(v, world);
+    let bary = barycentric(v, p);
+    if bary.w == 0.0 {
+        return s;
+    }
+    let lambda = bary.xyz;
+    let alpha = p.y;
+    let max_mag = max(settings.max_magnification, 1.0);
+    let abc = v.triangle_abc.xyz;
+    let triangle_area = abs(abc.x + alpha * abc.y + alpha * alpha * abc.z);
+    if triangle_area < abc.x / max_mag {
+        return s;
+    }
+    let flux = v.flux.xyz;
+    let constant = (flux.x + flux.y + flux.z) / 3.0 * abc.x / triangle_area;
+    let fan_area = v.fan_a.xyz + alpha * v.fan_b.xyz + alpha * alpha * v.fan_c.xyz;
+    var e = constant;
+    if settings.intensity_mode == 1u {
+        let a = dot(lambda, v.fan_a.xyz);
+        e = dot(lambda, flux * v.fan_a.xyz) / max(abs(dot(lambda, fan_area)), a / max_mag);
+    } else if settings.intensity_mode == 0u {
+        let vertex = flux * v.fan_a.xyz / max(abs(fan_area), v.fan_a.xyz / max_mag);
+        let mean = (vertex.x + vertex.y + vertex.z) / 3.0;
+        if mean > 0.0 {
+            e = constant * dot(lambda, vertex) / mean;
+        }
+    }
+    s.inside = true;
+    s.plane_irradiance = e;
+    s.ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
+    s.depth = alpha;
+    return s;
+}
+
+fn load_depth(pixel: vec2<i32>) -> f32 {
+    return textureLoad(depth_prepass, pixel, 0);
+}
+
+// World position at a pixel for an NDC depth (reverse Z: 1 near, 0 infinitely far).
+fn world_at(frag: vec2<f32>, depth: f32) -> vec3<f32> {
+    let uv = (frag - view.viewport.xy) / view.viewport.zw;
+    let clip = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    return clip.xyz / clip.w;
+}
+
+@fragment
+fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
+    let pixel = vec2<i32>(in.position.xy);
+    let depth = load_depth(pixel);
+    if depth <= 0.0 {
+        discard;
+    }
+    let v = volumes[in.volume];
+    let s = sample_volume(v, world_at(in.position.xy, depth));
+    if !s.inside {
+        discard;
+    }
+    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
+    let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
+    return vec4(v.color.rgb * (e * view.exposure), 0.0);
+}
+
+// Where the segment o + t·d, t ∈ [0, len], is inside a medium's unit box.
+fn clip_medium(m: Medium, o: vec3<f32>, d: vec3<f32>, len: f32) -> vec2<f32> {
+    let lo = (m.local_from_world * vec4(o, 1.0)).xyz;
+    let ld = (m.local_from_world * vec4(d, 0.0)).xyz;
+    var t = vec2(0.0, len);
+    for (var axis = 0; axis < 3; axis++) {
+        if abs(ld[axis]) < 1e-12 {
+            if abs(lo[axis]) > 0.5 {
+                return vec2(1.0, 0.0);
+            }
+            continue;
+        }
+        let a = (-0.5 - lo[axis]) / ld[axis];
+        let b = (0.5 - lo[axis]) / ld[axis];
+        t = vec2(max(t.x, min(a, b)), min(t.y, max(a, b)));
+    }
+    return t;
+}
+
+// Real roots of a s² + b s + c (NaN-free: a missing root is returned as 2, outside [−1, 1]).
+fn quadratic_roots(a: f32, b: f32, c: f32) -> vec2<f32> {
+    let scale = max(abs(a), max(abs(b), abs(c)));
+    if scale == 0.0 {
+        return vec2(2.0);
+    }
+    if abs(a) <= 1e-7 * scale {
+        return vec2(select(2.0, -c / b, b != 0.0), 2.0);
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return vec2(2.0);
+    }
+    let q = -0.5 * (b + select(-1.0, 1.0, b >= 0.0) * sqrt(disc));
+    if q == 0.0 {
+        return vec2(0.0, 2.0);
+    }
+    return vec2(q / a, c / q);
+}
+
+// `in_scattered_radiance` for one volume and one medium: the eye ray's pieces inside
+// the warped volume (roots of the βᵢ quadratics and the slab 0 ≤ α ≤ depth), each
+// scattering e^{−σt dₑ} e^{−σt dₛ} Δx σs p(cos θ) E_beam at its midpoint (§3.5).
+fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f32, exit: f32) -> vec3<f32> {
+    let o = to_local(v, eye);
+    let d = vec3(dot(dir, v.axis_x.xyz), dot(dir, v.axis_y.xyz), dot(dir, v.axis_z.xyz));
+    var cuts: array<f32, 10>;
+    var n = 0;
+    cuts[n] = enter;
+    n++;
+    if abs(d.y) > 1e-12 {
+        for (var k = 0; k < 2; k++) {
+            let t = (select(0.0, v.origin.w, k == 1) - o.y) / d.y;
+            if t > enter && t < exit {
+                cuts[n] = t;
+                n++;
+            }
+        }
+    }
+    let mid = 0.5 * (enter + exit);
+    let h = 0.5 * (exit - enter);
+    let b0 = beta(v, o + enter * d);
+    let b1 = beta(v, o + mid * d);
+    let b2 = beta(v, o + exit * d);
+    for (var i = 0; i < 3; i++) {
+        let roots = quadratic_roots(0.5 * (b2[i] + b0[i]) - b1[i], 0.5 * (b2[i] - b0[i]), b1[i]);
+        for (var r = 0; r < 2; r++) {
+            let s = roots[r];
+            let t = mid + s * h;
+            if s > -1.0 && s < 1.0 && t > enter && t < exit {
+                cuts[n] = t;
+                n++;
+            }
+        }
+    }
+    cuts[n] = exit;
+    n++;
+    // Insertion sort: at most ten cuts.
+    for (var i = 1; i < n; i++) {
+        let x = cuts[i];
+        var j = i - 1;
+        while j >= 0 && cuts[j] > x {
+            cuts[j + 1] = cuts[j];
+            j--;
+        }
+        cuts[j + 1] = x;
+    }
+    let c = m.coefficients;
+    let sigma_t = c.x + c.y;
+    var radiance = vec3(0.0);
+    for (var i = 0; i + 1 < n; i++) {
+        let a = cuts[i];
+        let b = cuts[i + 1];
+        if b <= a {
+            continue;
+        }
+        let t = 0.5 * (a + b);
+        let s = sample_volume(v, eye + t * dir);
+        if !s.inside {
+            continue;
+        }
+        let beam_length = length(s.ray);
+        let beam = s.ray / beam_length;
+        let g = clamp(c.z, -0.999, 0.999);
+        let denom = max(1.0 + g * g - 2.0 * g * dot(beam, -dir), 1e-12);
+        let phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
+        let attenuation = exp(-sigma_t * ((t - enter) + s.depth * beam_length));
+        radiance += v.color.rgb * (attenuation * (b - a) * c.x * phase * s.plane_irradiance * beam_length);
+    }
+    return radiance;
+}
+
+@fragment
+fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
+    let pixel = vec2<i32>(in.position.xy);
+    let depth = load_depth(pixel);
+    // The eye ray starts on the near plane (any projection) and ends at the surface,
+    // or far away where the pixel sees the sky.
+    let eye = world_at(in.position.xy, 1.0);
+    let dir = normalize(world_at(in.position.xy, 0.5) - eye);
+    var len = 1.0e5;
+    if depth > 0.0 {
+        len = distance(world_at(in.position.xy, depth), eye);
+    }
+    let v = volumes[in.volume];
+    var radiance = vec3(0.0);
+    for (var i = 0u; i < min(settings.medium_count, 4u); i++) {
+        let m = settings.media[i];
+        let t = clip_medium(m, eye, dir, len);
+        if t.x < t.y {
+            radiance += scatter(v, m, eye, dir, t.x, t.y);
+        }
+    }
+    return vec4(radiance * view.exposure, 0.0);
+}
