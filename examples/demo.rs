@@ -1,7 +1,8 @@
-//! The main demo: a rippled pool under the sun. Its caustics come from the
-//! ground-truth photon tracer (`caustics_core`), evaluated at the surface each pixel
-//! sees and handed to the plugin as injected irradiance, which the composite lays on
-//! the pool floor with the floor's own material.
+//! The main demo: a rippled pool under the sun, its ripples moving. The caustics on
+//! the pool floor are the plugin's warped caustic volumes, rebuilt every frame from
+//! the animated water mesh. With `--reference` they come instead from the
+//! ground-truth photon tracer (`caustics_core`, still water), evaluated at the surface
+//! each pixel sees and handed to the plugin as injected irradiance.
 //!
 //! `cargo run --example demo` opens a window when there is a display; otherwise, or
 //! with `--headless`, it renders offscreen and writes a PNG (`--out`, default
@@ -15,7 +16,8 @@ use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy::window::WindowResolution;
 use bevy_caustics::caustics_core::{
     estimate::{PhotonList, PhotonMap},
-    scenes::wave_pool,
+    mesh::TriMesh,
+    scenes::{Wave, wave_heightfield, wave_pool},
     tracer::{PhotonTracer, TraceSettings},
 };
 use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
@@ -34,21 +36,23 @@ const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
 
 struct Args {
     headless: bool,
+    reference: bool,
     out: PathBuf,
     photons: u64,
 }
 
 fn parse_args() -> Result<Args, String> {
-    let mut args = Args { headless: false, out: PathBuf::from("target/demo.png"), photons: 4 << 20 };
+    let mut args = Args { headless: false, reference: false, out: PathBuf::from("target/demo.png"), photons: 4 << 20 };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
         match arg.as_str() {
             "--headless" => args.headless = true,
+            "--reference" => args.reference = true,
             "--out" => args.out = it.next().ok_or("--out needs a path")?.into(),
             "--photons" => {
                 args.photons = it.next().and_then(|n| n.parse().ok()).ok_or("--photons needs a whole number")?
             }
-            other => return Err(format!("unknown argument {other:?} (use --headless, --out PATH, --photons N)")),
+            other => return Err(format!("unknown argument {other:?} (use --headless, --reference, --out PATH, --photons N)")),
         }
     }
     let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
@@ -68,7 +72,7 @@ fn main() -> ExitCode {
 
 fn run() -> Result<(), String> {
     let args = parse_args()?;
-    let irradiance = trace_caustics(args.photons)?;
+    let irradiance = if args.reference { Some(trace_caustics(args.photons)?) } else { None };
     if args.headless {
         let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
         let target = renderer.render_target();
@@ -90,7 +94,8 @@ fn run() -> Result<(), String> {
         .add_plugins(CausticsPlugin);
         #[cfg(feature = "egui")]
         app.add_plugins(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
-        app.add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()));
+        app.add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()))
+            .add_systems(Update, ripple);
         app.run();
     }
     Ok(())
@@ -139,11 +144,33 @@ fn tile_texture() -> Image {
     image
 }
 
-fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<Vec3>) {
-    let pool = wave_pool(129, 128);
-    let water = bevy_mesh(&pool.scene.generators[0].mesh);
+/// The water of `shared/reference`'s pool, its waves moved on by `time` seconds.
+fn water_surface(time: f32) -> TriMesh {
+    let waves = [
+        Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: -1.3 * time },
+        Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 - 1.1 * time },
+    ];
+    wave_heightfield(129, 4.0, 0.8, &waves)
+}
+
+/// The animated generator: the water mesh rewritten in place every frame. The plugin
+/// sees the mesh asset change and rebuilds the caustic volumes.
+#[derive(Component)]
+struct Water;
+
+fn ripple(time: Res<Time>, water: Query<&Mesh3d, With<Water>>, mut meshes: ResMut<Assets<Mesh>>) {
+    for mesh in &water {
+        if let Some(mut mesh) = meshes.get_mut(&mesh.0) {
+            *mesh = bevy_mesh(&water_surface(time.elapsed_secs()));
+        }
+    }
+}
+
+/// The pool; with `injected` irradiance (the tracer's), shown instead of live caustics.
+fn spawn_pool(world: &mut World, target: RenderTarget, injected: Option<Vec<Vec3>>) {
+    let water = bevy_mesh(&water_surface(0.0));
     let tiles = world.resource_mut::<Assets<Image>>().add(tile_texture());
-    let injected = world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &irradiance));
+    let injected = injected.map(|e| world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &e)));
     let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
     let floor_material = materials.add(StandardMaterial {
         base_color_texture: Some(tiles),
@@ -163,18 +190,23 @@ fn spawn_pool(world: &mut World, target: RenderTarget, irradiance: Vec<Vec3>) {
     let water = meshes.add(water);
 
     world.spawn((Mesh3d(floor), MeshMaterial3d(floor_material), CausticReceiver));
-    world.spawn((Mesh3d(water), MeshMaterial3d(water_material), CausticGenerator::refractive(1.333)));
+    let mut water = world.spawn((Mesh3d(water), MeshMaterial3d(water_material)));
+    if injected.is_none() {
+        water.insert((CausticGenerator::refractive(1.333), Water));
+    }
     world.spawn((
         DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(Vec3::new(0.3, -1.0, -0.2), Vec3::Y),
     ));
-    world.spawn((
+    let mut camera = world.spawn((
         Camera3d::default(),
         // Caustics are added to the linear HDR image, before tonemapping.
         bevy::camera::Hdr,
         target,
         Projection::from(PerspectiveProjection { fov: FOV_Y, ..default() }),
         Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),
-        InjectedIrradiance(injected),
     ));
+    if let Some(injected) = injected {
+        camera.insert(InjectedIrradiance(injected));
+    }
 }

@@ -95,21 +95,25 @@ pub fn pinhole(transform: &Transform, fov_y: f32, width: u32, height: u32) -> Pi
 }
 
 /// Spawns `scene` into `world`: receivers with their albedo and [`CausticReceiver`],
-/// generators as glass or mirror with [`CausticGenerator`], the lights (core
-/// intensities per steradian become Bevy's lumens, ×4π), and an HDR camera at `camera`
-/// rendering into `target`, showing `irradiance` through the composite. Ambient light is
-/// switched off, and exposure set so that `typical` lux on a white receiver comes out
-/// at mid grey.
+/// generators as glass or mirror, the lights (core intensities per steradian become
+/// Bevy's lumens, ×4π), and an HDR camera at `camera` rendering into `target`. With
+/// `injected` irradiance (one value per pixel, e.g. the tracer's), the camera shows
+/// that and the generators are plain meshes; without, the generators get
+/// [`CausticGenerator`] and the plugin's techniques draw the caustics live. Ambient
+/// light is switched off, and exposure set so that `typical` lux on a white receiver
+/// comes out at mid grey.
 pub fn spawn_scene(
     world: &mut World,
     scene: &Scene,
     camera: &PinholeCamera,
     target: RenderTarget,
-    irradiance: &[Vec3],
+    injected: Option<&[Vec3]>,
     typical: f32,
 ) {
-    let injected = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
-    let injected = world.resource_mut::<Assets<Image>>().add(injected);
+    let injected = injected.map(|irradiance| {
+        let image = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
+        world.resource_mut::<Assets<Image>>().add(image)
+    });
     for receiver in &scene.receivers {
         let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&receiver.mesh));
         let a = receiver.albedo;
@@ -140,7 +144,10 @@ pub fn spawn_scene(
             ),
         };
         let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
-        world.spawn((Mesh3d(mesh), MeshMaterial3d(material), component));
+        let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        if injected.is_none() {
+            entity.insert(component);
+        }
     }
     for light in &scene.lights {
         let color = Color::linear_rgb(light.color.x, light.color.y, light.color.z);
@@ -171,13 +178,15 @@ pub fn spawn_scene(
     world.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
     // exposure = 1 / (1.2 · 2^ev100); white at `typical` lux → radiance typical/π → 0.18.
     let exposure = 0.18 * PI / typical.max(1e-6);
-    world.spawn((
+    let mut camera = world.spawn((
         Camera3d::default(),
         Hdr,
         target,
         Exposure { ev100: (1.0 / (1.2 * exposure)).log2() },
         Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),
         Transform::from_translation(to_bevy(camera.position)).looking_at(to_bevy(camera.look_at), to_bevy(camera.up)),
-        InjectedIrradiance(injected),
     ));
+    if let Some(injected) = injected {
+        camera.insert(InjectedIrradiance(injected));
+    }
 }

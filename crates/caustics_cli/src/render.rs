@@ -136,7 +136,7 @@ fn render_with_bevy(
         .sum();
     let mut renderer = HeadlessRenderer::new(camera.width, camera.height).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
-    spawn_scene(renderer.world_mut(), scene, camera, target, &irradiance, typical);
+    spawn_scene(renderer.world_mut(), scene, camera, target, Some(&irradiance), typical);
     let image = renderer.render(8).map_err(|e| e.to_string())?;
     Ok(image.pixels.iter().map(|p| Vec3::new(p.x, p.y, p.z)).collect())
 }
