@@ -13,7 +13,10 @@ use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 use caustics_core::scene::{Light, LightKind};
-use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes};
+use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
+use caustics_core::mesh::TriMesh;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels};
 use std::f32::consts::PI;
 use std::sync::Arc;
 
@@ -97,16 +100,34 @@ type Generators<'w, 's> = Query<
     Without<InvalidCausticParams>,
 >;
 
-/// What the last build saw, to tell when to rebuild.
+/// One generator's input to a build: its world-space mesh and interaction.
+struct GeneratorInput {
+    entity: Entity,
+    mesh: TriMesh,
+    interaction: SpecularInteraction,
+}
+
+/// What a build produced: the volumes, their stats and the fans it kept.
+type BuildOutput = (Vec<CausticVolume>, BuildStats, HashMap<Entity, VertexFans>);
+
+/// The build state across frames.
 #[derive(Default)]
-struct BuildCache {
+struct BuildState {
+    /// Fans by generator, handed to each build and back.
     fans: HashMap<Entity, VertexFans>,
+    /// The generators' meshes at the last build, to notice their changes.
     meshes: HashSet<AssetId<Mesh>>,
     warned: HashSet<Entity>,
+    /// Something changed since the running build started.
+    pending: bool,
+    running: Option<Task<BuildOutput>>,
 }
 
 /// Rebuilds every caustic volume when a generator, light, receiver or the settings
-/// changed, or a generator's mesh asset was modified (an animated ocean: every frame).
+/// changed, or a generator's mesh asset was modified (an animated ocean: every
+/// frame). The build runs on the async compute pool, in parallel over triangles,
+/// while the frames go on with the previous volumes: no frame waits for it. Changes
+/// that arrive during a build start one more when it ends.
 #[allow(clippy::too_many_arguments)]
 fn build_volumes(
     generators: Generators<'_, '_>,
@@ -123,15 +144,15 @@ fn build_volumes(
     settings: Res<WarpedVolumesSettings>,
     mut volumes: ResMut<CausticVolumes>,
     mut active: ResMut<ActiveCausticTechniques>,
-    mut cache: Local<BuildCache>,
+    mut state: Local<BuildState>,
 ) {
     let mesh_changed = mesh_events.read().any(|e| match e {
         AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => {
-            cache.meshes.contains(id)
+            state.meshes.contains(id)
         }
         _ => false,
     });
-    let dirty = mesh_changed
+    state.pending |= mesh_changed
         || settings.is_changed()
         || !changed_generators.is_empty()
         || !changed_lights.is_empty()
@@ -140,10 +161,22 @@ fn build_volumes(
         || removed_invalid.read().count() > 0
         || removed_receivers.read().count() > 0
         // A mesh that had not loaded at the last build.
-        || generators.iter().any(|(_, _, m, ..)| !cache.meshes.contains(&m.id()));
-    if !dirty {
+        || generators.iter().any(|(_, _, m, ..)| !state.meshes.contains(&m.id()));
+
+    if let Some(task) = state.running.as_mut() {
+        let Some((built, stats, fans)) = block_on(poll_once(task)) else {
+            return;
+        };
+        state.running = None;
+        state.fans = fans;
+        active.warped_volumes = !built.is_empty();
+        *volumes = CausticVolumes { volumes: Arc::new(built), stats, generation: volumes.generation + 1 };
+    }
+    if !state.pending {
         return;
     }
+    state.pending = false;
+
     let core_settings = settings.core();
     let lights: Vec<Light> = lights
         .iter()
@@ -155,53 +188,61 @@ fn build_volumes(
     let bounds = receivers
         .iter()
         .filter_map(|(t, aabb)| aabb.map(|a| world_aabb(t, a)))
-        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)));
-    let mut built = Vec::new();
-    let mut stats = BuildStats::default();
-    cache.meshes.clear();
-    let mut live = HashSet::new();
+        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+        .map(|(lo, hi)| (to_core(lo), to_core(hi)));
+    state.meshes.clear();
+    let mut inputs = Vec::new();
     for (entity, generator, mesh3d, transform, visible) in &generators {
-        cache.meshes.insert(mesh3d.id());
+        state.meshes.insert(mesh3d.id());
         let uses_volumes = matches!(generator.technique, CausticTechnique::Auto | CausticTechnique::WarpedVolumes);
-        let (Some(mesh), Some((lo, hi)), true, true) = (meshes.get(&mesh3d.0), bounds, visible.get(), uses_volumes) else {
+        let (Some(mesh), true, true) = (meshes.get(&mesh3d.0), visible.get(), uses_volumes) else {
             continue;
         };
-        let mesh = match core_mesh(mesh, transform) {
-            Ok(mesh) => mesh,
+        match core_mesh(mesh, transform) {
+            Ok(mesh) => {
+                state.warned.remove(&entity);
+                inputs.push(GeneratorInput { entity, mesh, interaction: generator.specular_interaction() });
+            }
             Err(e) => {
-                if cache.warned.insert(entity) {
+                if state.warned.insert(entity) {
                     warn!("bevy_caustics: the mesh of CausticGenerator {entity} is skipped: it {e}");
                 }
-                continue;
-            }
-        };
-        cache.warned.remove(&entity);
-        live.insert(entity);
-        let fans = cache.fans.entry(entity).or_default();
-        if !fans.fits(&mesh) {
-            *fans = VertexFans::new(&mesh);
-        }
-        let interaction = generator.specular_interaction();
-        for light in &lights {
-            for (ior, color) in caustics_core::volumes::channels(&interaction, light.color) {
-                let s = build_generator_volumes(
-                    &mesh,
-                    fans,
-                    &interaction,
-                    ior,
-                    light,
-                    color,
-                    (to_core(lo), to_core(hi)),
-                    &core_settings,
-                    &mut built,
-                );
-                stats = stats.add(s);
             }
         }
     }
-    cache.fans.retain(|e, _| live.contains(e));
-    active.warped_volumes = !built.is_empty();
-    *volumes = CausticVolumes { volumes: Arc::new(built), stats, generation: volumes.generation + 1 };
+    let mut fans = std::mem::take(&mut state.fans);
+    state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
+        let mut built = Vec::new();
+        let mut stats = BuildStats::default();
+        let mut kept = HashMap::new();
+        let Some(bounds) = bounds else {
+            return (built, stats, kept);
+        };
+        for input in inputs {
+            let mut fan = fans.remove(&input.entity).unwrap_or_default();
+            if !fan.fits(&input.mesh) {
+                fan = VertexFans::new(&input.mesh);
+            }
+            for light in &lights {
+                for (ior, color) in channels(&input.interaction, light.color) {
+                    let s = build_generator_volumes(
+                        &input.mesh,
+                        &fan,
+                        &input.interaction,
+                        ior,
+                        light,
+                        color,
+                        bounds,
+                        &core_settings,
+                        &mut built,
+                    );
+                    stats = stats.add(s);
+                }
+            }
+            kept.insert(input.entity, fan);
+        }
+        (built, stats, kept)
+    }));
 }
 
 fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
