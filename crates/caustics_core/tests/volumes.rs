@@ -258,7 +258,8 @@ fn large_ior_and_dispersion_stay_finite_and_split_the_channels() {
 
 proptest! {
     /// Every point inside a volume — converging, diverging, twisted or crossing
-    /// itself — lies inside its bounding shape, whichever of prism and box it is.
+    /// itself — lies inside its bounding shape, whichever of prism and box it is, and
+    /// gets finite, non-negative irradiance.
     #[test]
     fn bounding_shapes_contain_their_volumes(
         normals in prop::array::uniform3((-0.9f32..0.9, -0.9f32..0.9)),
@@ -283,6 +284,10 @@ proptest! {
                 let corner = |i: usize| Vec3::new(v.vertex_x[i] + alpha * v.ray_x[i], alpha, v.vertex_z[i] + alpha * v.ray_z[i]);
                 let local = corner(0) * (1.0 - u - w) + corner(1) * u + corner(2) * w;
                 let p = v.origin + v.axes[0] * local.x + v.axes[1] * local.y + v.axes[2] * local.z;
+                for settings in ALL_MODES {
+                    let e = v.irradiance(p, Vec3::NEG_Y, &settings);
+                    prop_assert!(e.is_finite() && e.min_element() >= 0.0, "{e} at a point of a twisted volume");
+                }
                 for tri in HEXAHEDRON_TRIANGLES {
                     let [a, b, d] = tri.map(|i| c[i as usize]);
                     let n = (b - a).cross(d - a);
