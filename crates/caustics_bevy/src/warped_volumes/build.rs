@@ -91,6 +91,7 @@ type LightChanged = Or<(
     Changed<SpotLight>,
     Changed<InheritedVisibility>,
 )>;
+type ReceiverChanged = Or<(Changed<GlobalTransform>, Changed<Aabb>)>;
 type GeneratorChanged =
     Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<CausticGenerator>, Changed<InheritedVisibility>)>;
 type Generators<'w, 's> = Query<
@@ -135,7 +136,7 @@ fn build_volumes(
     lights: Query<LightComponents, AnyLight>,
     changed_lights: Query<(), (AnyLight, LightChanged)>,
     receivers: Query<(&GlobalTransform, Option<&Aabb>), With<CausticReceiver>>,
-    changed_receivers: Query<(), (With<CausticReceiver>, Or<(Changed<GlobalTransform>, Changed<Aabb>)>)>,
+    changed_receivers: Query<(), (With<CausticReceiver>, ReceiverChanged)>,
     mut removed: RemovedComponents<CausticGenerator>,
     mut removed_invalid: RemovedComponents<InvalidCausticParams>,
     mut removed_receivers: RemovedComponents<CausticReceiver>,
@@ -236,7 +237,7 @@ fn build_volumes(
                         &core_settings,
                         &mut built,
                     );
-                    stats = stats.add(s);
+                    stats = stats + s;
                 }
             }
             kept.insert(input.entity, fan);
@@ -258,12 +259,15 @@ fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
     (lo, hi)
 }
 
+/// A camera without one of the prepasses the surface pass reads.
+type MissingPrepasses = Or<(Without<DepthPrepass>, Without<NormalPrepass>)>;
+
 /// The surface pass reads receiver positions and normals from Bevy's prepasses: HDR
 /// 3D cameras get them while the scene has caustic volumes.
 fn add_prepasses(
     mut commands: Commands,
     volumes: Res<CausticVolumes>,
-    cameras: Query<Entity, (With<Camera3d>, With<Hdr>, Or<(Without<DepthPrepass>, Without<NormalPrepass>)>)>,
+    cameras: Query<Entity, (With<Camera3d>, With<Hdr>, MissingPrepasses)>,
 ) {
     if volumes.volumes.is_empty() {
         return;

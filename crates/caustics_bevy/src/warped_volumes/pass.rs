@@ -77,10 +77,13 @@ pub(super) fn surface_pass(
     }
 }
 
+/// Caustics views that see a medium.
+type MediumViews = (With<ViewSeesMedium>, With<ViewCausticWork>);
+
 /// Adds the light scattered out of the caustic beams in media to the view's HDR image.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn volumetric_pass(
-    view: ViewQuery<(&ViewTarget, &ViewPrepassTextures, &ViewUniformOffset, &ViewVolumePipelines), (With<ViewSeesMedium>, With<ViewCausticWork>)>,
+    view: ViewQuery<(&ViewTarget, &ViewPrepassTextures, &ViewUniformOffset, &ViewVolumePipelines), MediumViews>,
     buffers: Res<VolumeBuffers>,
     layouts: Res<VolumesPipeline>,
     cache: Res<PipelineCache>,

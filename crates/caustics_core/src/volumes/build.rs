@@ -67,9 +67,11 @@ pub struct BuildStats {
     pub dropped_flux: DVec3,
 }
 
-impl BuildStats {
+impl std::ops::Add for BuildStats {
+    type Output = Self;
+
     /// The sum of two builds' counts and fluxes.
-    pub fn add(mut self, o: Self) -> Self {
+    fn add(mut self, o: Self) -> Self {
         self.volumes += o.volumes;
         self.unlit += o.unlit;
         self.total_internal_reflection += o.total_internal_reflection;
@@ -215,171 +217,179 @@ pub fn build_generator_volumes(
         })
         .sum::<Vec3>()
         .try_normalize();
-    let results: Vec<(Option<CausticVolume>, BuildStats)> = (0..mesh.triangles().len())
-        .into_par_iter()
-        .map(|t| triangle_volume(mesh, fans, &rays, t, two_sided, slicing_axis, color, depth_bounds, settings))
-        .collect();
+    let context = TriangleContext { mesh, fans, rays: &rays, two_sided, slicing_axis, color, depth_bounds, settings };
+    let results: Vec<(Option<CausticVolume>, BuildStats)> =
+        (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
     let mut stats = BuildStats::default();
     out.reserve(results.len());
     for (volume, s) in results {
-        stats = stats.add(s);
+        stats = stats + s;
         out.extend(volume);
     }
     stats
 }
 
-fn triangle_volume(
-    mesh: &TriMesh,
-    fans: &VertexFans,
-    rays: &[VertexRay],
-    t: usize,
+/// What every triangle of one build shares.
+struct TriangleContext<'a> {
+    mesh: &'a TriMesh,
+    fans: &'a VertexFans,
+    rays: &'a [VertexRay],
     two_sided: bool,
     slicing_axis: Option<Vec3>,
     color: Vec3,
-    (lo, hi): (Vec3, Vec3),
-    settings: &VolumeSettings,
-) -> (Option<CausticVolume>, BuildStats) {
-    let tri = mesh.triangles()[t];
-    let p = mesh.corners(t);
-    let mut stats = BuildStats::default();
-    let cross = (p[1] - p[0]).cross(p[2] - p[0]);
-    let longest = (p[1] - p[0]).length_squared().max((p[2] - p[0]).length_squared()).max((p[2] - p[1]).length_squared());
-    if cross.length_squared() <= (1e-12 * longest) * longest || !cross.is_finite() {
-        stats.degenerate = 1;
-        return (None, stats);
-    }
-    let geometric = cross.normalize();
-    // A mirror is lit on its front, the side its vertex normals face; an interface
-    // between two media transmits light from either side.
-    let front = tri.iter().map(|&i| mesh.normals()[i as usize]).sum::<Vec3>();
-    let mut unit = [Vec3::ZERO; 3];
-    let mut weight = Vec3::ZERO;
-    let mut lit = false;
-    let mut tir = false;
-    for i in 0..3 {
-        let (irradiance, incident, fresnel) = match rays[tri[i] as usize] {
-            VertexRay::Ray { direction, fresnel, irradiance, incident } => {
-                unit[i] = direction;
-                (irradiance, incident, fresnel)
-            }
-            VertexRay::TotalInternalReflection { irradiance, incident } => {
-                tir = true;
-                (irradiance, incident, 1.0)
-            }
-        };
-        // Irradiance on the triangle's plane at the vertex, after Fresnel (with TIR:
-        // the flux that the dropped volume would have carried).
-        let cos = incident.dot(geometric).abs();
-        weight[i] = irradiance * cos * fresnel;
-        lit |= irradiance * cos > 0.0 && (two_sided || incident.dot(front) < 0.0);
-    }
-    let flux_estimate = |w: Vec3| DVec3::from((color * ((w.x + w.y + w.z) / 3.0 * 0.5 * cross.length())).as_dvec3());
-    if !lit {
-        stats.unlit = 1;
-        return (None, stats);
-    }
-    if tir {
-        stats.total_internal_reflection = 1;
-        stats.dropped_flux = flux_estimate(weight);
-        return (None, stats);
-    }
-    let mut normal = geometric;
-    let mean_ray = unit[0] + unit[1] + unit[2];
-    if mean_ray.dot(normal) < 0.0 {
-        normal = -normal;
-    }
-    // Slice along the generator's shared axis where it fits this triangle, so that
-    // neighbours pair their rays identically and their volumes leave no gaps or
-    // overlaps; otherwise along the triangle's own normal, as §3.2 does.
-    let shared = slicing_axis.filter(|&a| unit.iter().all(|u| u.dot(a) >= SHARED_AXIS_MIN_COS) && normal.dot(a) >= SHARED_AXIS_MIN_COS);
-    let y = shared.unwrap_or(normal);
-    // The origin is the vertex lowest along y, so the whole triangle lies at y ≥ 0.
-    let lowest = (0..3).min_by(|&i, &j| p[i].dot(y).total_cmp(&p[j].dot(y))).unwrap_or(0);
-    let edge = (p[(lowest + 1) % 3] - p[lowest]).reject_from_normalized(y);
-    let x = edge.try_normalize().unwrap_or_else(|| crate::tracer::orthonormal_basis(y).0);
-    let mut frame = Frame { origin: p[lowest], axes: [x, y, x.cross(y)] };
-    let own = |frame: &Frame| -> Option<([Vec3; 3], [Vec3; 3])> {
-        let mut v = [Vec3::ZERO; 3];
-        let mut r = [Vec3::ZERO; 3];
+    depth_bounds: (Vec3, Vec3),
+    settings: &'a VolumeSettings,
+}
+
+impl TriangleContext<'_> {
+    /// The caustic volume of triangle `t`, or why there is none.
+    fn volume(&self, t: usize) -> (Option<CausticVolume>, BuildStats) {
+        let TriangleContext { mesh, fans, rays, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
+            *self;
+        let tri = mesh.triangles()[t];
+        let p = mesh.corners(t);
+        let mut stats = BuildStats::default();
+        let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+        let longest =
+            (p[1] - p[0]).length_squared().max((p[2] - p[0]).length_squared()).max((p[2] - p[1]).length_squared());
+        if cross.length_squared() <= (1e-12 * longest) * longest || !cross.is_finite() {
+            stats.degenerate = 1;
+            return (None, stats);
+        }
+        let geometric = cross.normalize();
+        // A mirror is lit on its front, the side its vertex normals face; an interface
+        // between two media transmits light from either side.
+        let front = tri.iter().map(|&i| mesh.normals()[i as usize]).sum::<Vec3>();
+        let mut unit = [Vec3::ZERO; 3];
+        let mut weight = Vec3::ZERO;
+        let mut lit = false;
+        let mut tir = false;
         for i in 0..3 {
-            (v[i], r[i]) = flattened(frame, p[i], unit[i], settings.min_ray_cosine)?;
-        }
-        Some((v, r))
-    };
-    let Some((mut v, mut r)) = own(&frame) else {
-        stats.grazing = 1;
-        stats.dropped_flux = flux_estimate(weight);
-        return (None, stats);
-    };
-    let mut abc = area_coefficients(v, r);
-    if abc.x < 0.0 {
-        frame.axes[2] = -frame.axes[2];
-        (v, r) = own(&frame).expect("mirroring z keeps ray heights");
-        abc = area_coefficients(v, r);
-    }
-    // The flux crossing the triangle crosses its flattened image too: scale the
-    // per-vertex irradiance from the triangle's plane to the slicing plane.
-    weight *= cross.length() / abc.x;
-    let depth = (0..8)
-        .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
-        .map(|c| frame.local(c).y)
-        .fold(f32::NEG_INFINITY, f32::max);
-    if !(depth > 0.0) || !(abc.x > 0.0) || !abc.is_finite() {
-        stats.degenerate = 1;
-        stats.dropped_flux = flux_estimate(weight);
-        return (None, stats);
-    }
-    // Per-vertex coefficients from the fan around each vertex, flattened into this
-    // triangle's plane and summed (§3.4, Fig. 5); the triangle's own when the fan
-    // cannot be flattened.
-    let mut fan = [abc; 3];
-    for (i, coefficients) in fan.iter_mut().enumerate() {
-        let mut sum = Vec3::ZERO;
-        let mut complete = true;
-        for &f in fans.around(tri[i]) {
-            let ft = mesh.triangles()[f as usize];
-            let mut fv = [Vec3::ZERO; 3];
-            let mut fr = [Vec3::ZERO; 3];
-            for j in 0..3 {
-                let k = ft[j] as usize;
-                let ray = match rays[k] {
-                    VertexRay::Ray { direction, .. } => direction,
-                    VertexRay::TotalInternalReflection { .. } => Vec3::ZERO,
-                };
-                match flattened(&frame, mesh.positions()[k], ray, settings.min_ray_cosine) {
-                    Some(vr) => (fv[j], fr[j]) = vr,
-                    None => complete = false,
+            let (irradiance, incident, fresnel) = match rays[tri[i] as usize] {
+                VertexRay::Ray { direction, fresnel, irradiance, incident } => {
+                    unit[i] = direction;
+                    (irradiance, incident, fresnel)
                 }
-            }
-            if !complete {
-                break;
-            }
-            sum += area_coefficients(fv, fr);
+                VertexRay::TotalInternalReflection { irradiance, incident } => {
+                    tir = true;
+                    (irradiance, incident, 1.0)
+                }
+            };
+            // Irradiance on the triangle's plane at the vertex, after Fresnel (with TIR:
+            // the flux that the dropped volume would have carried).
+            let cos = incident.dot(geometric).abs();
+            weight[i] = irradiance * cos * fresnel;
+            lit |= irradiance * cos > 0.0 && (two_sided || incident.dot(front) < 0.0);
         }
-        if complete && sum.x > 0.0 && sum.is_finite() {
-            *coefficients = sum;
+        let flux_estimate = |w: Vec3| (color * ((w.x + w.y + w.z) / 3.0 * 0.5 * cross.length())).as_dvec3();
+        if !lit {
+            stats.unlit = 1;
+            return (None, stats);
         }
+        if tir {
+            stats.total_internal_reflection = 1;
+            stats.dropped_flux = flux_estimate(weight);
+            return (None, stats);
+        }
+        let mut normal = geometric;
+        let mean_ray = unit[0] + unit[1] + unit[2];
+        if mean_ray.dot(normal) < 0.0 {
+            normal = -normal;
+        }
+        // Slice along the generator's shared axis where it fits this triangle, so that
+        // neighbours pair their rays identically and their volumes leave no gaps or
+        // overlaps; otherwise along the triangle's own normal, as §3.2 does.
+        let shared = slicing_axis
+            .filter(|&a| unit.iter().all(|u| u.dot(a) >= SHARED_AXIS_MIN_COS) && normal.dot(a) >= SHARED_AXIS_MIN_COS);
+        let y = shared.unwrap_or(normal);
+        // The origin is the vertex lowest along y, so the whole triangle lies at y ≥ 0.
+        let lowest = (0..3).min_by(|&i, &j| p[i].dot(y).total_cmp(&p[j].dot(y))).unwrap_or(0);
+        let edge = (p[(lowest + 1) % 3] - p[lowest]).reject_from_normalized(y);
+        let x = edge.try_normalize().unwrap_or_else(|| crate::tracer::orthonormal_basis(y).0);
+        let mut frame = Frame { origin: p[lowest], axes: [x, y, x.cross(y)] };
+        let own = |frame: &Frame| -> Option<([Vec3; 3], [Vec3; 3])> {
+            let mut v = [Vec3::ZERO; 3];
+            let mut r = [Vec3::ZERO; 3];
+            for i in 0..3 {
+                (v[i], r[i]) = flattened(frame, p[i], unit[i], settings.min_ray_cosine)?;
+            }
+            Some((v, r))
+        };
+        let Some((mut v, mut r)) = own(&frame) else {
+            stats.grazing = 1;
+            stats.dropped_flux = flux_estimate(weight);
+            return (None, stats);
+        };
+        let mut abc = area_coefficients(v, r);
+        if abc.x < 0.0 {
+            frame.axes[2] = -frame.axes[2];
+            (v, r) = own(&frame).expect("mirroring z keeps ray heights");
+            abc = area_coefficients(v, r);
+        }
+        // The flux crossing the triangle crosses its flattened image too: scale the
+        // per-vertex irradiance from the triangle's plane to the slicing plane.
+        weight *= cross.length() / abc.x;
+        let depth = (0..8)
+            .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
+            .map(|c| frame.local(c).y)
+            .fold(f32::NEG_INFINITY, f32::max);
+        if depth.is_nan() || depth <= 0.0 || abc.x.is_nan() || abc.x <= 0.0 || !abc.is_finite() {
+            stats.degenerate = 1;
+            stats.dropped_flux = flux_estimate(weight);
+            return (None, stats);
+        }
+        // Per-vertex coefficients from the fan around each vertex, flattened into this
+        // triangle's plane and summed (§3.4, Fig. 5); the triangle's own when the fan
+        // cannot be flattened.
+        let mut fan = [abc; 3];
+        for (i, coefficients) in fan.iter_mut().enumerate() {
+            let mut sum = Vec3::ZERO;
+            let mut complete = true;
+            for &f in fans.around(tri[i]) {
+                let ft = mesh.triangles()[f as usize];
+                let mut fv = [Vec3::ZERO; 3];
+                let mut fr = [Vec3::ZERO; 3];
+                for j in 0..3 {
+                    let k = ft[j] as usize;
+                    let ray = match rays[k] {
+                        VertexRay::Ray { direction, .. } => direction,
+                        VertexRay::TotalInternalReflection { .. } => Vec3::ZERO,
+                    };
+                    match flattened(&frame, mesh.positions()[k], ray, settings.min_ray_cosine) {
+                        Some(vr) => (fv[j], fr[j]) = vr,
+                        None => complete = false,
+                    }
+                }
+                if !complete {
+                    break;
+                }
+                sum += area_coefficients(fv, fr);
+            }
+            if complete && sum.x > 0.0 && sum.is_finite() {
+                *coefficients = sum;
+            }
+        }
+        let volume = CausticVolume {
+            origin: frame.origin,
+            axes: frame.axes,
+            vertex_x: Vec3::new(v[0].x, v[1].x, v[2].x),
+            vertex_z: Vec3::new(v[0].z, v[1].z, v[2].z),
+            ray_x: Vec3::new(r[0].x, r[1].x, r[2].x),
+            ray_z: Vec3::new(r[0].z, r[1].z, r[2].z),
+            fan_a: Vec3::new(fan[0].x, fan[1].x, fan[2].x),
+            fan_b: Vec3::new(fan[0].y, fan[1].y, fan[2].y),
+            fan_c: Vec3::new(fan[0].z, fan[1].z, fan[2].z),
+            triangle_abc: abc,
+            surface_normal: normal,
+            flux: weight,
+            color,
+            depth,
+            bounds: BoundingShape::new(v, r, depth, |q| frame.world(q)),
+        };
+        stats.volumes = 1;
+        stats.flux = volume.flux().as_dvec3();
+        (Some(volume), stats)
     }
-    let volume = CausticVolume {
-        origin: frame.origin,
-        axes: frame.axes,
-        vertex_x: Vec3::new(v[0].x, v[1].x, v[2].x),
-        vertex_z: Vec3::new(v[0].z, v[1].z, v[2].z),
-        ray_x: Vec3::new(r[0].x, r[1].x, r[2].x),
-        ray_z: Vec3::new(r[0].z, r[1].z, r[2].z),
-        fan_a: Vec3::new(fan[0].x, fan[1].x, fan[2].x),
-        fan_b: Vec3::new(fan[0].y, fan[1].y, fan[2].y),
-        fan_c: Vec3::new(fan[0].z, fan[1].z, fan[2].z),
-        triangle_abc: abc,
-        surface_normal: normal,
-        flux: weight,
-        color,
-        depth,
-        bounds: BoundingShape::new(v, r, depth, |q| frame.world(q)),
-    };
-    stats.volumes = 1;
-    stats.flux = volume.flux().as_dvec3();
-    (Some(volume), stats)
 }
 
 /// Builds every volume of a scene: each light × generator, and one set per RGB
@@ -399,7 +409,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
         let fans = VertexFans::new(&generator.mesh);
         for light in &scene.lights {
             for (ior, color) in channels(&generator.interaction, light.color) {
-                stats = stats.add(build_generator_volumes(
+                stats = stats + build_generator_volumes(
                     &generator.mesh,
                     &fans,
                     &generator.interaction,
@@ -409,7 +419,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
                     bounds,
                     settings,
                     &mut volumes,
-                ));
+                );
             }
         }
     }
@@ -420,9 +430,9 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
 /// (red, green, blue, each with its own index) for a dispersive refractor.
 pub fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f32>, Vec3)> {
     match interaction {
-        SpecularInteraction::Refract { dispersion: Some(d), .. } => (0..3)
-            .map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c]))
-            .collect(),
+        SpecularInteraction::Refract { dispersion: Some(d), .. } => {
+            (0..3).map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c])).collect()
+        }
         SpecularInteraction::Refract { ior, dispersion: None } => vec![(Some(*ior), color)],
         SpecularInteraction::Reflect => vec![(None, color)],
     }

@@ -120,7 +120,7 @@ pub fn in_scattered_radiance(
     settings: &VolumeSettings,
 ) -> Vec3 {
     let length = (end - eye).length();
-    if !(length > 0.0) || !length.is_finite() {
+    if length.is_nan() || length <= 0.0 || length.is_infinite() {
         return Vec3::ZERO;
     }
     let dir = (end - eye) / length;
