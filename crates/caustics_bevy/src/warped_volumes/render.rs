@@ -52,7 +52,9 @@ impl From<&CausticVolume> for GpuCausticVolume {
             axis_x: p(v.axes[0]),
             axis_y: p(v.axes[1]),
             axis_z: p(v.axes[2]),
-            surface_normal: p(v.surface_normal),
+            surface_normal: p(v.surface_normal).with_w(
+                v.owned_edges.iter().enumerate().map(|(i, &owned)| if owned { (1 << i) as f32 } else { 0.0 }).sum(),
+            ),
             vertex_x: p(v.vertex_x),
             vertex_z: p(v.vertex_z),
             ray_x: p(v.ray_x),

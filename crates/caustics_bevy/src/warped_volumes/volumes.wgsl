@@ -11,7 +11,7 @@ struct CausticVolume {
     axis_x: vec4<f32>,
     axis_y: vec4<f32>,          // slicing axis: the caustic triangle lies at y = α
     axis_z: vec4<f32>,
-    surface_normal: vec4<f32>,  // the generator triangle's normal, rays' side
+    surface_normal: vec4<f32>,  // the generator triangle's normal, rays' side; w: owned sides (bits)
     vertex_x: vec4<f32>,        // §4.1 vertical layout: x of the three vertices
     vertex_z: vec4<f32>,
     ray_x: vec4<f32>,           // rays scaled to r_y = 1
@@ -50,6 +50,8 @@ struct VolumeSettings {
 #endif
 
 const PI: f32 = 3.141592653589793;
+// `caustics_core::volumes::EDGE_EPSILON`.
+const EDGE_EPSILON: f32 = 1.0e-4;
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -75,11 +77,12 @@ fn to_local(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
     return vec3(dot(d, v.axis_x.xyz), dot(d, v.axis_y.xyz), dot(d, v.axis_z.xyz));
 }
 
-// Unnormalised barycentric coordinates βᵢ in the caustic triangle at depth α = y (§3.3, §4.1).
+// Unnormalised barycentric coordinates βᵢ in the caustic triangle at depth α = y
+// (§3.3, §4.1), from the edge vectors p − cⁱ (see `CausticVolume::beta`).
 fn beta(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
-    let cx = v.vertex_x.xyz + p.y * v.ray_x.xyz;
-    let cz = v.vertex_z.xyz + p.y * v.ray_z.xyz;
-    return p.x * (cz.zxy - cz.yzx) + p.z * (cx.yzx - cx.zxy) + cz.yzx * cx.zxy - cx.yzx * cz.zxy;
+    let ex = p.x - (v.vertex_x.xyz + p.y * v.ray_x.xyz);
+    let ez = p.z - (v.vertex_z.xyz + p.y * v.ray_z.xyz);
+    return ez.yzx * ex.zxy - ex.yzx * ez.zxy;
 }
 
 // Normalised barycentric coordinates in .xyz; .w = 1 inside the volume, 0 outside.
@@ -98,7 +101,17 @@ fn barycentric(v: CausticVolume, p: vec3<f32>) -> vec4<f32> {
         return vec4(0.0);
     }
     let lambda = b / sum;
-    return vec4(lambda, select(0.0, 1.0, min(lambda.x, min(lambda.y, lambda.z)) >= 0.0));
+    // A side shared with a neighbour belongs to one of the two (`owned_edges`).
+    let owned = u32(v.surface_normal.w);
+    var inside = true;
+    for (var i = 0u; i < 3u; i++) {
+        if (owned & (1u << i)) != 0u {
+            inside = inside && lambda[i] >= -EDGE_EPSILON;
+        } else {
+            inside = inside && lambda[i] > EDGE_EPSILON;
+        }
+    }
+    return vec4(lambda, select(0.0, 1.0, inside));
 }
 
 struct VolumeSample {

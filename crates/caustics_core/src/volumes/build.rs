@@ -329,10 +329,13 @@ impl TriangleContext<'_> {
         // The flux crossing the triangle crosses its flattened image too: scale the
         // per-vertex irradiance from the triangle's plane to the slicing plane.
         weight *= cross.length() / abc.x;
+        // The far corner of the receivers' bounds, and a little beyond, so that a
+        // receiver lying exactly at the end is not lost to rounding.
         let depth = (0..8)
             .map(|i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
             .map(|c| frame.local(c).y)
-            .fold(f32::NEG_INFINITY, f32::max);
+            .fold(f32::NEG_INFINITY, f32::max)
+            * (1.0 + 1e-3);
         if depth.is_nan() || depth <= 0.0 || abc.x.is_nan() || abc.x <= 0.0 || !abc.is_finite() {
             stats.degenerate = 1;
             stats.dropped_flux = flux_estimate(weight);
@@ -369,6 +372,14 @@ impl TriangleContext<'_> {
                 *coefficients = sum;
             }
         }
+        // Edge i (opposite vertex i) is shared with at most one neighbour; the
+        // triangle with the lower index owns the points exactly on it.
+        let owned_edges = std::array::from_fn(|i| {
+            let (a, b) = (tri[(i + 1) % 3], tri[(i + 2) % 3]);
+            let neighbour =
+                fans.around(a).iter().find(|&&f| f as usize != t && mesh.triangles()[f as usize].contains(&b));
+            neighbour.is_none_or(|&f| t < f as usize)
+        });
         let volume = CausticVolume {
             origin: frame.origin,
             axes: frame.axes,
@@ -381,6 +392,7 @@ impl TriangleContext<'_> {
             fan_c: Vec3::new(fan[0].z, fan[1].z, fan[2].z),
             triangle_abc: abc,
             surface_normal: normal,
+            owned_edges,
             flux: weight,
             color,
             depth,

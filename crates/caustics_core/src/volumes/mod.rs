@@ -39,6 +39,11 @@ pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
 
 use glam::Vec3;
 
+/// Half-width, in barycentric units, of the band along a shared side that only the
+/// side's owner counts: wider than the rounding of two volumes' different frames and
+/// of a point rebuilt from a depth buffer, far narrower than a pixel.
+pub const EDGE_EPSILON: f32 = 1.0e-4;
+
 /// How irradiance varies inside one caustic triangle.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum IntensityMode {
@@ -102,6 +107,10 @@ pub struct CausticVolume {
     /// starts at the triangle, `(p − origin)·n ≥ 0`, when the slices are not parallel
     /// to it.
     pub surface_normal: Vec3,
+    /// Which sides (opposite vertex 0, 1, 2) this volume owns: a point on a side
+    /// shared with a neighbour (within [`EDGE_EPSILON`]) counts for one of the two only,
+    /// as a rasteriser's fill rule does for pixels on shared edges.
+    pub owned_edges: [bool; 3],
     /// Per-vertex flux weight: the irradiance crossing the triangle's plane at the
     /// vertex (light irradiance × cosine × Fresnel term).
     pub flux: Vec3,
@@ -135,15 +144,19 @@ impl CausticVolume {
     }
 
     /// Unnormalised barycentric coordinates βᵢ of a local point in its caustic
-    /// triangle (§3.3, in the vertical form of §4.1).
+    /// triangle (§3.3): `β₀ = (p − c¹) × (p − c²)` and so on, in the vertical layout of
+    /// §4.1. Expanded as the paper writes it, the terms are products of coordinates
+    /// metres from the origin that cancel to a tiny area; from the edge vectors
+    /// `p − cⁱ` they do not, which keeps the βᵢ of small caustic triangles exact
+    /// enough for the fill rule on shared sides.
     #[inline]
     pub fn beta(&self, local: Vec3) -> Vec3 {
         let alpha = local.y;
-        let cx = self.vertex_x + alpha * self.ray_x;
-        let cz = self.vertex_z + alpha * self.ray_z;
-        let (yzx_x, zxy_x) = (Vec3::new(cx.y, cx.z, cx.x), Vec3::new(cx.z, cx.x, cx.y));
-        let (yzx_z, zxy_z) = (Vec3::new(cz.y, cz.z, cz.x), Vec3::new(cz.z, cz.x, cz.y));
-        local.x * (zxy_z - yzx_z) + local.z * (yzx_x - zxy_x) + yzx_z * zxy_x - yzx_x * zxy_z
+        let ex = local.x - (self.vertex_x + alpha * self.ray_x);
+        let ez = local.z - (self.vertex_z + alpha * self.ray_z);
+        let yzx = |v: Vec3| Vec3::new(v.y, v.z, v.x);
+        let zxy = |v: Vec3| Vec3::new(v.z, v.x, v.y);
+        yzx(ez) * zxy(ex) - yzx(ex) * zxy(ez)
     }
 
     /// Normalised barycentric coordinates when the point is inside the volume
@@ -164,7 +177,8 @@ impl CausticVolume {
             return None;
         }
         let lambda = beta / sum;
-        (lambda.min_element() >= 0.0).then_some(lambda)
+        let inside = (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
+        inside.then_some(lambda)
     }
 
     /// Irradiance on the plane parallel to the triangle at a point inside, and the
