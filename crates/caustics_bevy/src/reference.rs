@@ -13,7 +13,7 @@ use caustics_core::estimate::PhotonMap;
 use caustics_core::glam;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
-use caustics_core::scene::{LightKind, Scene};
+use caustics_core::scene::{Light, LightKind, Scene};
 use caustics_core::tracer::PhotonTracer;
 use caustics_core::view::PinholeCamera;
 use rayon::prelude::*;
@@ -26,6 +26,40 @@ fn to_bevy(v: glam::Vec3) -> Vec3 {
 /// A Bevy vector as the core crate's (the same glam, re-exported at another path).
 pub fn to_core(v: Vec3) -> glam::Vec3 {
     glam::Vec3::from_array(v.to_array())
+}
+
+/// A Bevy light placed by `transform` as the core crate's light. Bevy's point and spot
+/// intensities are luminous power (lm); the core wants intensity per steradian, Φ/4π
+/// (Bevy's own convention, spots included).
+pub fn core_light(
+    directional: Option<&DirectionalLight>,
+    point: Option<&PointLight>,
+    spot: Option<&SpotLight>,
+    transform: &GlobalTransform,
+) -> Option<Light> {
+    let color = |c: Color| {
+        let c = c.to_linear();
+        caustics_core::glam::Vec3::new(c.red, c.green, c.blue)
+    };
+    let position = to_core(transform.translation());
+    let forward = to_core(transform.forward().as_vec3());
+    Some(match (directional, point, spot) {
+        (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
+        (_, Some(p), _) => {
+            Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) }
+        }
+        (_, _, Some(s)) => Light {
+            kind: LightKind::Spot {
+                position,
+                direction: forward,
+                intensity: s.intensity / (4.0 * PI),
+                inner_angle: s.inner_angle,
+                outer_angle: s.outer_angle,
+            },
+            color: color(s.color),
+        },
+        _ => return None,
+    })
 }
 
 /// A Bevy mesh placed by `transform` as a world-space core mesh. Meshes without

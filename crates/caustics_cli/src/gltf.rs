@@ -15,13 +15,12 @@ use bevy::render::{RenderPlugin, settings::WgpuSettings};
 use bevy::window::ExitCondition;
 use bevy::winit::WinitPlugin;
 use bevy::world_serialization::WorldAsset;
-use caustics_bevy::reference::{core_mesh, to_core};
+use caustics_bevy::reference::{core_light, core_mesh, to_core};
 use caustics_core::estimate::GridRegion;
 use caustics_core::glam;
-use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene, SurfaceRole, role_from_material};
+use caustics_core::scene::{Generator, Receiver, Scene, SurfaceRole, role_from_material};
 use caustics_core::scenes::BenchScene;
 use caustics_core::view::PinholeCamera;
-use std::f32::consts::PI;
 use std::path::Path;
 
 /// Updates to wait for the file and its dependencies before giving up.
@@ -111,33 +110,11 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
             }
         }
     }
-    let color = |c: Color| {
-        let c = c.to_linear();
-        glam::Vec3::new(c.red, c.green, c.blue)
-    };
     let mut lights = world.query::<(Entity, Option<&DirectionalLight>, Option<&PointLight>, Option<&SpotLight>)>();
     for (entity, directional, point, spot) in lights.iter(world) {
-        let t = global_transform(world, entity);
-        let position = to_core(t.translation());
-        let forward = to_core(t.forward().as_vec3());
-        // Bevy's point and spot intensities are luminous power (lm); the tracer wants
-        // intensity per steradian: Φ / 4π (Bevy's own convention, also for spots).
-        let light = match (directional, point, spot) {
-            (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
-            (_, Some(p), _) => Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) },
-            (_, _, Some(s)) => Light {
-                kind: LightKind::Spot {
-                    position,
-                    direction: forward,
-                    intensity: s.intensity / (4.0 * PI),
-                    inner_angle: s.inner_angle,
-                    outer_angle: s.outer_angle,
-                },
-                color: color(s.color),
-            },
-            _ => continue,
-        };
-        scene.lights.push(light);
+        if let Some(light) = core_light(directional, point, spot, &global_transform(world, entity)) {
+            scene.lights.push(light);
+        }
     }
     scene.validate().map_err(|e| format!("{name}: {e}"))?;
     let (lo, hi) = scene.generator_bounds().ok_or_else(|| format!("{name}: no caustic generators (transmissive or mirror materials)"))?;

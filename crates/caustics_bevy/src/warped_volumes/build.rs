@@ -4,7 +4,7 @@
 use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{core_mesh, to_core};
+use crate::reference::{core_light, core_mesh, to_core};
 use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
@@ -12,12 +12,11 @@ use bevy::camera::Hdr;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
-use caustics_core::scene::{Light, LightKind};
+use caustics_core::scene::Light;
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels};
-use std::f32::consts::PI;
 use std::sync::Arc;
 
 /// The caustic volumes of the current scene, shared with the render world. A new
@@ -40,40 +39,6 @@ pub(super) fn build(app: &mut App) {
             .after(VisibilitySystems::VisibilityPropagate)
             .after(crate::components::validate_caustic_params),
     );
-}
-
-/// A Bevy light placed by `transform` as the core crate's light. Bevy's point and spot
-/// intensities are luminous power (lm); the core wants intensity per steradian, Φ/4π
-/// (Bevy's own convention, spots included).
-pub fn core_light(
-    directional: Option<&DirectionalLight>,
-    point: Option<&PointLight>,
-    spot: Option<&SpotLight>,
-    transform: &GlobalTransform,
-) -> Option<Light> {
-    let color = |c: Color| {
-        let c = c.to_linear();
-        caustics_core::glam::Vec3::new(c.red, c.green, c.blue)
-    };
-    let position = to_core(transform.translation());
-    let forward = to_core(transform.forward().as_vec3());
-    Some(match (directional, point, spot) {
-        (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
-        (_, Some(p), _) => {
-            Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) }
-        }
-        (_, _, Some(s)) => Light {
-            kind: LightKind::Spot {
-                position,
-                direction: forward,
-                intensity: s.intensity / (4.0 * PI),
-                inner_angle: s.inner_angle,
-                outer_angle: s.outer_angle,
-            },
-            color: color(s.color),
-        },
-        _ => return None,
-    })
 }
 
 type LightComponents = (

@@ -27,7 +27,7 @@ mod build;
 mod pass;
 mod render;
 
-pub use build::{CausticVolumes, core_light};
+pub use build::CausticVolumes;
 
 use bevy::prelude::*;
 use caustics_core::volumes::{IntensityMode, VolumeSettings};
