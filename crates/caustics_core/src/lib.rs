@@ -8,6 +8,7 @@ pub mod bvh;
 pub mod estimate;
 pub mod mesh;
 pub mod metrics;
+pub mod ocean;
 pub mod optics;
 pub mod params;
 pub mod rng;

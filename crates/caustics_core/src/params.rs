@@ -19,6 +19,9 @@ pub enum ParamError {
     /// A Henyey–Greenstein asymmetry outside the open interval (−1, 1).
     #[error("phase asymmetry g = {0} is impossible: it must lie strictly between −1 and 1")]
     ImpossibleAsymmetry(f32),
+    /// A value outside the range it must lie in.
+    #[error("{name} = {value} is impossible: it must be {expected}")]
+    OutOfRange { name: &'static str, value: f32, expected: &'static str },
     /// Any other value that must be finite and is not.
     #[error("{name} = {value} is not a finite number")]
     NotFinite { name: &'static str, value: f32 },
