@@ -11,6 +11,8 @@ pub mod debug_panel;
 pub mod gltf_tagging;
 pub mod headless;
 pub mod irradiance;
+#[cfg(feature = "ocean")]
+pub mod ocean;
 pub mod reference;
 pub mod report;
 #[cfg(feature = "warped-volumes")]
@@ -22,6 +24,8 @@ pub use components::{
 };
 pub use gltf_tagging::TagCausticsFromMaterials;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, InjectedIrradiance};
+#[cfg(feature = "ocean")]
+pub use ocean::Ocean;
 pub use report::CausticPassReport;
 
 use bevy::prelude::*;
@@ -44,11 +48,17 @@ impl Plugin for CausticsPlugin {
         irradiance::build(app);
         #[cfg(feature = "warped-volumes")]
         warped_volumes::build(app);
+        #[cfg(feature = "ocean")]
+        app.add_plugins(ocean::OceanPlugin);
     }
 }
 
 /// Everything a game needs: `use caustics_bevy::prelude::*`.
 pub mod prelude {
+    #[cfg(feature = "ocean")]
+    pub use crate::Ocean;
+    #[cfg(feature = "warped-volumes")]
+    pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
         CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsPlugin,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,

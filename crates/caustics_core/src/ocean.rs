@@ -228,9 +228,9 @@ impl OceanSurface {
         Vec3::new(-0.5 * self.size + i as f32 * step, 0.0, -0.5 * self.size + j as f32 * step)
     }
 
-    /// The patch as a mesh of (N + 1)² vertices (the last row and column repeat the
-    /// first, so that copies tile without a seam), normals from the spectral slopes.
-    pub fn mesh(&self) -> TriMesh {
+    /// Positions and normals of the (N + 1)² vertices of the patch's grid: the last row
+    /// and column repeat the first, so that copies tile without a seam.
+    pub fn vertices(&self) -> (Vec<Vec3>, Vec<Vec3>) {
         let n = self.resolution;
         let mut positions = Vec::with_capacity((n + 1) * (n + 1));
         let mut normals = Vec::with_capacity((n + 1) * (n + 1));
@@ -241,15 +241,22 @@ impl OceanSurface {
                 normals.push(self.normals[idx]);
             }
         }
-        let stride = (n + 1) as u32;
-        let mut triangles = Vec::with_capacity(2 * n * n);
-        for j in 0..n as u32 {
-            for i in 0..n as u32 {
-                let p = j * stride + i;
-                triangles.push([p, p + stride, p + 1]);
-                triangles.push([p + 1, p + stride, p + stride + 1]);
-            }
-        }
-        TriMesh::new(positions, normals, triangles).expect("spectral normals have y = 1 before normalising")
+        (positions, normals)
+    }
+
+    /// The triangles of [`Self::vertices`]' grid, front faces up.
+    pub fn triangles(&self) -> Vec<[u32; 3]> {
+        let n = self.resolution as u32;
+        let stride = n + 1;
+        (0..n)
+            .flat_map(|j| (0..n).map(move |i| j * stride + i))
+            .flat_map(|p| [[p, p + stride, p + 1], [p + 1, p + stride, p + stride + 1]])
+            .collect()
+    }
+
+    /// The patch as a mesh, normals from the spectral slopes.
+    pub fn mesh(&self) -> TriMesh {
+        let (positions, normals) = self.vertices();
+        TriMesh::new(positions, normals, self.triangles()).expect("spectral normals have y = 1 before normalising")
     }
 }
