@@ -11,7 +11,7 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
-pub fn plot_error_vs_time(path: &Path, series: &[Series]) -> Result<(), String> {
+pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String> {
     // ab_glyph needs one font; egui's default font is small, free and ships as a crate.
     register_font("sans-serif", FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT)
         .map_err(|_| "the plot font is not a valid TrueType font".to_string())?;

@@ -13,10 +13,22 @@ pub const BUILT_IN: [&str; 3] = ["pool", "sphere", "ring"];
 
 /// A built-in scene by name, at the default tessellation.
 pub fn built_in(name: &str) -> Option<BenchScene> {
+    let default = match name {
+        "pool" => 128,
+        "sphere" => 64,
+        "ring" => 256,
+        _ => return None,
+    };
+    tessellated(name, default)
+}
+
+/// A built-in scene with its generator cut into `cells` (the pool's water grid has
+/// `cells`² cells, the sphere and the ring `cells` segments around).
+pub fn tessellated(name: &str, cells: usize) -> Option<BenchScene> {
     match name {
-        "pool" => Some(wave_pool(129, 128)),
-        "sphere" => Some(glass_sphere(64)),
-        "ring" => Some(metal_ring(256)),
+        "pool" => Some(wave_pool(cells + 1, 128)),
+        "sphere" => Some(glass_sphere(cells)),
+        "ring" => Some(metal_ring(cells)),
         _ => None,
     }
 }

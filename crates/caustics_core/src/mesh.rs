@@ -247,6 +247,40 @@ impl TriMesh {
         Self { positions, normals, triangles }
     }
 
+    /// A closed solid ring (a napkin ring), axis along +y, standing on `base`: the inner
+    /// wall (normals to the axis), the outer wall (normals away) and the top and bottom
+    /// annuli, `segments` around, smooth around the circle.
+    pub fn solid_ring(base: Vec3, inner_radius: f32, outer_radius: f32, height: f32, segments: usize) -> Self {
+        let segments = segments.max(3);
+        let mut mesh = Self::ring(base, inner_radius, height, segments);
+        let mut outer = Self::ring(base, outer_radius, height, segments);
+        for n in &mut outer.normals {
+            *n = -*n;
+        }
+        for t in &mut outer.triangles {
+            t.swap(1, 2);
+        }
+        mesh.append(&outer);
+        for (y, up) in [(height, Vec3::Y), (0.0, Vec3::NEG_Y)] {
+            let offset = mesh.positions.len() as u32;
+            for s in 0..=segments {
+                let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+                let out = Vec3::new(phi.cos(), 0.0, phi.sin());
+                for r in [inner_radius, outer_radius] {
+                    mesh.positions.push(base + r * out + Vec3::Y * y);
+                    mesh.normals.push(up);
+                }
+            }
+            for s in 0..segments as u32 {
+                let (a, b, c, d) = (offset + 2 * s, offset + 2 * s + 1, offset + 2 * s + 2, offset + 2 * s + 3);
+                let (t1, t2) = if up.y > 0.0 { ([a, c, b], [b, c, d]) } else { ([a, b, c], [b, d, c]) };
+                mesh.triangles.push(t1);
+                mesh.triangles.push(t2);
+            }
+        }
+        mesh
+    }
+
     /// Appends `other` to this mesh.
     pub fn append(&mut self, other: &TriMesh) {
         let offset = self.positions.len() as u32;

@@ -82,13 +82,13 @@ pub fn glass_sphere(segments: usize) -> BenchScene {
     BenchScene { name: "glass_sphere".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
 }
 
-/// A mirror ring (radius 1, height 0.3) on a floor under a low directional light:
-/// the cardioid of Ernst et al. 2005, Fig. 1.
+/// A solid mirror ring (inner radius 1, 5 cm thick, height 0.3) on a floor under a low
+/// directional light: the cardioid of Ernst et al. 2005, Fig. 1.
 pub fn metal_ring(segments: usize) -> BenchScene {
     let scene = Scene {
         lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(1.0, -0.45, 0.0), irradiance: 1.0 })],
         generators: vec![Generator {
-            mesh: TriMesh::ring(Vec3::ZERO, 1.0, 0.3, segments),
+            mesh: TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, segments),
             interaction: SpecularInteraction::Reflect,
         }],
         receivers: vec![floor(4.0)],
