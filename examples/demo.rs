@@ -6,24 +6,22 @@
 //!
 //! `cargo run --example demo` opens a window when there is a display; otherwise, or
 //! with `--headless`, it renders offscreen and writes a PNG (`--out`, default
-//! `target/demo.png`). `--photons N` sets the tracer's photon count.
+//! `target/demo.png`). `--reference --photons N` sets the tracer's photon count.
 
-use bevy::asset::RenderAssetUsages;
+#[path = "support/mod.rs"]
+mod support;
+
 use bevy::camera::RenderTarget;
-use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy::window::WindowResolution;
 use bevy_caustics::caustics_core::{
     estimate::{PhotonList, PhotonMap},
     mesh::TriMesh,
     scenes::{Wave, wave_heightfield, wave_pool},
     tracer::{PhotonTracer, TraceSettings},
 };
-use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
+use bevy_caustics::headless::irradiance_image;
 use bevy_caustics::reference::{bevy_mesh, pinhole, view_irradiance};
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticsPlugin, InjectedIrradiance};
-use std::path::PathBuf;
+use bevy_caustics::{CausticGenerator, CausticReceiver, InjectedIrradiance};
 use std::process::ExitCode;
 
 const WIDTH: u32 = 960;
@@ -34,71 +32,15 @@ const CAMERA_POSITION: Vec3 = Vec3::new(0.0, 3.4, 3.9);
 const CAMERA_TARGET: Vec3 = Vec3::new(0.0, 0.0, 0.3);
 const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
 
-struct Args {
-    headless: bool,
-    reference: bool,
-    out: PathBuf,
-    photons: u64,
-}
-
-fn parse_args() -> Result<Args, String> {
-    let mut args = Args { headless: false, reference: false, out: PathBuf::from("target/demo.png"), photons: 4 << 20 };
-    let mut it = std::env::args().skip(1);
-    while let Some(arg) = it.next() {
-        match arg.as_str() {
-            "--headless" => args.headless = true,
-            "--reference" => args.reference = true,
-            "--out" => args.out = it.next().ok_or("--out needs a path")?.into(),
-            "--photons" => {
-                args.photons = it.next().and_then(|n| n.parse().ok()).ok_or("--photons needs a whole number")?
-            }
-            other => return Err(format!("unknown argument {other:?} (use --headless, --reference, --out PATH, --photons N)")),
-        }
-    }
-    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
-    args.headless |= !has_display;
-    Ok(args)
-}
-
 fn main() -> ExitCode {
-    match run() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("demo: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    support::exit_code("demo", run)
 }
 
 fn run() -> Result<(), String> {
-    let args = parse_args()?;
-    let irradiance = if args.reference { Some(trace_caustics(args.photons)?) } else { None };
-    if args.headless {
-        let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
-        let target = renderer.render_target();
-        spawn_pool(renderer.world_mut(), target, irradiance);
-        let image = renderer.render(8).map_err(|e| e.to_string())?;
-        image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
-        eprintln!("wrote {}", args.out.display());
-    } else {
-        let mut app = App::new();
-        app.add_plugins(DefaultPlugins.set(WindowPlugin {
-            primary_window: Some(Window {
-                title: "bevy_caustics — rippled pool".into(),
-                resolution: WindowResolution::new(WIDTH, HEIGHT).with_scale_factor_override(1.0),
-                resizable: false,
-                ..default()
-            }),
-            ..default()
-        }))
-        .add_plugins(CausticsPlugin);
-        #[cfg(feature = "egui")]
-        app.add_plugins(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
-        app.add_systems(Startup, move |world: &mut World| spawn_pool(world, RenderTarget::default(), irradiance.clone()))
-            .add_systems(Update, ripple);
-        app.run();
-    }
-    Ok(())
+    let args = support::Args::parse("demo", &["photons"], &["reference"])?;
+    let irradiance = if args.has("reference") { Some(trace_caustics(args.number("photons", 4u64 << 20)?)?) } else { None };
+    let spawn = move |world: &mut World, target: RenderTarget| spawn_pool(world, target, irradiance.clone());
+    support::show(&args, "rippled pool", (WIDTH, HEIGHT), 8, spawn, ripple)
 }
 
 /// The view's caustic irradiance (lux), one value per pixel, from the ground-truth tracer.
@@ -118,30 +60,6 @@ fn trace_caustics(photons: u64) -> Result<Vec<Vec3>, String> {
     eprintln!("gathering caustic irradiance for {WIDTH}×{HEIGHT} pixels…");
     // The pool's light has irradiance 1; the sun here has SUN_LUX.
     Ok(view_irradiance(&tracer, &map, &camera).into_iter().map(|e| e * SUN_LUX).collect())
-}
-
-/// Pool tiles: light cyan with dark grout, 16 tiles per metre-square texture repeat.
-fn tile_texture() -> Image {
-    const N: u32 = 64;
-    let data = (0..N * N)
-        .flat_map(|i| {
-            let (x, y) = (i % N, i / N);
-            if x < 3 || y < 3 { [70, 90, 100, 255] } else { [190, 225, 230, 255] }
-        })
-        .collect();
-    let mut image = Image::new(
-        Extent3d { width: N, height: N, depth_or_array_layers: 1 },
-        TextureDimension::D2,
-        data,
-        TextureFormat::Rgba8UnormSrgb,
-        RenderAssetUsages::RENDER_WORLD,
-    );
-    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
-        address_mode_u: ImageAddressMode::Repeat,
-        address_mode_v: ImageAddressMode::Repeat,
-        ..ImageSamplerDescriptor::linear()
-    });
-    image
 }
 
 /// The water of `shared/reference`'s pool, its waves moved on by `time` seconds.
@@ -169,7 +87,7 @@ fn ripple(time: Res<Time>, water: Query<&Mesh3d, With<Water>>, mut meshes: ResMu
 /// The pool; with `injected` irradiance (the tracer's), shown instead of live caustics.
 fn spawn_pool(world: &mut World, target: RenderTarget, injected: Option<Vec<Vec3>>) {
     let water = bevy_mesh(&water_surface(0.0));
-    let tiles = world.resource_mut::<Assets<Image>>().add(tile_texture());
+    let tiles = world.resource_mut::<Assets<Image>>().add(support::tiles());
     let injected = injected.map(|e| world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &e)));
     let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
     let floor_material = materials.add(StandardMaterial {

@@ -1,0 +1,160 @@
+//! What every example shares: its command line, the window-or-PNG runner and a few
+//! procedural textures. Included by each example with `#[path = "support/mod.rs"]`;
+//! each uses a part of it.
+#![allow(dead_code)]
+
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
+use bevy::prelude::*;
+use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
+use bevy::window::WindowResolution;
+use bevy_caustics::CausticsPlugin;
+use bevy_caustics::headless::HeadlessRenderer;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+/// The options every example takes, and its own ones by name.
+pub struct Args {
+    pub headless: bool,
+    pub out: PathBuf,
+    /// `--name value` pairs the example reads with [`Args::number`].
+    pub extra: Vec<(String, String)>,
+    /// The example's own switches given (`--name`, no value).
+    pub switches: Vec<String>,
+}
+
+impl Args {
+    /// Parses `--headless`, `--out PATH`, the example's own `--name value` options
+    /// (`options`) and `--name` switches (`switches`). Without a display the example
+    /// runs headless.
+    pub fn parse(name: &str, options: &[&str], switches: &[&str]) -> Result<Self, String> {
+        let mut args = Args {
+            headless: false,
+            out: PathBuf::from(format!("target/{name}.png")),
+            extra: Vec::new(),
+            switches: Vec::new(),
+        };
+        let mut it = std::env::args().skip(1);
+        while let Some(arg) = it.next() {
+            let bare = arg.trim_start_matches("--");
+            match arg.as_str() {
+                "--headless" => args.headless = true,
+                "--out" => args.out = it.next().ok_or("--out needs a path")?.into(),
+                _ if arg.starts_with("--") && options.contains(&bare) => {
+                    let value = it.next().ok_or(format!("{arg} needs a value"))?;
+                    args.extra.push((bare.to_string(), value));
+                }
+                _ if arg.starts_with("--") && switches.contains(&bare) => args.switches.push(bare.to_string()),
+                other => {
+                    let own: Vec<String> = options.iter().map(|k| format!("--{k} N")).chain(switches.iter().map(|k| format!("--{k}"))).collect();
+                    return Err(format!("unknown argument {other:?} (use --headless, --out PATH {})", own.join(" ")));
+                }
+            }
+        }
+        let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
+        args.headless |= !has_display;
+        Ok(args)
+    }
+
+    /// Whether the switch `--name` was given.
+    pub fn has(&self, name: &str) -> bool {
+        self.switches.iter().any(|s| s == name)
+    }
+
+    /// The value of `--name`, or `default`.
+    pub fn number<T: std::str::FromStr>(&self, name: &str, default: T) -> Result<T, String> {
+        match self.extra.iter().rev().find(|(k, _)| k == name) {
+            Some((_, v)) => v.parse().map_err(|_| format!("--{name} needs a number, not {v:?}")),
+            None => Ok(default),
+        }
+    }
+}
+
+/// Runs `main`, printing its error on one line and exiting non-zero on failure.
+pub fn exit_code(name: &str, main: impl FnOnce() -> Result<(), String>) -> ExitCode {
+    match main() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{name}: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Shows the scene `spawn` builds: in a window (with `animate` running every frame),
+/// or headless, `frames` updates rendered offscreen and written to `args.out`.
+pub fn show<M>(
+    args: &Args,
+    title: &str,
+    (width, height): (u32, u32),
+    frames: u32,
+    spawn: impl Fn(&mut World, RenderTarget) + Send + Sync + 'static,
+    animate: impl IntoScheduleConfigs<bevy::ecs::system::ScheduleSystem, M>,
+) -> Result<(), String> {
+    if args.headless {
+        let mut renderer = HeadlessRenderer::new(width, height).map_err(|e| e.to_string())?;
+        let target = renderer.render_target();
+        spawn(renderer.world_mut(), target);
+        let image = renderer.render(frames).map_err(|e| e.to_string())?;
+        image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
+        eprintln!("wrote {}", args.out.display());
+        return Ok(());
+    }
+    let mut app = App::new();
+    app.add_plugins(DefaultPlugins.set(WindowPlugin {
+        primary_window: Some(Window {
+            title: format!("bevy_caustics — {title}"),
+            resolution: WindowResolution::new(width, height).with_scale_factor_override(1.0),
+            ..default()
+        }),
+        ..default()
+    }))
+    .add_plugins(CausticsPlugin);
+    #[cfg(feature = "egui")]
+    app.add_plugins(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
+    app.add_systems(Startup, move |world: &mut World| spawn(world, RenderTarget::default()))
+        .add_systems(Update, animate);
+    app.run();
+    Ok(())
+}
+
+/// An sRGB texture of `size`² texels from a colour function of (u, v) ∈ [0, 1)², repeating.
+pub fn texture(size: u32, color: impl Fn(f32, f32) -> [u8; 3]) -> Image {
+    let data = (0..size * size)
+        .flat_map(|i| {
+            let [r, g, b] = color((i % size) as f32 / size as f32, (i / size) as f32 / size as f32);
+            [r, g, b, 255]
+        })
+        .collect();
+    let mut image = Image::new(
+        Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        TextureDimension::D2,
+        data,
+        TextureFormat::Rgba8UnormSrgb,
+        RenderAssetUsages::RENDER_WORLD,
+    );
+    image.sampler = ImageSampler::Descriptor(ImageSamplerDescriptor {
+        address_mode_u: ImageAddressMode::Repeat,
+        address_mode_v: ImageAddressMode::Repeat,
+        ..ImageSamplerDescriptor::linear()
+    });
+    image
+}
+
+/// Light cyan pool tiles with dark grout.
+pub fn tiles() -> Image {
+    texture(64, |u, v| if u < 3.0 / 64.0 || v < 3.0 / 64.0 { [70, 90, 100] } else { [190, 225, 230] })
+}
+
+/// Wood: warm planks with rings of grain.
+pub fn wood() -> Image {
+    texture(256, |u, v| {
+        let plank = (v * 4.0).floor();
+        let grain = ((u * 6.0 + plank * 1.7 + (v * 40.0 + plank).sin() * 0.15) * std::f32::consts::TAU).sin();
+        let t = 0.5 + 0.5 * grain;
+        let seam = if (v * 4.0).fract() < 0.02 { 0.6 } else { 1.0 };
+        let c = |a: f32, b: f32| ((a + (b - a) * t) * seam) as u8;
+        [c(150.0, 110.0), c(98.0, 68.0), c(58.0, 38.0)]
+    })
+}
