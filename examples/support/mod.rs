@@ -6,10 +6,13 @@
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
+use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy::window::WindowResolution;
-use bevy_caustics::CausticsPlugin;
+use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
+use bevy_caustics::prelude::*;
+use bevy_caustics::reference::bevy_mesh;
 use bevy_caustics::headless::HeadlessRenderer;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -157,4 +160,40 @@ pub fn wood() -> Image {
         let c = |a: f32, b: f32| ((a + (b - a) * t) * seam) as u8;
         [c(150.0, 110.0), c(98.0, 68.0), c(58.0, 38.0)]
     })
+}
+
+/// The sun of the ring scene: low, so that the ring's far wall focuses it into the cardioid.
+const RING_SUN_LUX: f32 = 20_000.0;
+const RING_SUN_DIRECTION: Vec3 = Vec3::new(1.0, -0.45, 0.0);
+
+/// Ernst et al.'s Fig. 1: a solid metal ring of `segments` around on a wooden floor,
+/// under a low sun (the `ring` and `volumes_compare` examples).
+pub fn ring_scene(world: &mut World, segments: usize, intensity: VolumeIntensity) {
+    world.insert_resource(WarpedVolumesSettings { intensity, ..default() });
+    world.insert_resource(GlobalAmbientLight { brightness: 300.0, ..default() });
+    world.insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.06)));
+    let ring = bevy_mesh(&TriMesh::solid_ring(glam::Vec3::ZERO, 1.0, 1.05, 0.3, segments));
+    let wood = world.resource_mut::<Assets<Image>>().add(wood());
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let floor_material = materials.add(StandardMaterial {
+        base_color_texture: Some(wood),
+        uv_transform: bevy::math::Affine2::from_scale(Vec2::splat(2.0)),
+        perceptual_roughness: 0.8,
+        ..default()
+    });
+    let metal = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.95, 0.93, 0.88),
+        metallic: 1.0,
+        perceptual_roughness: 0.08,
+        ..default()
+    });
+    let mut meshes = world.resource_mut::<Assets<Mesh>>();
+    let floor = meshes.add(Plane3d::new(Vec3::Y, Vec2::splat(3.0)).mesh());
+    let ring = meshes.add(ring);
+    world.spawn((Mesh3d(floor), MeshMaterial3d(floor_material), CausticReceiver));
+    world.spawn((Mesh3d(ring), MeshMaterial3d(metal), CausticGenerator::mirror()));
+    world.spawn((
+        DirectionalLight { illuminance: RING_SUN_LUX, shadow_maps_enabled: true, ..default() },
+        Transform::default().looking_to(RING_SUN_DIRECTION, Vec3::Y),
+    ));
 }
