@@ -78,7 +78,7 @@ pub struct VolumeSettings {
 
 impl Default for VolumeSettings {
     fn default() -> Self {
-        Self { intensity: IntensityMode::Interpolated, max_magnification: 1.0e4, min_ray_cosine: 1.0e-3 }
+        Self { intensity: IntensityMode::default(), max_magnification: 1.0e4, min_ray_cosine: 1.0e-3 }
     }
 }
 
@@ -86,10 +86,11 @@ impl Default for VolumeSettings {
 /// three vertices' x components together, and so on).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CausticVolume {
-    /// World position of the local origin (vertex 0 of the generator triangle).
+    /// World position of the local origin (the generator triangle's vertex lowest
+    /// along the slicing axis).
     pub origin: Vec3,
-    /// World directions of the local x, y and z axes; y is the triangle normal, on the
-    /// side the rays leave to.
+    /// World directions of the local x, y and z axes; y is the slicing axis (the
+    /// generator's mean ray, or the triangle's normal on the side the rays leave to).
     pub axes: [Vec3; 3],
     /// Local x and z of the three vertices (their y is 0).
     pub vertex_x: Vec3,
@@ -177,7 +178,8 @@ impl CausticVolume {
             return None;
         }
         let lambda = beta / sum;
-        let inside = (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
+        let inside =
+            (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
         inside.then_some(lambda)
     }
 
@@ -240,19 +242,114 @@ impl CausticVolume {
     }
 }
 
-/// All caustic volumes of a scene, with the world bounds of each for quick rejection.
+/// All caustic volumes of a scene, binned by their world bounds on a uniform grid so
+/// that a point meets only the volumes near it (the GPU gets the same effect from
+/// rasterising each volume's prism).
 #[derive(Clone, Debug, Default)]
 pub struct VolumeSet {
     pub volumes: Vec<CausticVolume>,
     pub stats: BuildStats,
     boxes: Vec<(Vec3, Vec3)>,
+    grid: VolumeGrid,
+}
+
+/// Volume indices per cell of a uniform grid over the volumes' bounds (rows packed).
+#[derive(Clone, Debug, Default)]
+struct VolumeGrid {
+    lo: Vec3,
+    cell: Vec3,
+    dims: [usize; 3],
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl VolumeGrid {
+    fn new(boxes: &[(Vec3, Vec3)]) -> Self {
+        let finite = boxes.iter().filter(|(a, b)| a.is_finite() && b.is_finite());
+        let (lo, hi) = finite.fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(l, h), (a, b)| {
+            (l.min(*a), h.max(*b))
+        });
+        if boxes.is_empty() || !(lo.cmple(hi).all()) {
+            return Self::default();
+        }
+        // Cells about as large as a typical volume's bounds along each axis (so that a
+        // volume lands in a few cells), at most 8 cells per volume in all.
+        let extent = (hi - lo).max(Vec3::splat(1e-6));
+        let mut sizes: [Vec<f32>; 3] =
+            std::array::from_fn(|i| boxes.iter().map(|(a, b)| b[i] - a[i]).filter(|e| e.is_finite()).collect());
+        let median = Vec3::from_array(std::array::from_fn(|i| {
+            let v = &mut sizes[i];
+            let mid = v.len() / 2;
+            if v.is_empty() { extent[i] } else { *v.select_nth_unstable_by(mid, f32::total_cmp).1 }
+        }));
+        let mut cell = median.max(extent / 512.0);
+        let budget = 8.0 * boxes.len() as f32;
+        let cells_of = |cell: Vec3| (extent / cell).ceil().max(Vec3::ONE);
+        let total = cells_of(cell).element_product();
+        if total > budget {
+            cell *= (total / budget).cbrt();
+        }
+        let d = cells_of(cell).min(Vec3::splat(512.0));
+        let dims = [d.x as usize, d.y as usize, d.z as usize];
+        let cell = extent / d;
+        let grid = Self { lo, cell, dims, start: Vec::new(), items: Vec::new() };
+        let ranges: Vec<Option<([usize; 3], [usize; 3])>> = boxes.iter().map(|&(a, b)| grid.range(a, b)).collect();
+        let cells = dims[0] * dims[1] * dims[2];
+        let mut count = vec![0u32; cells + 1];
+        let each = |r: &([usize; 3], [usize; 3]), f: &mut dyn FnMut(usize)| {
+            for z in r.0[2]..=r.1[2] {
+                for y in r.0[1]..=r.1[1] {
+                    for x in r.0[0]..=r.1[0] {
+                        f((z * dims[1] + y) * dims[0] + x);
+                    }
+                }
+            }
+        };
+        for r in ranges.iter().flatten() {
+            each(r, &mut |c| count[c + 1] += 1);
+        }
+        for i in 0..cells {
+            count[i + 1] += count[i];
+        }
+        let mut next = count.clone();
+        let mut items = vec![0u32; count[cells] as usize];
+        for (v, r) in ranges.iter().enumerate() {
+            if let Some(r) = r {
+                each(r, &mut |c| {
+                    items[next[c] as usize] = v as u32;
+                    next[c] += 1;
+                });
+            }
+        }
+        Self { start: count, items, ..grid }
+    }
+
+    fn coordinate(&self, p: Vec3) -> [usize; 3] {
+        let c = ((p - self.lo) / self.cell).floor();
+        std::array::from_fn(|i| (c[i].max(0.0) as usize).min(self.dims[i] - 1))
+    }
+
+    fn range(&self, a: Vec3, b: Vec3) -> Option<([usize; 3], [usize; 3])> {
+        (a.is_finite() && b.is_finite()).then(|| (self.coordinate(a), self.coordinate(b)))
+    }
+
+    /// The volumes whose bounds may contain `p`.
+    fn near(&self, p: Vec3) -> &[u32] {
+        if self.start.is_empty() || !p.is_finite() {
+            return &[];
+        }
+        let [x, y, z] = self.coordinate(p);
+        let c = (z * self.dims[1] + y) * self.dims[0] + x;
+        &self.items[self.start[c] as usize..self.start[c + 1] as usize]
+    }
 }
 
 impl VolumeSet {
     /// Wraps built volumes.
     pub fn new(volumes: Vec<CausticVolume>, stats: BuildStats) -> Self {
-        let boxes = volumes.iter().map(|v| v.bounds.aabb()).collect();
-        Self { volumes, stats, boxes }
+        let boxes: Vec<_> = volumes.iter().map(|v| v.bounds.aabb()).collect();
+        let grid = VolumeGrid::new(&boxes);
+        Self { volumes, stats, boxes, grid }
     }
 
     /// Caustic irradiance at receiver points with their normals, each standing for
@@ -273,9 +370,10 @@ impl VolumeSet {
     /// Caustic irradiance at one point.
     pub fn irradiance(&self, p: Vec3, n: Vec3, footprint: f32, settings: &VolumeSettings) -> Vec3 {
         let mut e = Vec3::ZERO;
-        for (volume, (lo, hi)) in self.volumes.iter().zip(&self.boxes) {
-            if p.cmpge(*lo).all() && p.cmple(*hi).all() {
-                e += volume.irradiance(p, n, footprint, settings);
+        for &i in self.grid.near(p) {
+            let (lo, hi) = self.boxes[i as usize];
+            if p.cmpge(lo).all() && p.cmple(hi).all() {
+                e += self.volumes[i as usize].irradiance(p, n, footprint, settings);
             }
         }
         e
