@@ -93,9 +93,7 @@ fn cpu_twin(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, setting
     let set = cpu_volumes(mesh, interaction, sun, settings);
     let points: Vec<_> = (0..SIZE * SIZE).map(|i| to_core(world_at(i % SIZE, i / SIZE))).collect();
     let normals = vec![caustics_core::glam::Vec3::Y; points.len()];
-    // Each pixel stands for its square on the floor, as the shader's footprint says.
-    let footprint = (VIEW / SIZE as f32).powi(2);
-    set.irradiance_at(&points, &normals, footprint, &settings.core()).iter().map(|e| e.x).collect()
+    set.irradiance_at(&points, &normals, &settings.core()).iter().map(|e| e.x).collect()
 }
 
 fn set_technique(renderer: &mut HeadlessRenderer, generator: Entity, technique: CausticTechnique) {

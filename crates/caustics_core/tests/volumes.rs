@@ -41,7 +41,7 @@ fn flat(n: usize, size: f32, height: f32) -> TriMesh {
 fn floor_irradiance(set: &VolumeSet, region: &GridRegion, settings: &VolumeSettings) -> Vec<Vec3> {
     let points: Vec<Vec3> =
         (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
-    set.irradiance_at(&points, &vec![Vec3::Y; points.len()], 0.0, settings)
+    set.irradiance_at(&points, &vec![Vec3::Y; points.len()], settings)
 }
 
 fn assert_finite(values: &[Vec3]) {
@@ -161,7 +161,7 @@ fn a_focal_point_gives_finite_energy_conserving_irradiance() {
             let region = GridRegion::horizontal(-0.5 * size, -0.5 * size, y, size, 599);
             let points: Vec<Vec3> =
                 (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
-            let e = set.irradiance_at(&points, &vec![Vec3::NEG_Y; points.len()], 0.0, &settings);
+            let e = set.irradiance_at(&points, &vec![Vec3::NEG_Y; points.len()], &settings);
             assert_finite(&e);
             let got = integrated(&e, &region);
             eprintln!("{:?} y = {y}: {got} of {expected}", settings.intensity);
@@ -285,7 +285,7 @@ proptest! {
                 let local = corner(0) * (1.0 - u - w) + corner(1) * u + corner(2) * w;
                 let p = v.origin + v.axes[0] * local.x + v.axes[1] * local.y + v.axes[2] * local.z;
                 for settings in ALL_MODES {
-                    let e = v.irradiance(p, Vec3::NEG_Y, 0.0, &settings);
+                    let e = v.irradiance(p, Vec3::NEG_Y, &settings);
                     prop_assert!(e.is_finite() && e.min_element() >= 0.0, "{e} at a point of a twisted volume");
                 }
                 for tri in HEXAHEDRON_TRIANGLES {

@@ -121,9 +121,8 @@ struct VolumeSample {
     depth: f32,
 }
 
-// `CausticVolume::sample`: irradiance on the slicing plane and the interpolated ray,
-// for a sample standing for `footprint` m² (0: a point).
-fn sample_volume(v: CausticVolume, world: vec3<f32>, footprint: f32) -> VolumeSample {
+// `CausticVolume::sample`: irradiance on the slicing plane and the interpolated ray.
+fn sample_volume(v: CausticVolume, world: vec3<f32>) -> VolumeSample {
     var s: VolumeSample;
     s.inside = false;
     let p = to_local(v, world);
@@ -133,15 +132,12 @@ fn sample_volume(v: CausticVolume, world: vec3<f32>, footprint: f32) -> VolumeSa
     }
     let lambda = bary.xyz;
     let alpha = p.y;
-    let noise_cap = max(settings.max_magnification, 1.0);
+    let max_mag = max(settings.max_magnification, 1.0);
     let abc = v.triangle_abc.xyz;
-    let exact_area = abs(abc.x + alpha * abc.y + alpha * alpha * abc.z);
-    if exact_area < abc.x / noise_cap {
+    let triangle_area = abs(abc.x + alpha * abc.y + alpha * alpha * abc.z);
+    if triangle_area < abc.x / max_mag {
         return s;
     }
-    // Areas are twice the triangles' (§3.4's footnote).
-    let max_mag = select(noise_cap, max(min(noise_cap, abc.x / (2.0 * footprint)), 1.0), footprint > 0.0);
-    let triangle_area = max(exact_area, abc.x / max_mag);
     let flux = v.flux.xyz;
     let constant = (flux.x + flux.y + flux.z) / 3.0 * abc.x / triangle_area;
     let fan_area = v.fan_a.xyz + alpha * v.fan_b.xyz + alpha * alpha * v.fan_c.xyz;
@@ -181,19 +177,12 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     if depth <= 0.0 {
         discard;
     }
-    let world = world_at(in.position.xy, depth);
-    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    // The pixel's area on the receiver: its square at this view depth, spread over the
-    // receiver by the viewing angle (not from neighbours, which may lie on other surfaces).
-    let across = world_at(in.position.xy + vec2(1.0, 0.0), depth) - world;
-    let down = world_at(in.position.xy + vec2(0.0, 1.0), depth) - world;
-    let facing = abs(dot(n, normalize(cross(across, down))));
-    let footprint = length(cross(across, down)) / max(facing, 0.05);
     let v = volumes[in.volume];
-    let s = sample_volume(v, world, footprint);
+    let s = sample_volume(v, world_at(in.position.xy, depth));
     if !s.inside {
         discard;
     }
+    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
     let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
     return vec4(v.color.rgb * (e * view.exposure), 0.0);
 }
@@ -294,7 +283,7 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
             continue;
         }
         let t = 0.5 * (a + b);
-        let s = sample_volume(v, eye + t * dir, 0.0);
+        let s = sample_volume(v, eye + t * dir);
         if !s.inside {
             continue;
         }

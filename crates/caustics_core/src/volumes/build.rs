@@ -421,17 +421,18 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
         let fans = VertexFans::new(&generator.mesh);
         for light in &scene.lights {
             for (ior, color) in channels(&generator.interaction, light.color) {
-                stats = stats + build_generator_volumes(
-                    &generator.mesh,
-                    &fans,
-                    &generator.interaction,
-                    ior,
-                    light,
-                    color,
-                    bounds,
-                    settings,
-                    &mut volumes,
-                );
+                stats = stats
+                    + build_generator_volumes(
+                        &generator.mesh,
+                        &fans,
+                        &generator.interaction,
+                        ior,
+                        light,
+                        color,
+                        bounds,
+                        settings,
+                        &mut volumes,
+                    );
             }
         }
     }

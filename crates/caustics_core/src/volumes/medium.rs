@@ -136,7 +136,7 @@ pub fn in_scattered_radiance(
         let (pieces, count) = ray_pieces(volume, o, d, enter, exit);
         for &(a, b) in &pieces[..count] {
             let t = 0.5 * (a + b);
-            let Some(sample) = volume.sample(eye + t * dir, 0.0, settings) else {
+            let Some(sample) = volume.sample(eye + t * dir, settings) else {
                 continue;
             };
             let beam_length = sample.ray.length();

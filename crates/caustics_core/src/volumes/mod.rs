@@ -184,11 +184,10 @@ impl CausticVolume {
     }
 
     /// Irradiance on the slicing plane at a point inside, and the interpolated ray
-    /// there (§3.4). `footprint` is the area (m²) the sample stands for — a pixel's on
-    /// the receiver, 0 for a point: no caustic triangle counts as smaller than it, so
-    /// a focal line is never brighter than all its flux in one pixel (the heavy tail
-    /// of point samples near a fold, where `E = Φ/A` grows without bound).
-    pub fn sample(&self, p: Vec3, footprint: f32, settings: &VolumeSettings) -> Option<VolumeSample> {
+    /// there (§3.4). A point sample: near a fold `E = Φ/A` grows without bound in
+    /// ever smaller regions, so averages of point samples there converge slowly (but
+    /// to the right flux); capping `E` per pixel would lose that flux instead.
+    pub fn sample(&self, p: Vec3, settings: &VolumeSettings) -> Option<VolumeSample> {
         let local = self.to_local(p);
         let lambda = self.barycentric(local)?;
         let alpha = local.y;
@@ -200,9 +199,6 @@ impl CausticVolume {
         if triangle_area < a / max_mag {
             return None;
         }
-        // Areas here are twice the triangles' (§3.4's footnote).
-        let max_mag = if footprint > 0.0 { max_mag.min(a / (2.0 * footprint)).max(1.0) } else { max_mag };
-        let triangle_area = triangle_area.max(a / max_mag);
         let constant = (self.flux.x + self.flux.y + self.flux.z) / 3.0 * a / triangle_area;
         let plane_irradiance = match settings.intensity {
             IntensityMode::Constant => constant,
@@ -228,8 +224,8 @@ impl CausticVolume {
     /// Caustic irradiance on a surface at `p` with unit normal `n` facing the light:
     /// `E = E_plane · max(0, −r·n)` with `r` scaled to unit height — the flux density
     /// on the triangle-parallel plane carried onto the receiver's own plane.
-    pub fn irradiance(&self, p: Vec3, n: Vec3, footprint: f32, settings: &VolumeSettings) -> Vec3 {
-        match self.sample(p, footprint, settings) {
+    pub fn irradiance(&self, p: Vec3, n: Vec3, settings: &VolumeSettings) -> Vec3 {
+        match self.sample(p, settings) {
             Some(s) => self.color * (s.plane_irradiance * (-s.ray.dot(n)).max(0.0)),
             None => Vec3::ZERO,
         }
@@ -352,28 +348,21 @@ impl VolumeSet {
         Self { volumes, stats, boxes, grid }
     }
 
-    /// Caustic irradiance at receiver points with their normals, each standing for
-    /// `footprint` m² (see [`CausticVolume::sample`]): the CPU twin of the GPU pass —
-    /// every volume whose bounding shape contains a point runs the exact test and adds
-    /// its irradiance (§3, the accumulation loop).
-    pub fn irradiance_at(
-        &self,
-        points: &[Vec3],
-        normals: &[Vec3],
-        footprint: f32,
-        settings: &VolumeSettings,
-    ) -> Vec<Vec3> {
+    /// Caustic irradiance at receiver points with their normals: the CPU twin of the
+    /// GPU pass — every volume whose bounding shape contains a point runs the exact
+    /// test and adds its irradiance (§3, the accumulation loop).
+    pub fn irradiance_at(&self, points: &[Vec3], normals: &[Vec3], settings: &VolumeSettings) -> Vec<Vec3> {
         use rayon::prelude::*;
-        points.par_iter().zip(normals.par_iter()).map(|(&p, &n)| self.irradiance(p, n, footprint, settings)).collect()
+        points.par_iter().zip(normals.par_iter()).map(|(&p, &n)| self.irradiance(p, n, settings)).collect()
     }
 
     /// Caustic irradiance at one point.
-    pub fn irradiance(&self, p: Vec3, n: Vec3, footprint: f32, settings: &VolumeSettings) -> Vec3 {
+    pub fn irradiance(&self, p: Vec3, n: Vec3, settings: &VolumeSettings) -> Vec3 {
         let mut e = Vec3::ZERO;
         for &i in self.grid.near(p) {
             let (lo, hi) = self.boxes[i as usize];
             if p.cmpge(lo).all() && p.cmple(hi).all() {
-                e += self.volumes[i as usize].irradiance(p, n, footprint, settings);
+                e += self.volumes[i as usize].irradiance(p, n, settings);
             }
         }
         e

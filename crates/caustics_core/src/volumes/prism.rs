@@ -105,7 +105,12 @@ fn local_box(v: &[Vec3; 3], b: &[Vec3; 3], depth: f32) -> [Vec3; 8] {
         lo = lo.min(*p);
         hi = hi.max(*p);
     }
-    let top = [Vec3::new(lo.x, 0.0, lo.z), Vec3::new(hi.x, 0.0, lo.z), Vec3::new(hi.x, 0.0, hi.z), Vec3::new(lo.x, 0.0, hi.z)];
+    let top = [
+        Vec3::new(lo.x, 0.0, lo.z),
+        Vec3::new(hi.x, 0.0, lo.z),
+        Vec3::new(hi.x, 0.0, hi.z),
+        Vec3::new(lo.x, 0.0, hi.z),
+    ];
     let bottom = top.map(|p| p + Vec3::Y * depth);
     [top[0], top[1], top[2], top[3], bottom[0], bottom[1], bottom[2], bottom[3]]
 }
