@@ -11,27 +11,22 @@ use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
 
 /// A square patch of wind-driven ocean, centred on its entity, in its xz plane. The
 /// entity's `Mesh3d` is created (or replaced when the resolution changes) and then
-/// updated in place every frame.
+/// updated in place every frame. The fields are `caustics_core::ocean::OceanSettings`'
+/// (see there), in Bevy types for the inspector, and `time_scale`, simulated seconds
+/// per real second.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 #[require(Transform, Visibility)]
+#[allow(missing_docs)]
 pub struct Ocean {
-    /// Grid points per side: a power of two from 2 to 4096.
     pub resolution: u32,
-    /// Side of the patch (m).
     pub size: f32,
-    /// Wind speed (m/s): the largest waves are V²/g long.
     pub wind_speed: f32,
-    /// Wind direction in the xz plane.
     pub wind_direction: Vec2,
-    /// Phillips constant: the height scale.
     pub amplitude: f32,
-    /// Sharpness of the crests (0: rounded).
     pub choppiness: f32,
-    /// Waves shorter than this (m) are damped away.
     pub small_wave_cutoff: f32,
     pub seed: u64,
-    /// Simulated seconds per real second.
     pub time_scale: f32,
 }
 
