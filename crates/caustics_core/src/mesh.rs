@@ -241,8 +241,9 @@ impl TriMesh {
         let mut triangles = Vec::new();
         for s in 0..segments as u32 {
             let (a, b, c, d) = (2 * s, 2 * s + 1, 2 * s + 2, 2 * s + 3);
-            triangles.push([a, b, c]);
-            triangles.push([c, b, d]);
+            // Counter-clockwise seen from the axis, the side the normals face.
+            triangles.push([a, c, b]);
+            triangles.push([c, d, b]);
         }
         Self { positions, normals, triangles }
     }

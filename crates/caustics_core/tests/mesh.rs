@@ -1,0 +1,65 @@
+//! The built-in meshes wind every triangle counter-clockwise seen from the side its
+//! vertex normals face. Bevy culls back faces by winding but shades with the vertex
+//! normals: a mesh whose winding disagrees with its normals shows its far side, lit
+//! as if it faced the other way.
+
+use caustics_core::mesh::TriMesh;
+use glam::Vec3;
+
+/// Every triangle's geometric normal (by winding) points the way of its vertex normals.
+fn assert_wound_like_normals(name: &str, mesh: &TriMesh) {
+    for (t, tri) in mesh.triangles().iter().enumerate() {
+        let [a, b, c] = mesh.corners(t);
+        let geometric = (b - a).cross(c - a);
+        if geometric.length_squared() < 1e-12 {
+            continue; // a pole's degenerate triangle has no winding
+        }
+        for &i in tri {
+            let n = mesh.normals()[i as usize];
+            assert!(geometric.dot(n) > 0.0, "{name}: triangle {t} is wound against vertex {i}'s normal {n}");
+        }
+    }
+}
+
+#[test]
+fn built_in_meshes_are_wound_like_their_normals() {
+    let wavy = |x: f32, z: f32| 0.1 * (3.0 * x).sin() * (2.0 * z).cos();
+    let slope = |x: f32, z: f32| Vec3::new(-0.3 * (3.0 * x).cos() * (2.0 * z).cos(), 1.0, 0.2 * (3.0 * x).sin() * (2.0 * z).sin());
+    assert_wound_like_normals("heightfield", &TriMesh::heightfield(9, 2.0, wavy, slope).unwrap());
+    assert_wound_like_normals("quad", &TriMesh::quad(Vec3::ONE, Vec3::X, Vec3::Z));
+    assert_wound_like_normals("uv_sphere", &TriMesh::uv_sphere(Vec3::ZERO, 0.5, 6, 12));
+    for segments in [3, 8, 64] {
+        assert_wound_like_normals("ring", &TriMesh::ring(Vec3::ZERO, 1.0, 0.3, segments));
+        assert_wound_like_normals("solid_ring", &TriMesh::solid_ring(Vec3::Y, 1.0, 1.05, 0.3, segments));
+    }
+}
+
+#[test]
+fn the_solid_ring_is_closed_with_walls_facing_in_and_out() {
+    let ring = TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, 16);
+    // Closed: every edge is shared by exactly two triangles, once in each direction,
+    // counting vertices by position (the walls, top and bottom have their own).
+    let key = |p: Vec3| (p * 1e4).round().as_ivec3().to_array();
+    let mut edges = std::collections::HashMap::new();
+    for t in 0..ring.triangles().len() {
+        let corners = ring.corners(t);
+        for k in 0..3 {
+            let (from, to) = (key(corners[k]), key(corners[(k + 1) % 3]));
+            *edges.entry((from, to)).or_insert(0) += 1;
+        }
+    }
+    for (&(from, to), &count) in &edges {
+        assert_eq!(count, 1, "edge {from:?} → {to:?} used {count} times");
+        assert_eq!(edges.get(&(to, from)), Some(&1), "edge {from:?} → {to:?} has no twin: the ring is open");
+    }
+    // Walls: normals horizontal, to the axis on the inner radius and away on the outer;
+    // smooth around (a vertex normal is the exact radial direction).
+    for (p, n) in ring.positions().iter().zip(ring.normals()) {
+        let radial = Vec3::new(p.x, 0.0, p.z);
+        let r = radial.length();
+        if n.y.abs() < 1e-6 {
+            let expected = if r < 1.025 { -radial / r } else { radial / r };
+            assert!(n.distance(expected) < 1e-5, "wall normal {n} at {p}");
+        }
+    }
+}
