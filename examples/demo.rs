@@ -21,7 +21,7 @@ use bevy_caustics::caustics_core::{
 };
 use bevy_caustics::headless::irradiance_image;
 use bevy_caustics::reference::{bevy_mesh, pinhole, view_irradiance};
-use bevy_caustics::{CausticGenerator, CausticReceiver, InjectedIrradiance};
+use bevy_caustics::{CausticGenerator, InjectedIrradiance};
 use std::process::ExitCode;
 
 const WIDTH: u32 = 960;
@@ -87,27 +87,16 @@ fn ripple(time: Res<Time>, water: Query<&Mesh3d, With<Water>>, mut meshes: ResMu
 /// The pool; with `injected` irradiance (the tracer's), shown instead of live caustics.
 fn spawn_pool(world: &mut World, target: RenderTarget, injected: Option<Vec<Vec3>>) {
     let water = bevy_mesh(&water_surface(0.0));
-    let tiles = world.resource_mut::<Assets<Image>>().add(support::tiles());
     let injected = injected.map(|e| world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &e)));
-    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-    let floor_material = materials.add(StandardMaterial {
-        base_color_texture: Some(tiles),
-        uv_transform: bevy::math::Affine2::from_scale(Vec2::splat(16.0)),
-        perceptual_roughness: 0.9,
-        ..default()
-    });
-    let water_material = materials.add(StandardMaterial {
+    support::textured_floor(world, support::tiles(), bevy::math::Affine2::from_scale(Vec2::splat(16.0)), 8.0, 0.9);
+    let water_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
         base_color: Color::srgba(0.55, 0.8, 0.9, 0.3),
         alpha_mode: AlphaMode::Blend,
         perceptual_roughness: 0.05,
         reflectance: 0.5,
         ..default()
     });
-    let mut meshes = world.resource_mut::<Assets<Mesh>>();
-    let floor = meshes.add(Plane3d::new(Vec3::Y, Vec2::splat(8.0)).mesh());
-    let water = meshes.add(water);
-
-    world.spawn((Mesh3d(floor), MeshMaterial3d(floor_material), CausticReceiver));
+    let water = world.resource_mut::<Assets<Mesh>>().add(water);
     let mut water = world.spawn((Mesh3d(water), MeshMaterial3d(water_material)));
     if injected.is_none() {
         water.insert((CausticGenerator::refractive(1.333), Water));

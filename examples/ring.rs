@@ -24,7 +24,9 @@ fn run() -> Result<(), String> {
     let intensity = if args.has("constant") { VolumeIntensity::Constant } else { VolumeIntensity::Conserving };
     let spawn = move |world: &mut World, target: RenderTarget| {
         support::ring_scene(world, segments, intensity);
+        let sky = support::sky(world, 1000.0);
         world.spawn((
+            sky,
             Camera3d::default(),
             Hdr,
             target,

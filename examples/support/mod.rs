@@ -7,6 +7,7 @@ use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
+use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy::window::WindowResolution;
@@ -145,6 +146,20 @@ pub fn texture(size: u32, color: impl Fn(f32, f32) -> [u8; 3]) -> Image {
     image
 }
 
+/// A floor at y = 0 facing up, `half_size` from the origin each way, showing `texture`
+/// (`uv` maps the plane's UVs into it, repeating) and the caustics that land on it.
+pub fn textured_floor(world: &mut World, texture: Image, uv: Affine2, half_size: f32, roughness: f32) -> Entity {
+    let texture = world.resource_mut::<Assets<Image>>().add(texture);
+    let material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color_texture: Some(texture),
+        uv_transform: uv,
+        perceptual_roughness: roughness,
+        ..default()
+    });
+    let mesh = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(half_size)).mesh());
+    world.spawn((Mesh3d(mesh), MeshMaterial3d(material), CausticReceiver)).id()
+}
+
 /// Light cyan pool tiles with dark grout.
 pub fn tiles() -> Image {
     texture(64, |u, v| if u < 3.0 / 64.0 || v < 3.0 / 64.0 { [70, 90, 100] } else { [190, 225, 230] })
@@ -162,6 +177,24 @@ pub fn wood() -> Image {
     })
 }
 
+/// Sand: pale, with a fine grain of hashed speckles (no pattern to repeat across a tile).
+pub fn sand() -> Image {
+    texture(128, |u, v| {
+        let (x, y) = ((u * 128.0) as u32, (v * 128.0) as u32);
+        let hash = (x.wrapping_mul(0x9E37_79B9) ^ y.wrapping_mul(0x85EB_CA6B)).wrapping_mul(0xC2B2_AE35);
+        let grain = (hash >> 24) as f32 / 255.0 * 22.0;
+        [(190.0 + grain) as u8, (172.0 + grain) as u8, (128.0 + grain * 0.6) as u8]
+    })
+}
+
+/// A sky to reflect in metal (blue above, a pale horizon, brown ground), for a camera:
+/// without one, a polished metal shows only the sun's highlight and reads as grey paint.
+pub fn sky(world: &mut World, intensity: f32) -> bevy::light::EnvironmentMapLight {
+    let mut images = world.resource_mut::<Assets<Image>>();
+    let (top, horizon, ground) = (Color::srgb(0.35, 0.55, 0.9), Color::srgb(0.85, 0.85, 0.8), Color::srgb(0.3, 0.22, 0.15));
+    bevy::light::EnvironmentMapLight { intensity, ..bevy::light::EnvironmentMapLight::hemispherical_gradient(&mut images, top, horizon, ground) }
+}
+
 /// The sun of the ring scene: low, so that the ring's far wall focuses it into the cardioid.
 const RING_SUN_LUX: f32 = 20_000.0;
 const RING_SUN_DIRECTION: Vec3 = Vec3::new(1.0, -0.45, 0.0);
@@ -172,25 +205,17 @@ pub fn ring_scene(world: &mut World, segments: usize, intensity: VolumeIntensity
     world.insert_resource(WarpedVolumesSettings { intensity, ..default() });
     world.insert_resource(GlobalAmbientLight { brightness: 300.0, ..default() });
     world.insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.06)));
-    let ring = bevy_mesh(&TriMesh::solid_ring(glam::Vec3::ZERO, 1.0, 1.05, 0.3, segments));
-    let wood = world.resource_mut::<Assets<Image>>().add(wood());
-    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-    let floor_material = materials.add(StandardMaterial {
-        base_color_texture: Some(wood),
-        uv_transform: bevy::math::Affine2::from_scale(Vec2::splat(2.0)),
-        perceptual_roughness: 0.8,
-        ..default()
-    });
-    let metal = materials.add(StandardMaterial {
+    // Planks 0.75 m wide, their seams off the ring's axis of symmetry (z = 0).
+    let planks = Affine2::from_scale_angle_translation(Vec2::splat(2.0), 0.0, Vec2::new(0.0, 0.125));
+    textured_floor(world, wood(), planks, 3.0, 0.8);
+    let metal = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
         base_color: Color::srgb(0.95, 0.93, 0.88),
         metallic: 1.0,
         perceptual_roughness: 0.08,
         ..default()
     });
-    let mut meshes = world.resource_mut::<Assets<Mesh>>();
-    let floor = meshes.add(Plane3d::new(Vec3::Y, Vec2::splat(3.0)).mesh());
-    let ring = meshes.add(ring);
-    world.spawn((Mesh3d(floor), MeshMaterial3d(floor_material), CausticReceiver));
+    let ring = bevy_mesh(&TriMesh::solid_ring(glam::Vec3::ZERO, 1.0, 1.05, 0.3, segments));
+    let ring = world.resource_mut::<Assets<Mesh>>().add(ring);
     world.spawn((Mesh3d(ring), MeshMaterial3d(metal), CausticGenerator::mirror()));
     world.spawn((
         DirectionalLight { illuminance: RING_SUN_LUX, shadow_maps_enabled: true, ..default() },
