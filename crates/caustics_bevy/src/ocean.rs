@@ -58,6 +58,7 @@ impl Ocean {
             amplitude: self.amplitude,
             choppiness: self.choppiness,
             small_wave_cutoff: self.small_wave_cutoff,
+            depth: None,
             seed: self.seed,
         }
     }
