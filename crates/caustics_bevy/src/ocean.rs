@@ -1,19 +1,23 @@
 //! An animated ocean surface: the [`Ocean`] component rewrites its entity's mesh every
 //! frame from Tessendorf's FFT spectrum (`caustics_core::ocean`). With a
 //! [`crate::CausticGenerator`] beside it, the caustic techniques see the mesh asset
-//! change and rebuild — the same path any user-animated generator takes.
+//! change and rebuild — the same path any user-animated generator takes: write the
+//! `Mesh` asset behind a `Mesh3d` in place (`Assets<Mesh>::get_mut`), and Bevy
+//! re-uploads it and recomputes the entity's `Aabb`.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
 
 /// A square patch of wind-driven ocean, centred on its entity, in its xz plane. The
-/// entity's `Mesh3d` is created (or replaced when the resolution changes) and then
-/// updated in place every frame. The fields are `caustics_core::ocean::OceanSettings`'
-/// (see there), in Bevy types for the inspector, and `time_scale`, simulated seconds
-/// per real second.
+/// entity's `Mesh3d` is created when it has none (or one that is not this ocean's
+/// grid, or whose data lives only in the render world) and then updated in place
+/// every frame: (N + 1)² vertices, the last row and column repeating the first so
+/// that copies tile. The fields are `caustics_core::ocean::OceanSettings`' (see there),
+/// in Bevy types for the inspector, and `time_scale`, simulated seconds per second of
+/// `Time::elapsed_secs`. Invalid settings are reported once and the ocean stands still.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 #[require(Transform, Visibility)]
@@ -26,6 +30,7 @@ pub struct Ocean {
     pub amplitude: f32,
     pub choppiness: f32,
     pub small_wave_cutoff: f32,
+    pub depth: Option<f32>,
     pub seed: u64,
     pub time_scale: f32,
 }
@@ -41,6 +46,7 @@ impl Default for Ocean {
             amplitude: core.amplitude,
             choppiness: core.choppiness,
             small_wave_cutoff: core.small_wave_cutoff,
+            depth: core.depth,
             seed: core.seed,
             time_scale: 1.0,
         }
@@ -58,15 +64,27 @@ impl Ocean {
             amplitude: self.amplitude,
             choppiness: self.choppiness,
             small_wave_cutoff: self.small_wave_cutoff,
-            depth: None,
+            depth: self.depth,
             seed: self.seed,
         }
     }
+
+    /// The wave field for these settings, or why there is none.
+    fn spectrum(&self) -> Result<OceanSpectrum, String> {
+        if !self.time_scale.is_finite() {
+            return Err(format!("time scale {} is not a finite number", self.time_scale));
+        }
+        OceanSpectrum::new(&self.settings()).map_err(|e| e.to_string())
+    }
 }
 
-/// The wave field drawn for an [`Ocean`]'s current settings.
+/// The wave field drawn for an [`Ocean`]'s current settings, and the surface it last
+/// evaluated (its buffers reused every frame).
 #[derive(Component)]
-struct OceanWaves(OceanSpectrum);
+struct OceanWaves {
+    spectrum: OceanSpectrum,
+    surface: OceanSurface,
+}
 
 /// Animates every [`Ocean`]. `CausticsPlugin` adds it; it also works on its own.
 pub struct OceanPlugin;
@@ -77,22 +95,34 @@ impl Plugin for OceanPlugin {
     }
 }
 
-/// (Re)draws the wave field of oceans that are new or changed; invalid settings are
-/// reported once and the ocean stands still.
+/// (Re)draws the wave field of oceans that are new or whose settings changed; invalid
+/// settings are reported once per entity and the ocean stands still until fixed.
 fn draw_waves(
     mut commands: Commands,
-    oceans: Query<(Entity, &Ocean), Changed<Ocean>>,
+    oceans: Query<(Entity, &Ocean, Option<&OceanWaves>), Changed<Ocean>>,
+    orphans: Query<Entity, (With<OceanWaves>, Without<Ocean>)>,
+    mut removed: RemovedComponents<Ocean>,
     mut warned: Local<HashSet<Entity>>,
 ) {
-    for (entity, ocean) in &oceans {
-        match OceanSpectrum::new(&ocean.settings()) {
+    for entity in removed.read() {
+        warned.remove(&entity);
+    }
+    for entity in &orphans {
+        commands.entity(entity).remove::<OceanWaves>();
+    }
+    for (entity, ocean, waves) in &oceans {
+        // A change of time scale (or a mutable access that changed nothing) keeps the sea.
+        if waves.is_some_and(|w| *w.spectrum.settings() == ocean.settings()) && ocean.time_scale.is_finite() {
+            continue;
+        }
+        match ocean.spectrum() {
             Ok(spectrum) => {
                 warned.remove(&entity);
-                commands.entity(entity).insert(OceanWaves(spectrum));
+                commands.entity(entity).insert(OceanWaves { spectrum, surface: OceanSurface::default() });
             }
-            Err(e) => {
+            Err(reason) => {
                 if warned.insert(entity) {
-                    warn!("bevy_caustics: Ocean on {entity} is skipped: {e}");
+                    warn!("bevy_caustics: Ocean on {entity} is skipped: {reason}");
                 }
                 commands.entity(entity).remove::<OceanWaves>();
             }
@@ -103,32 +133,62 @@ fn draw_waves(
 fn animate_oceans(
     mut commands: Commands,
     time: Res<Time>,
-    mut oceans: Query<(Entity, &Ocean, &OceanWaves, Option<&Mesh3d>)>,
+    mut oceans: Query<(Entity, &Ocean, &mut OceanWaves, Option<&Mesh3d>)>,
     mut meshes: ResMut<Assets<Mesh>>,
 ) {
-    for (entity, ocean, waves, mesh3d) in &mut oceans {
-        let surface = waves.0.evaluate(time.elapsed_secs() * ocean.time_scale);
-        let (positions, normals) = vertices(&surface);
+    for (entity, ocean, mut waves, mesh3d) in &mut oceans {
+        let OceanWaves { spectrum, surface } = &mut *waves;
+        spectrum.evaluate_into(time.elapsed_secs() * ocean.time_scale, surface);
         if let Some(mut mesh) = mesh3d.and_then(|m| meshes.get_mut(&m.0))
-            && mesh.count_vertices() == positions.len()
+            && write_in_place(&mut mesh, surface)
         {
-            mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
-            mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
             continue;
         }
-        let mesh = grid_mesh(&surface, positions, normals);
-        commands.entity(entity).insert(Mesh3d(meshes.add(mesh)));
+        commands.entity(entity).insert(Mesh3d(meshes.add(grid_mesh(surface))));
     }
 }
 
-/// Positions and normals of the tiling grid (see `OceanSurface::vertices`).
-fn vertices(surface: &OceanSurface) -> (Vec<[f32; 3]>, Vec<[f32; 3]>) {
-    let (positions, normals) = surface.vertices();
-    (positions.iter().map(|p| p.to_array()).collect(), normals.iter().map(|n| n.to_array()).collect())
+/// Rewrites the positions and normals of `mesh` if it is this surface's grid (a
+/// triangle list with (N + 1)² float positions and 6N² indices, its data in the main
+/// world); false, with nothing changed, if not.
+fn write_in_place(mesh: &mut Mesh, surface: &OceanSurface) -> bool {
+    let n = surface.resolution;
+    let count = (n + 1) * (n + 1);
+    let grid = mesh.primitive_topology() == PrimitiveTopology::TriangleList
+        && mesh.try_indices().is_ok_and(|indices| indices.len() == 6 * n * n);
+    if !grid {
+        return false;
+    }
+    let vertices = (0..=n).flat_map(|j| (0..=n).map(move |i| surface.vertex(i, j)));
+    match mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION) {
+        Ok(VertexAttributeValues::Float32x3(positions)) if positions.len() == count => {
+            for (slot, (position, _)) in positions.iter_mut().zip(vertices.clone()) {
+                *slot = position.to_array();
+            }
+        }
+        _ => return false,
+    }
+    match mesh.try_attribute_mut(Mesh::ATTRIBUTE_NORMAL) {
+        Ok(VertexAttributeValues::Float32x3(normals)) if normals.len() == count => {
+            for (slot, (_, normal)) in normals.iter_mut().zip(vertices) {
+                *slot = normal.to_array();
+            }
+        }
+        _ => {
+            let normals: Vec<[f32; 3]> = vertices.map(|(_, normal)| normal.to_array()).collect();
+            // The data is in the main world (the positions were), so this cannot fail.
+            return mesh.try_insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals).is_ok();
+        }
+    }
+    true
 }
 
-fn grid_mesh(surface: &OceanSurface, positions: Vec<[f32; 3]>, normals: Vec<[f32; 3]>) -> Mesh {
+/// A new grid mesh of the surface: positions, normals, UVs over [0, 1]² and indices.
+fn grid_mesh(surface: &OceanSurface) -> Mesh {
     let n = surface.resolution;
+    let (positions, normals) = surface.vertices();
+    let positions: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
+    let normals: Vec<[f32; 3]> = normals.iter().map(|n| n.to_array()).collect();
     let uvs: Vec<[f32; 2]> =
         (0..=n).flat_map(|j| (0..=n).map(move |i| [i as f32 / n as f32, j as f32 / n as f32])).collect();
     let indices = surface.triangles().into_iter().flatten().collect();
