@@ -15,8 +15,9 @@ use caustics_core::volumes::{
 use glam::{Affine3A, Vec3};
 use proptest::prelude::*;
 
+/// The default cap and grazing limit (`VolumeSettings::default()`, which is not const).
 const INTERPOLATED: VolumeSettings =
-    VolumeSettings { intensity: IntensityMode::Interpolated, max_magnification: 1.0e4, min_ray_cosine: 1.0e-3 };
+    VolumeSettings { intensity: IntensityMode::Interpolated, max_magnification: 1.0e3, min_ray_cosine: 1.0e-3 };
 const CONSTANT: VolumeSettings = VolumeSettings { intensity: IntensityMode::Constant, ..INTERPOLATED };
 const CONSERVING: VolumeSettings = VolumeSettings { intensity: IntensityMode::Conserving, ..INTERPOLATED };
 const ALL_MODES: [VolumeSettings; 3] = [CONSERVING, INTERPOLATED, CONSTANT];
@@ -418,4 +419,11 @@ fn point_and_spot_lights_reflect_as_their_mirror_images() {
             assert!((got_sum - expected_sum).abs() < 0.02 * expected_sum, "{:?}: {got_sum} vs {expected_sum}", settings.intensity);
         }
     }
+}
+
+#[test]
+fn the_test_settings_are_the_defaults() {
+    let d = VolumeSettings::default();
+    assert_eq!((d.max_magnification, d.min_ray_cosine), (INTERPOLATED.max_magnification, INTERPOLATED.min_ray_cosine));
+    assert_eq!(d.intensity, IntensityMode::Conserving);
 }

@@ -67,8 +67,12 @@ pub enum IntensityMode {
 pub struct VolumeSettings {
     pub intensity: IntensityMode,
     /// Upper bound of the magnification `a / A(α)`. Irradiance at an exact focus is
-    /// infinite; the clamp keeps buffers finite and only removes the flux that falls
-    /// inside caustic triangles smaller than `1/max_magnification` of their generator.
+    /// infinite, and a point sample that lands in a caustic triangle a thousandth of
+    /// its generator's size carries a thousand times its irradiance: a heavy tail that
+    /// makes single pixels (or bench cells) flash. Slices beyond the cap (caustic
+    /// triangles smaller than 1/cap of their generator) are left out. The default,
+    /// 1000, keeps the flux on a large floor within half a percent on the pool and the
+    /// ring scenes (100 lost 3.6 % of the pool's, whose floor lies at the waves' focus).
     pub max_magnification: f32,
     /// Smallest cosine between a vertex ray and the triangle normal; volumes with a
     /// flatter ray (grazing light) are dropped, since their scaled rays (`r_y = 1`)
@@ -78,7 +82,7 @@ pub struct VolumeSettings {
 
 impl Default for VolumeSettings {
     fn default() -> Self {
-        Self { intensity: IntensityMode::default(), max_magnification: 1.0e4, min_ray_cosine: 1.0e-3 }
+        Self { intensity: IntensityMode::default(), max_magnification: 1000.0, min_ray_cosine: 1.0e-3 }
     }
 }
 
