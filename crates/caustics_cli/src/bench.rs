@@ -6,7 +6,7 @@
 use crate::plot::{Series, plot_error_vs_time};
 use crate::{prepare_output, progress};
 use caustics_core::estimate::IrradianceGrid;
-use caustics_core::metrics::relative_l2;
+use caustics_core::metrics::{relative_l1, relative_l2};
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{IntensityMode, VolumeSettings, build_scene_volumes};
@@ -36,12 +36,26 @@ pub struct Measurement {
     /// Photons (or other work items) the run processed.
     pub work: u64,
     pub seconds: f64,
-    /// Relative L2 of caustic irradiance on the scene's region against the reference.
-    pub error: f32,
-    /// For the volumes: relative L2 against the method's own limit (constant intensity
-    /// on a 4× finer generator than the finest measured), which isolates the error
-    /// the tessellation causes from the single-bounce model's.
-    pub error_vs_limit: Option<f32>,
+    /// Caustic irradiance on the scene's region against the reference.
+    pub error: Errors,
+    /// For the volumes: against the method's own limit (constant intensity on a 4×
+    /// finer generator than the finest measured), which isolates the error the
+    /// tessellation causes from the single-bounce model's.
+    pub error_vs_limit: Option<Errors>,
+}
+
+/// Relative L2 (the figure of merit) and relative L1 (robust to the heavy tail of
+/// point samples near a cusp) of an image against another.
+#[derive(Clone, Copy)]
+pub struct Errors {
+    pub l2: f32,
+    pub l1: f32,
+}
+
+impl Errors {
+    fn between(image: &[f32], truth: &[f32]) -> Self {
+        Self { l2: relative_l2(image, truth), l1: relative_l1(image, truth) }
+    }
 }
 
 /// A caustics method the bench can run: it computes the caustic irradiance on the
@@ -175,10 +189,10 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                 let start = Instant::now();
                 let (image, work) = method.run(name, &scene, quality)?;
                 let seconds = start.elapsed().as_secs_f64();
-                let error = relative_l2(&image, &truth);
+                let error = Errors::between(&image, &truth);
                 let is_volumes = VOLUME_METHODS.iter().any(|m| m.name == method.name());
-                let error_vs_limit = volumes_limit.as_ref().filter(|_| is_volumes).map(|limit| relative_l2(&image, limit));
-                eprintln!("{name:>8} {:>16} {quality:>10}: {seconds:8.3} s, relative L2 {error:.4}", method.name());
+                let error_vs_limit = volumes_limit.as_ref().filter(|_| is_volumes).map(|limit| Errors::between(&image, limit));
+                eprintln!("{name:>8} {:>16} {quality:>10}: {seconds:8.3} s, relative L2 {:.4}", method.name(), error.l2);
                 rows.push(Measurement {
                     scene: name.clone(),
                     method: method.name().into(),
@@ -214,7 +228,7 @@ fn photon_throughput(photons: u64) -> Result<f64, String> {
 
 /// Least-squares slope of log(error) against log(work): −½ for Monte Carlo.
 fn convergence_slope(rows: &[&Measurement]) -> f64 {
-    let pts: Vec<(f64, f64)> = rows.iter().map(|r| ((r.work as f64).ln(), (r.error as f64).ln())).collect();
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| ((r.work as f64).ln(), (r.error.l2 as f64).ln())).collect();
     let n = pts.len() as f64;
     let (mx, my) = (pts.iter().map(|p| p.0).sum::<f64>() / n, pts.iter().map(|p| p.1).sum::<f64>() / n);
     let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
@@ -224,24 +238,31 @@ fn convergence_slope(rows: &[&Measurement]) -> f64 {
 
 fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64) -> Result<(), String> {
     let csv_path = prepare_output(&dir.join("bench.csv"))?;
-    let limit = |r: &Measurement| r.error_vs_limit.map_or(String::new(), |e| format!("{e:.4}"));
-    let mut csv = String::from("scene,method,quality,work,seconds,relative_l2,relative_l2_vs_limit\n");
+    let limit = |r: &Measurement, sep: &str| {
+        r.error_vs_limit.map_or(sep.to_string(), |e| format!("{:.4}{sep}{:.4}", e.l2, e.l1))
+    };
+    let mut csv =
+        String::from("scene,method,quality,work,seconds,relative_l2,relative_l1,relative_l2_vs_limit,relative_l1_vs_limit\n");
     for r in rows {
-        writeln!(csv, "{},{},{},{},{:.6},{:.6},{}", r.scene, r.method, r.quality, r.work, r.seconds, r.error, limit(r))
-            .unwrap();
+        let (scene, method, quality, work, seconds, error) = (&r.scene, &r.method, &r.quality, r.work, r.seconds, r.error);
+        let limit = limit(r, ",");
+        writeln!(csv, "{scene},{method},{quality},{work},{seconds:.6},{:.6},{:.6},{limit}", error.l2, error.l1).unwrap();
     }
     std::fs::write(&csv_path, csv).map_err(|e| format!("cannot write {}: {e}", csv_path.display()))?;
 
     let mut md = String::from(
         "Quality: photons for the reference tracer, generator cells (segments around the ring, \
          grid cells per side of the pool) for the volumes; work: photons or volumes.\n\n\
-         Relative L2 against the reference tracer; for the volumes also against their own limit (constant \
-         intensity on a 4× finer generator than the finest here).\n\n\
-         | scene | method | quality | work | time (s) | relative L2 | vs limit |\n|---|---|---|---:|---:|---:|---:|\n",
+         Relative L2 and L1 against the reference tracer; for the volumes also against their own limit \
+         (constant intensity on a 4× finer generator than the finest here).\n\n\
+         | scene | method | quality | work | time (s) | relative L2 | relative L1 | L2 vs limit | L1 vs limit |\n\
+         |---|---|---|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         let (scene, method, quality, work, seconds, error) = (&r.scene, &r.method, &r.quality, r.work, r.seconds, r.error);
-        writeln!(md, "| {scene} | {method} | {quality} | {work} | {seconds:.3} | {error:.4} | {} |", limit(r)).unwrap();
+        let limit = limit(r, " | ");
+        writeln!(md, "| {scene} | {method} | {quality} | {work} | {seconds:.3} | {:.4} | {:.4} | {limit} |", error.l2, error.l1)
+            .unwrap();
     }
     let mut series: Vec<(String, Series)> = Vec::new();
     md.push('\n');
@@ -253,7 +274,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64) -
             if r.method == ReferenceTracer.name() {
                 writeln!(md, "Convergence of {key}: error ∝ photons^{:.2}.  ", convergence_slope(&group)).unwrap();
             }
-            let points = group.iter().map(|m| (m.seconds, m.error as f64)).collect();
+            let points = group.iter().map(|m| (m.seconds, m.error.l2 as f64)).collect();
             series.push((r.scene.clone(), Series { label: key, points }));
         }
     }
@@ -288,17 +309,25 @@ fn paper_claim(rows: &[Measurement]) -> String {
     for method in ["volumes", "volumes-paper"] {
         let Some(coarse) = find(method, "64") else { continue };
         let verdict = |a: f32, b: f32| if a <= 1.05 * b && coarse.seconds < fine.seconds { "holds" } else { "does not hold" };
-        let (a, b) = (coarse.error_vs_limit.unwrap_or(f32::NAN), fine.error_vs_limit.unwrap_or(f32::NAN));
+        let compare = |against: &str, a: Option<Errors>, b: Option<Errors>| match (a, b) {
+            (Some(a), Some(b)) => format!(
+                "against {against}: L2 {:.4} vs {:.4} ({}), L1 {:.4} vs {:.4} ({})",
+                a.l2,
+                b.l2,
+                verdict(a.l2, b.l2),
+                a.l1,
+                b.l1,
+                verdict(a.l1, b.l1)
+            ),
+            _ => format!("against {against}: not measured"),
+        };
         writeln!(
             md,
-            "- `{method}` at 64 in {:.3} s vs `volumes-constant` at 1024 in {:.3} s: against the reference {:.4} vs {:.4} ({}); \
-             against the method's limit {a:.4} vs {b:.4} ({}).",
+            "- `{method}` at 64 in {:.3} s vs `volumes-constant` at 1024 in {:.3} s: {}; {}.",
             coarse.seconds,
             fine.seconds,
-            coarse.error,
-            fine.error,
-            verdict(coarse.error, fine.error),
-            verdict(a, b),
+            compare("the reference", Some(coarse.error), Some(fine.error)),
+            compare("the method's limit", coarse.error_vs_limit, fine.error_vs_limit),
         )
         .unwrap();
     }

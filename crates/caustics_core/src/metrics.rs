@@ -17,6 +17,21 @@ pub fn relative_l2(a: &[f32], b: &[f32]) -> f32 {
     }
 }
 
+/// Relative L1 difference `‖a − b‖₁ / ‖b‖₁` of `a` against reference `b`: unlike L2,
+/// not dominated by a few samples where irradiance has a heavy tail (a point sample
+/// near a caustic's cusp). Infinity when the lengths differ, 0 when both are zero.
+pub fn relative_l1(a: &[f32], b: &[f32]) -> f32 {
+    if a.len() != b.len() {
+        return f32::INFINITY;
+    }
+    let (num, den) = a.iter().zip(b).fold((0f64, 0f64), |(n, d), (&x, &y)| (n + (x - y).abs() as f64, d + y.abs() as f64));
+    if den == 0.0 {
+        if num == 0.0 { 0.0 } else { f32::INFINITY }
+    } else {
+        (num / den) as f32
+    }
+}
+
 /// Separable Gaussian blur of a row-major `width × height` image with standard
 /// deviation `sigma` cells, truncated at 3σ and renormalised at the borders (edges
 /// are not darkened).
@@ -68,4 +83,22 @@ pub fn read_csv_image(text: &str) -> Result<(Vec<f32>, usize, usize), String> {
         height += 1;
     }
     Ok((data, width.unwrap_or(0), height))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_errors_weigh_a_spike_differently() {
+        // One sample of a hundred off by 10 against a flat reference of ones: L1 sees
+        // a tenth of the total, L2 a whole reference norm.
+        let reference = vec![1.0; 100];
+        let mut spiked = reference.clone();
+        spiked[7] += 10.0;
+        assert!((relative_l1(&spiked, &reference) - 0.1).abs() < 1e-6);
+        assert!((relative_l2(&spiked, &reference) - 1.0).abs() < 1e-6);
+        assert_eq!((relative_l1(&[0.0], &[0.0]), relative_l1(&[1.0], &[0.0])), (0.0, f32::INFINITY));
+        assert_eq!(relative_l1(&[1.0], &[1.0, 2.0]), f32::INFINITY);
+    }
 }
