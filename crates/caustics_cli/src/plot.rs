@@ -123,9 +123,8 @@ fn tick(value: f64) -> String {
 mod tests {
     #[test]
     fn ticks_read_as_people_write_them() {
-        let labels: Vec<String> = [0.30000000000000004, 2.0, 0.07000000000000001, 1234.5]
-            .map(super::tick)
-            .into();
+        // 0.1 + 0.2 and 0.7 * 0.1 are not 0.3 and 0.07 in binary.
+        let labels: Vec<String> = [0.1 + 0.2, 2.0, 0.7 * 0.1, 1234.5].map(super::tick).into();
         assert_eq!(labels, ["0.3", "2", "0.07", "1230"]);
     }
 }
