@@ -34,13 +34,17 @@ proptest! {
     }
 
     /// Helmholtz reciprocity: R(θ₁, n₁→n₂) = R(θ₂, n₂→n₁) with θ₂ the refracted angle.
+    /// Near grazing the way back is ill-conditioned: a rounding of cos θ₂ moves the
+    /// cos θ₁ it implies κ = n² cos θ₂ / cos θ₁ times as much (245 at 88.8° into
+    /// n = 2.4), so the tolerance grows with κ times f32's rounding.
     #[test]
     fn fresnel_is_reciprocal(theta in 0.0f32..1.55, n in 1.0f32..2.5) {
         let t = refract(dir_at(theta), Vec3::Y, 1.0 / n).direction().unwrap();
         let cos_t = -t.y;
         let forward = fresnel_reflectance(theta.cos(), 1.0 / n);
         let backward = fresnel_reflectance(cos_t, n);
-        prop_assert!((forward - backward).abs() < 1e-4, "{forward} vs {backward}");
+        let kappa = n * n * cos_t / theta.cos();
+        prop_assert!((forward - backward).abs() < 1e-4 + 1e-6 * kappa, "{forward} vs {backward}, κ = {kappa}");
     }
 
     /// Reflection keeps the angle and the tangential component, and is an involution.
