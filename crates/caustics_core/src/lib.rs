@@ -5,6 +5,7 @@
 //! measures itself against. Everything here runs on the CPU and tests in seconds.
 
 pub mod bvh;
+pub mod convolution;
 pub mod estimate;
 pub mod mesh;
 pub mod metrics;
