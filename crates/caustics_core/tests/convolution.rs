@@ -1,4 +1,5 @@
-//! Convolution caustics (Trendall & Stewart 2000): the flat surface lights the floor with
+//! Convolution caustics (Trendall & Stewart 2000): the light entering is Snell's with the
+//! paper's Fresnel transmission; the flat surface lights the floor with
 //! exactly L·T·cos θ in both forms; the convolution form approaches the direct integral
 //! of eq. 2 where the paper's approximations hold (small slopes, d ≫ h, n = 2a, a high
 //! sun); stiff and extreme inputs give finite irradiance or a clear error; the pond's
@@ -446,4 +447,22 @@ fn the_kernels_are_the_expansion_of_eq_2() {
     assert!((terms[2] - scale).abs() < 1e-12);
     assert!((terms[0] / (7.0 * scale * light.direction.x as f64 / -light.direction.y as f64) - 1.0).abs() < 1e-6);
     assert_eq!(kernels.terms(&TransmittedLight { flux: 0.0, direction: Vec3::NEG_Y }), [0.0; 3]);
+}
+
+#[test]
+fn the_transmitted_light_is_snell_and_the_papers_fresnel_transmission() {
+    let ior = 1.333f32;
+    for sun in [Vec3::NEG_Y, Vec3::new(0.5, -1.0, 0.0), Vec3::new(-1.0, -0.3, 2.0)] {
+        let settings = ConvolutionSettings { ior, sun_direction: sun, sun_irradiance: 2.0, ..Default::default() };
+        let light = transmitted_light(&Heightfield::flat(2, 2, 0.1).unwrap(), &settings).unwrap()[0];
+        let (cos_i, cos_t) = (-settings.sun_unit().y as f64, -light.direction.y as f64);
+        // Snell (eq. 1): sin θi = n sin θt, in the plane of incidence.
+        let (sin_i, sin_t) = ((1.0 - cos_i * cos_i).sqrt(), (1.0 - cos_t * cos_t).sqrt());
+        assert!((sin_i - ior as f64 * sin_t).abs() < 1e-6);
+        assert!(light.direction.x * sun.x >= 0.0 && light.direction.z * sun.z >= 0.0);
+        // §4: T(θi) = 2 (n_t cos θt / n_i cos θi)([n_i cos θi / (n_i cos θi + n_t cos θt)]² + [n_i cos θi / (n_t cos θi + n_i cos θt)]²).
+        let n_t = ior as f64;
+        let paper = 2.0 * (n_t * cos_t / cos_i) * ((cos_i / (cos_i + n_t * cos_t)).powi(2) + (cos_i / (n_t * cos_i + cos_t)).powi(2));
+        assert!((light.flux as f64 / (2.0 * paper * cos_i) - 1.0).abs() < 1e-5, "{} vs {}", light.flux, 2.0 * paper * cos_i);
+    }
 }
