@@ -6,6 +6,8 @@
 //! `caustics_core`; this crate is a thin layer of components, systems and passes.
 
 pub mod components;
+#[cfg(feature = "convolution")]
+pub mod convolution;
 #[cfg(feature = "egui")]
 pub mod debug_panel;
 pub mod gltf_tagging;
@@ -24,6 +26,8 @@ pub use components::{
 };
 pub use gltf_tagging::TagCausticsFromMaterials;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, InjectedIrradiance};
+#[cfg(feature = "convolution")]
+pub use convolution::{DropPebble, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
 pub use report::CausticPassReport;
@@ -50,6 +54,8 @@ impl Plugin for CausticsPlugin {
         warped_volumes::build(app);
         #[cfg(feature = "ocean")]
         app.add_plugins(ocean::OceanPlugin);
+        #[cfg(feature = "convolution")]
+        app.add_plugins(convolution::PoolRipplesPlugin);
     }
 }
 
@@ -57,6 +63,8 @@ impl Plugin for CausticsPlugin {
 pub mod prelude {
     #[cfg(feature = "ocean")]
     pub use crate::Ocean;
+    #[cfg(feature = "convolution")]
+    pub use crate::{DropPebble, PoolRipples};
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{

@@ -1,0 +1,90 @@
+//! Pool caustics by convolution (Trendall & Stewart 2000, §4): a rectangular pool whose
+//! water ripples where pebbles fall (§4.3).
+//!
+//! [`PoolRipples`] on an entity makes its mesh the pool's water surface, animated from
+//! `caustics_core::convolution::ripples`: every [`DropPebble`] that lands inside the
+//! pool starts an impulse, mirrored across the four walls, and faded impulses are
+//! removed. The mesh is rewritten in place each frame while the water moves, so a
+//! [`crate::CausticGenerator`] beside it feeds the other techniques as a dynamic
+//! generator (the warped caustic volumes rebuild from it).
+
+mod ripples;
+
+pub use ripples::PoolSurface;
+
+use bevy::prelude::*;
+use caustics_core::convolution::ripples::RippleSettings;
+
+/// A rectangular pool of rippling water, centred on its entity in its xz plane: the
+/// surface's rest level is the entity's `y = 0`, and it spans `columns × rows` texels
+/// `cell_size` metres wide. The entity's `Mesh3d` becomes a grid with a vertex at each
+/// texel centre. The wave fields are `caustics_core::convolution::ripples::RippleSettings`'
+/// (see there). Invalid settings are reported once and the pool stands still.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component)]
+#[require(Transform, Visibility)]
+#[allow(missing_docs)]
+pub struct PoolRipples {
+    pub columns: u32,
+    pub rows: u32,
+    pub cell_size: f32,
+    pub wave_number: f32,
+    pub angular_frequency: f32,
+    pub time_damping: f32,
+    pub front_damping: f32,
+    pub expiry_height: f32,
+}
+
+impl Default for PoolRipples {
+    /// A 4 m × 4 m pool at 128² texels with the core's default waves.
+    fn default() -> Self {
+        let waves = RippleSettings::default();
+        Self {
+            columns: 128,
+            rows: 128,
+            cell_size: 4.0 / 128.0,
+            wave_number: waves.wave_number,
+            angular_frequency: waves.angular_frequency,
+            time_damping: waves.time_damping,
+            front_damping: waves.front_damping,
+            expiry_height: waves.expiry_height,
+        }
+    }
+}
+
+impl PoolRipples {
+    /// The core crate's wave settings.
+    pub fn waves(&self) -> RippleSettings {
+        RippleSettings {
+            wave_number: self.wave_number,
+            angular_frequency: self.angular_frequency,
+            time_damping: self.time_damping,
+            front_damping: self.front_damping,
+            expiry_height: self.expiry_height,
+        }
+    }
+
+    /// The pool's width (x) and length (z) in metres.
+    pub fn size(&self) -> Vec2 {
+        Vec2::new(self.columns as f32, self.rows as f32) * self.cell_size
+    }
+}
+
+/// Drops a pebble: a new ripple impulse (§4.3) in the pool whose water lies under
+/// `position` (world space; its height does not matter), `strength` metres high at
+/// its start (negative inverts the wave). A pebble outside every pool is ignored.
+#[derive(Message, Clone, Copy, Debug, PartialEq)]
+pub struct DropPebble {
+    pub position: Vec3,
+    pub strength: f32,
+}
+
+/// Animates every [`PoolRipples`]. `CausticsPlugin` adds it; it also works on its own.
+pub struct PoolRipplesPlugin;
+
+impl Plugin for PoolRipplesPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<PoolRipples>().add_message::<DropPebble>();
+        ripples::build(app);
+    }
+}

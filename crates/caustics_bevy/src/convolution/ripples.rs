@@ -1,0 +1,208 @@
+//! Main world: the pool's water, simulated from its impulses and written into its mesh.
+
+use super::{DropPebble, PoolRipples};
+use bevy::asset::RenderAssetUsages;
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use bevy::platform::collections::HashSet;
+use bevy::prelude::*;
+use caustics_core::convolution::ripples::PoolRipples as Ripples;
+use caustics_core::convolution::{Boundary, Heightfield};
+
+/// The simulated water of a [`PoolRipples`]: its live impulses and the surface they
+/// made this frame (pool coordinates: x and z from 0 to the pool's size).
+#[derive(Component, Clone, Debug)]
+pub struct PoolSurface {
+    ripples: Ripples,
+    heightfield: Heightfield,
+}
+
+impl PoolSurface {
+    /// The impulses and wave settings.
+    pub fn ripples(&self) -> &Ripples {
+        &self.ripples
+    }
+
+    /// The heights at the texel centres, as of this frame.
+    pub fn heightfield(&self) -> &Heightfield {
+        &self.heightfield
+    }
+
+    /// A still pool for `pool`'s settings, or why there is none.
+    fn new(pool: &PoolRipples) -> Result<Self, String> {
+        let (columns, rows) = (pool.columns as usize, pool.rows as usize);
+        let ripples = Ripples::new(columns, rows, pool.cell_size, pool.waves()).map_err(|e| e.to_string())?;
+        let heightfield = Heightfield::flat(columns, rows, pool.cell_size).map_err(|e| e.to_string())?;
+        Ok(Self { ripples, heightfield })
+    }
+}
+
+pub(super) fn build(app: &mut App) {
+    app.add_systems(Update, (configure_pools, drop_pebbles, animate_pools).chain());
+}
+
+/// Starts the water of pools that are new or whose settings changed (a still pool);
+/// invalid settings are reported once per entity and the pool has no water until fixed.
+fn configure_pools(
+    mut commands: Commands,
+    pools: Query<(Entity, &PoolRipples, Option<&PoolSurface>), Changed<PoolRipples>>,
+    orphans: Query<Entity, (With<PoolSurface>, Without<PoolRipples>)>,
+    mut removed: RemovedComponents<PoolRipples>,
+    mut warned: Local<HashSet<Entity>>,
+) {
+    for entity in removed.read() {
+        warned.remove(&entity);
+    }
+    for entity in &orphans {
+        commands.entity(entity).remove::<PoolSurface>();
+    }
+    for (entity, pool, surface) in &pools {
+        let same = surface.is_some_and(|s| {
+            let hf = &s.heightfield;
+            *s.ripples.settings() == pool.waves()
+                && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
+        });
+        if same {
+            continue;
+        }
+        match PoolSurface::new(pool) {
+            Ok(surface) => {
+                warned.remove(&entity);
+                commands.entity(entity).insert(surface);
+            }
+            Err(reason) => {
+                if warned.insert(entity) {
+                    warn!("bevy_caustics: PoolRipples on {entity} is skipped: {reason}");
+                }
+                commands.entity(entity).remove::<PoolSurface>();
+            }
+        }
+    }
+}
+
+/// Starts an impulse for each [`DropPebble`] in the first pool whose water lies under it.
+fn drop_pebbles(
+    mut pebbles: MessageReader<DropPebble>,
+    mut pools: Query<(Entity, &PoolRipples, &GlobalTransform, &mut PoolSurface)>,
+    time: Res<Time>,
+) {
+    for pebble in pebbles.read() {
+        let landed = pools.iter_mut().find_map(|(entity, pool, transform, surface)| {
+            let local = transform.affine().inverse().transform_point3(pebble.position);
+            let at = Vec2::new(local.x, local.z) + 0.5 * pool.size();
+            let inside = at.cmpge(Vec2::ZERO).all() && at.cmple(pool.size()).all();
+            inside.then_some((entity, at, surface))
+        });
+        let Some((entity, at, mut surface)) = landed else {
+            debug!("bevy_caustics: a pebble at {} fell outside every pool", pebble.position);
+            continue;
+        };
+        let at = caustics_core::glam::Vec2::new(at.x, at.y);
+        if let Err(e) = surface.ripples.drop_pebble(at, pebble.strength, time.elapsed_secs()) {
+            warn!("bevy_caustics: a pebble in the pool {entity} is ignored: {e}");
+        }
+    }
+}
+
+/// Removes faded impulses and, while the water moves, evaluates the surface and writes
+/// it into the pool's mesh; still water costs nothing.
+fn animate_pools(
+    mut commands: Commands,
+    time: Res<Time>,
+    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, Option<&Mesh3d>)>,
+    mut meshes: ResMut<Assets<Mesh>>,
+) {
+    let now = time.elapsed_secs();
+    for (entity, pool, mut surface, mesh3d) in &mut pools {
+        let surface = &mut *surface;
+        surface.ripples.remove_expired(now);
+        let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
+        let has_grid = mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| is_grid(mesh, &surface.heightfield));
+        if surface.ripples.impulses().is_empty() && was_still && has_grid {
+            continue;
+        }
+        surface.heightfield = match surface.ripples.heightfield(now) {
+            Ok(heightfield) => heightfield,
+            Err(e) => {
+                warn!("bevy_caustics: the water of the pool {entity} is stilled: {e}");
+                if let Ok(still) = PoolSurface::new(pool) {
+                    *surface = still;
+                }
+                continue;
+            }
+        };
+        if let Some(mut mesh) = mesh3d.and_then(|m| meshes.get_mut(&m.0))
+            && write_in_place(&mut mesh, &surface.heightfield)
+        {
+            continue;
+        }
+        commands.entity(entity).insert(Mesh3d(meshes.add(grid_mesh(&surface.heightfield))));
+    }
+}
+
+/// The mesh vertex over each texel centre, centred on the pool, with its normal.
+fn vertices(heightfield: &Heightfield) -> impl Iterator<Item = ([f32; 3], [f32; 3])> + Clone + '_ {
+    let (columns, rows, cell) = (heightfield.columns(), heightfield.rows(), heightfield.cell_size());
+    let half = 0.5 * Vec2::new(columns as f32, rows as f32) * cell;
+    (0..rows).flat_map(move |row| {
+        (0..columns).map(move |column| {
+            let x = (column as f32 + 0.5) * cell - half.x;
+            let z = (row as f32 + 0.5) * cell - half.y;
+            let normal = heightfield.normal(column, row, Boundary::Mirror).to_array();
+            ([x, heightfield.height(column, row), z], normal)
+        })
+    })
+}
+
+/// Whether `mesh` is this pool's grid: a triangle list with its indices and a float
+/// position and normal per texel, its data in the main world.
+fn is_grid(mesh: &Mesh, heightfield: &Heightfield) -> bool {
+    let count = heightfield.columns() * heightfield.rows();
+    let sized = |values: &VertexAttributeValues| matches!(values, VertexAttributeValues::Float32x3(v) if v.len() == count);
+    mesh.primitive_topology() == PrimitiveTopology::TriangleList
+        && mesh.try_indices().is_ok_and(|indices| indices.len() == 6 * (heightfield.columns() - 1) * (heightfield.rows() - 1))
+        && [Mesh::ATTRIBUTE_POSITION, Mesh::ATTRIBUTE_NORMAL]
+            .into_iter()
+            .all(|attribute| mesh.try_attribute(attribute).is_ok_and(sized))
+}
+
+/// Rewrites the positions and normals of `mesh` if it is this pool's grid; false, with
+/// nothing changed, if not.
+fn write_in_place(mesh: &mut Mesh, heightfield: &Heightfield) -> bool {
+    if !is_grid(mesh, heightfield) {
+        return false;
+    }
+    for (attribute, pick) in [(Mesh::ATTRIBUTE_POSITION, 0), (Mesh::ATTRIBUTE_NORMAL, 1)] {
+        if let Ok(VertexAttributeValues::Float32x3(values)) = mesh.try_attribute_mut(attribute) {
+            for (slot, (position, normal)) in values.iter_mut().zip(vertices(heightfield)) {
+                *slot = if pick == 0 { position } else { normal };
+            }
+        }
+    }
+    true
+}
+
+/// Two triangles between each four neighbouring texel centres, wound counter-clockwise
+/// seen from above.
+fn grid_indices(heightfield: &Heightfield) -> Vec<u32> {
+    let (columns, rows) = (heightfield.columns() as u32, heightfield.rows() as u32);
+    let quads = (0..rows.saturating_sub(1)).flat_map(|r| (0..columns.saturating_sub(1)).map(move |c| (c, r)));
+    quads
+        .flat_map(|(c, r)| {
+            let at = |c: u32, r: u32| r * columns + c;
+            [at(c, r), at(c, r + 1), at(c + 1, r), at(c + 1, r), at(c, r + 1), at(c + 1, r + 1)]
+        })
+        .collect()
+}
+
+/// A new grid mesh of the surface: positions, normals, UVs over [0, 1]² and indices.
+fn grid_mesh(heightfield: &Heightfield) -> Mesh {
+    let (columns, rows) = (heightfield.columns(), heightfield.rows());
+    let (positions, normals): (Vec<[f32; 3]>, Vec<[f32; 3]>) = vertices(heightfield).unzip();
+    let uv = |i: usize, n: usize| (i as f32 + 0.5) / n as f32;
+    let uvs: Vec<[f32; 2]> = (0..rows).flat_map(|r| (0..columns).map(move |c| [uv(c, columns), uv(r, rows)])).collect();
+    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
+        .with_inserted_indices(Indices::U32(grid_indices(heightfield)))
+}
