@@ -55,7 +55,7 @@ impl Plugin for CausticsPlugin {
         #[cfg(feature = "ocean")]
         app.add_plugins(ocean::OceanPlugin);
         #[cfg(feature = "convolution")]
-        app.add_plugins(convolution::PoolRipplesPlugin);
+        convolution::build(app);
     }
 }
 

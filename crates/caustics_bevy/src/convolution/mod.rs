@@ -8,18 +8,26 @@
 //! [`crate::CausticGenerator`] beside it feeds the other techniques as a dynamic
 //! generator (the warped caustic volumes rebuild from it).
 
+mod render;
 mod ripples;
 
-pub use ripples::PoolSurface;
+pub use ripples::{PoolKernels, PoolSurface};
 
 use bevy::prelude::*;
+use caustics_core::convolution::ConvolutionSettings;
 use caustics_core::convolution::ripples::RippleSettings;
 
 /// A rectangular pool of rippling water, centred on its entity in its xz plane: the
 /// surface's rest level is the entity's `y = 0`, and it spans `columns × rows` texels
-/// `cell_size` metres wide. The entity's `Mesh3d` becomes a grid with a vertex at each
-/// texel centre. The wave fields are `caustics_core::convolution::ripples::RippleSettings`'
-/// (see there). Invalid settings are reported once and the pool stands still.
+/// `cell_size` metres wide, over a floor `depth` metres below. The entity's `Mesh3d`
+/// becomes a grid with a vertex at each texel centre. The wave fields are
+/// `caustics_core::convolution::ripples::RippleSettings`' and the light's
+/// `caustics_core::convolution::ConvolutionSettings`' (see there). Invalid settings are
+/// reported once and the pool stands still.
+///
+/// With a `CausticGenerator` that refracts and asks for `CausticTechnique::Convolution`,
+/// the brightest `DirectionalLight` makes caustics on the pool floor: irradiance at
+/// `y = −depth` under the pool, shown by the `CausticReceiver` lying there.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 #[require(Transform, Visibility)]
@@ -33,12 +41,17 @@ pub struct PoolRipples {
     pub time_damping: f32,
     pub front_damping: f32,
     pub expiry_height: f32,
+    pub depth: f32,
+    pub exponent: f32,
+    pub extinction: f32,
+    pub kernel_radius: u32,
 }
 
 impl Default for PoolRipples {
-    /// A 4 m × 4 m pool at 128² texels with the core's default waves.
+    /// A 4 m × 4 m pool 1 m deep at 128² texels with the core's default waves and light.
     fn default() -> Self {
         let waves = RippleSettings::default();
+        let light = ConvolutionSettings::default();
         Self {
             columns: 128,
             rows: 128,
@@ -48,6 +61,10 @@ impl Default for PoolRipples {
             time_damping: waves.time_damping,
             front_damping: waves.front_damping,
             expiry_height: waves.expiry_height,
+            depth: light.depth,
+            exponent: light.exponent,
+            extinction: light.extinction,
+            kernel_radius: light.kernel_radius as u32,
         }
     }
 }
@@ -61,6 +78,21 @@ impl PoolRipples {
             time_damping: self.time_damping,
             front_damping: self.front_damping,
             expiry_height: self.expiry_height,
+        }
+    }
+
+    /// The core crate's light settings, with the water's index of refraction and the
+    /// sunlight (direction in pool space, irradiance).
+    pub fn light(&self, ior: f32, sun_direction: Vec3, sun_irradiance: f32) -> ConvolutionSettings {
+        ConvolutionSettings {
+            ior,
+            sun_direction: caustics_core::glam::Vec3::from_array(sun_direction.to_array()),
+            sun_irradiance,
+            depth: self.depth,
+            exponent: self.exponent,
+            extinction: self.extinction,
+            kernel_radius: self.kernel_radius as usize,
+            ..ConvolutionSettings::default()
         }
     }
 
@@ -79,7 +111,8 @@ pub struct DropPebble {
     pub strength: f32,
 }
 
-/// Animates every [`PoolRipples`]. `CausticsPlugin` adds it; it also works on its own.
+/// Animates every [`PoolRipples`]. `CausticsPlugin` adds it with the passes; it also
+/// works on its own.
 pub struct PoolRipplesPlugin;
 
 impl Plugin for PoolRipplesPlugin {
@@ -87,4 +120,9 @@ impl Plugin for PoolRipplesPlugin {
         app.register_type::<PoolRipples>().add_message::<DropPebble>();
         ripples::build(app);
     }
+}
+
+pub(crate) fn build(app: &mut App) {
+    app.add_plugins(PoolRipplesPlugin);
+    render::build(app);
 }

@@ -6,7 +6,8 @@ use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::convolution::ripples::PoolRipples as Ripples;
-use caustics_core::convolution::{Boundary, Heightfield};
+use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
+use std::sync::Arc;
 
 /// The simulated water of a [`PoolRipples`]: its live impulses and the surface they
 /// made this frame (pool coordinates: x and z from 0 to the pool's size).
@@ -14,6 +15,26 @@ use caustics_core::convolution::{Boundary, Heightfield};
 pub struct PoolSurface {
     ripples: Ripples,
     heightfield: Heightfield,
+    kernels: PoolKernels,
+}
+
+/// The three kernels of §4.1 for a pool's depth, exponent, extinction and texels, as
+/// the GPU reads them (`caustics_core::convolution::ConvolutionKernels`).
+#[derive(Clone, Debug)]
+pub struct PoolKernels {
+    /// `[k_x, k_z, k_v, 0]` row-major over `Δz, Δx ∈ −r..=r`.
+    pub taps: Arc<Vec<Vec4>>,
+    /// `K_v`, by which every texel's terms are divided.
+    pub normaliser: f64,
+}
+
+impl PoolKernels {
+    fn new(pool: &PoolRipples) -> Result<Self, String> {
+        let settings = pool.light(1.333, Vec3::NEG_Y, 1.0);
+        let kernels = ConvolutionKernels::new(&settings, pool.cell_size).map_err(|e| e.to_string())?;
+        let taps = kernels.taps().iter().map(|t| Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, 0.0)).collect();
+        Ok(Self { taps: Arc::new(taps), normaliser: kernels.normaliser() })
+    }
 }
 
 impl PoolSurface {
@@ -27,12 +48,17 @@ impl PoolSurface {
         &self.heightfield
     }
 
+    /// The convolution kernels.
+    pub fn kernels(&self) -> &PoolKernels {
+        &self.kernels
+    }
+
     /// A still pool for `pool`'s settings, or why there is none.
     fn new(pool: &PoolRipples) -> Result<Self, String> {
         let (columns, rows) = (pool.columns as usize, pool.rows as usize);
         let ripples = Ripples::new(columns, rows, pool.cell_size, pool.waves()).map_err(|e| e.to_string())?;
         let heightfield = Heightfield::flat(columns, rows, pool.cell_size).map_err(|e| e.to_string())?;
-        Ok(Self { ripples, heightfield })
+        Ok(Self { ripples, heightfield, kernels: PoolKernels::new(pool)? })
     }
 }
 
@@ -40,11 +66,13 @@ pub(super) fn build(app: &mut App) {
     app.add_systems(Update, (configure_pools, drop_pebbles, animate_pools).chain());
 }
 
-/// Starts the water of pools that are new or whose settings changed (a still pool);
-/// invalid settings are reported once per entity and the pool has no water until fixed.
+/// Starts the water of pools that are new or whose grid or waves changed (a still
+/// pool), and redraws the kernels of those whose light changed (the water keeps
+/// moving); invalid settings are reported once per entity and the pool has no water
+/// until fixed.
 fn configure_pools(
     mut commands: Commands,
-    pools: Query<(Entity, &PoolRipples, Option<&PoolSurface>), Changed<PoolRipples>>,
+    mut pools: Query<(Entity, &PoolRipples, Option<&mut PoolSurface>), Changed<PoolRipples>>,
     orphans: Query<Entity, (With<PoolSurface>, Without<PoolRipples>)>,
     mut removed: RemovedComponents<PoolRipples>,
     mut warned: Local<HashSet<Entity>>,
@@ -55,19 +83,21 @@ fn configure_pools(
     for entity in &orphans {
         commands.entity(entity).remove::<PoolSurface>();
     }
-    for (entity, pool, surface) in &pools {
-        let same = surface.is_some_and(|s| {
+    for (entity, pool, surface) in &mut pools {
+        let same_water = surface.as_ref().is_some_and(|s| {
             let hf = &s.heightfield;
             *s.ripples.settings() == pool.waves()
                 && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
         });
-        if same {
-            continue;
-        }
-        match PoolSurface::new(pool) {
-            Ok(surface) => {
-                warned.remove(&entity);
+        let made = match surface {
+            Some(mut surface) if same_water => PoolKernels::new(pool).map(|kernels| surface.kernels = kernels),
+            _ => PoolSurface::new(pool).map(|surface| {
                 commands.entity(entity).insert(surface);
+            }),
+        };
+        match made {
+            Ok(()) => {
+                warned.remove(&entity);
             }
             Err(reason) => {
                 if warned.insert(entity) {

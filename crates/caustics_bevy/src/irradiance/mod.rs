@@ -59,11 +59,12 @@ pub struct InjectedIrradiance(pub Handle<Image>);
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ActiveCausticTechniques {
     pub warped_volumes: bool,
+    pub convolution: bool,
 }
 
 impl ActiveCausticTechniques {
     pub fn any(&self) -> bool {
-        self.warped_volumes
+        self.warped_volumes || self.convolution
     }
 }
 

@@ -1,0 +1,130 @@
+// Pool caustics by convolution (Trendall & Stewart 2000, §4): the GPU twin of
+// `caustics_core::convolution`. Three compute entry points run in order over the
+// pool's texels: `ripple_heights` (the rippling surface of §4.3 from its impulses and
+// their wall images), `convolution_terms` (normals, Snell, Fresnel: §4.2 passes 1–5)
+// and `convolve` (the three kernels of §4.1, pass 6).
+
+#import bevy_caustics::convolution::Pool
+
+@group(0) @binding(0) var<uniform> pool: Pool;
+@group(0) @binding(1) var<storage, read> images: array<vec4<f32>>;  // x, z, strength, drop time
+@group(0) @binding(2) var<storage, read> taps: array<vec4<f32>>;    // k_x, k_z, k_v over −r..=r²
+@group(0) @binding(3) var<storage, read_write> heights: array<f32>;
+@group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;
+@group(0) @binding(5) var<storage, read_write> irradiance: array<f32>;
+
+// `caustics_core::convolution::MIN_DOWNWARD_COSINE`.
+const MIN_DOWNWARD_COSINE: f32 = 1.0e-3;
+
+fn texel_index(c: u32, r: u32) -> u32 {
+    return r * pool.columns + c;
+}
+
+// `Boundary::Mirror.fold`: the texel the surface, mirrored across the pool's walls,
+// shows at `index` along a side of `texels`, and whether it is mirrored there.
+fn fold(index: i32, texels: u32) -> vec2<i32> {
+    let n = i32(texels);
+    let folded = ((index % (2 * n)) + 2 * n) % (2 * n);
+    if folded < n {
+        return vec2(folded, 0);
+    }
+    return vec2(2 * n - 1 - folded, 1);
+}
+
+fn height(c: i32, r: i32) -> f32 {
+    return heights[texel_index(u32(fold(c, pool.columns).x), u32(fold(r, pool.rows).x))];
+}
+
+// `RippleSettings::impulse_height` summed over the impulses' images (`PoolRipples::height_at`).
+@compute @workgroup_size(8, 8, 1)
+fn ripple_heights(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let point = (vec2<f32>(id.xy) + 0.5) * pool.cell_size;
+    var h = 0.0;
+    for (var i = 0u; i < pool.image_count; i++) {
+        let image = images[i];
+        let elapsed = pool.time - image.w;
+        let front = pool.angular_frequency * elapsed / pool.wave_number;
+        let distance = length(point - image.xy);
+        if elapsed > 0.0 && distance <= front {
+            let envelope = -pool.front_damping * (front - distance) - pool.time_damping * elapsed;
+            h += image.z * exp(envelope) * sin(pool.wave_number * distance - pool.angular_frequency * elapsed);
+        }
+    }
+    heights[texel_index(id.x, id.y)] = h;
+}
+
+// `optics::fresnel_reflectance` for light entering water from air.
+fn fresnel_transmittance(cos_i: f32, eta: f32) -> f32 {
+    if eta == 1.0 {
+        return 1.0;
+    }
+    let c = min(abs(cos_i), 1.0);
+    let sin2_t = eta * eta * (1.0 - c * c);
+    if sin2_t >= 1.0 {
+        return 0.0;
+    }
+    let cos_t = sqrt(1.0 - sin2_t);
+    let rs = (eta * c - cos_t) / (eta * c + cos_t);
+    let rp = (c - eta * cos_t) / (c + eta * cos_t);
+    return 1.0 - clamp(0.5 * (rs * rs + rp * rp), 0.0, 1.0);
+}
+
+// `transmitted_light` and `ConvolutionKernels::terms`: what each texel convolves.
+@compute @workgroup_size(8, 8, 1)
+fn convolution_terms(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let c = i32(id.x);
+    let r = i32(id.y);
+    let span = 2.0 * pool.cell_size;
+    let slope = vec2(height(c + 1, r) - height(c - 1, r), height(c, r + 1) - height(c, r - 1)) / span;
+    let scale = max(max(abs(slope.x), abs(slope.y)), 1.0);
+    let normal = normalize(vec3(-slope.x, 1.0, -slope.y) / scale);
+    let sun = pool.sun.xyz;
+    let eta = 1.0 / pool.ior;
+    let cos_i = -dot(sun, normal);
+    var term = vec4(0.0);
+    if cos_i > 0.0 {
+        let sin2_t = eta * eta * (1.0 - min(cos_i, 1.0) * min(cos_i, 1.0));
+        let cos_t = sqrt(max(0.0, 1.0 - sin2_t));
+        var direction = sun;
+        if eta != 1.0 {
+            direction = normalize(eta * sun + (eta * min(cos_i, 1.0) - cos_t) * normal);
+        }
+        if -direction.y >= MIN_DOWNWARD_COSINE {
+            let flux = pool.sun.w * fresnel_transmittance(cos_i, eta) * cos_i;
+            let per_tap = flux / pool.normaliser;
+            let tilt = pool.exponent * per_tap / -direction.y;
+            term = vec4(tilt * direction.x, tilt * direction.z, per_tap, 0.0);
+        }
+    }
+    terms[texel_index(id.x, id.y)] = term;
+}
+
+// `ConvolutionCaustics::irradiance` as a direct sum over the (2r + 1)² taps: the floor
+// below texel x₀ gets Σ k(x₀ − x)·term(x) over the extended surface.
+@compute @workgroup_size(8, 8, 1)
+fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let r = pool.kernel_radius;
+    let width = 2 * r + 1;
+    var e = 0.0;
+    for (var dz = -r; dz <= r; dz++) {
+        let row = fold(i32(id.y) - dz, pool.rows);
+        for (var dx = -r; dx <= r; dx++) {
+            let column = fold(i32(id.x) - dx, pool.columns);
+            let term = terms[texel_index(u32(column.x), u32(row.x))];
+            // Seen in a mirror, the horizontal direction across it flips.
+            let flip = vec2(1.0 - 2.0 * f32(column.y), 1.0 - 2.0 * f32(row.y));
+            let k = taps[(dz + r) * width + dx + r];
+            e += k.x * term.x * flip.x + k.y * term.y * flip.y + k.z * term.z;
+        }
+    }
+    irradiance[texel_index(id.x, id.y)] = e;
+}

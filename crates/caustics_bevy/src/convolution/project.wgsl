@@ -1,0 +1,46 @@
+// Pool caustics by convolution: adds a pool's floor irradiance to the view's caustic
+// irradiance buffer at every pixel whose receiver point lies on the pool's floor,
+// interpolated bilinearly between the texel centres below which it was computed.
+
+#import bevy_render::view::View
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_caustics::convolution::Pool
+
+@group(0) @binding(0) var<uniform> view: View;
+#ifdef MULTISAMPLED
+@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
+#else
+@group(0) @binding(1) var depth_prepass: texture_depth_2d;
+#endif
+@group(0) @binding(2) var<uniform> pool: Pool;
+@group(0) @binding(3) var<storage, read> irradiance: array<f32>;
+
+// The floor irradiance below a texel, the nearest edge texel past the walls.
+fn floor_at(c: i32, r: i32) -> f32 {
+    let column = clamp(c, 0, i32(pool.columns) - 1);
+    let row = clamp(r, 0, i32(pool.rows) - 1);
+    return irradiance[u32(row) * pool.columns + u32(column)];
+}
+
+@fragment
+fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let depth = textureLoad(depth_prepass, vec2<i32>(in.position.xy), 0);
+    if depth <= 0.0 {
+        discard;
+    }
+    // World position at the pixel (reverse Z).
+    let uv = (in.position.xy - view.viewport.xy) / view.viewport.zw;
+    let clip = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    let p = (pool.pool_from_world * vec4(clip.xyz / clip.w, 1.0)).xyz;
+    let size = vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
+    if abs(p.y + pool.depth) > pool.floor_tolerance || any(p.xz < vec2(0.0)) || any(p.xz > size) {
+        discard;
+    }
+    let t = p.xz / pool.cell_size - 0.5;
+    let base = floor(t);
+    let f = t - base;
+    let c = i32(base.x);
+    let r = i32(base.y);
+    let e = mix(mix(floor_at(c, r), floor_at(c + 1, r), f.x), mix(floor_at(c, r + 1), floor_at(c + 1, r + 1), f.x), f.y);
+    return vec4(pool.color.rgb * (e * view.exposure), 0.0);
+}

@@ -1,0 +1,449 @@
+//! Render world: extraction, GPU buffers, the compute passes of the convolution and
+//! the projection of the floor irradiance into each view's caustic irradiance buffer.
+
+use super::{PoolRipples, PoolSurface};
+use crate::components::{CausticGenerator, CausticTechnique, GeneratorInteraction, InvalidCausticParams};
+use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewCausticWork};
+use crate::report::PassRecorder;
+use bevy::camera::Hdr;
+use bevy::core_pipeline::prepass::{DepthPrepass, ViewPrepassTextures};
+use bevy::core_pipeline::schedule::{Core3d, camera_driver};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::{
+    Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    render_resource::{
+        binding_types::{storage_buffer, storage_buffer_read_only, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
+        *,
+    },
+    renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue, ViewQuery},
+    sync_world::MainEntity,
+    view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
+};
+use caustics_core::convolution::ripples::mirror_images;
+
+/// `Pool` in `types.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuPool {
+    columns: u32,
+    rows: u32,
+    cell_size: f32,
+    image_count: u32,
+    time: f32,
+    wave_number: f32,
+    angular_frequency: f32,
+    time_damping: f32,
+    front_damping: f32,
+    ior: f32,
+    exponent: f32,
+    normaliser: f32,
+    sun: Vec4,
+    kernel_radius: i32,
+    depth: f32,
+    floor_tolerance: f32,
+    pool_from_world: Mat4,
+    color: Vec4,
+}
+
+/// Render world: one pool to draw this frame.
+struct ExtractedPool {
+    uniform: GpuPool,
+    /// Every impulse's nine wall images: x, z, strength, drop time.
+    images: Vec<Vec4>,
+    taps: std::sync::Arc<Vec<Vec4>>,
+}
+
+/// Render world: the pools of this frame, by main-world entity.
+#[derive(Resource, Default)]
+struct ExtractedPools(HashMap<MainEntity, ExtractedPool>);
+
+/// Render world: a pool's buffers on the GPU and the bind groups over them.
+pub(super) struct PoolBuffers {
+    texels: u32,
+    uniform: UniformBuffer<GpuPool>,
+    images: StorageBuffer<Vec<Vec4>>,
+    taps: StorageBuffer<Vec<Vec4>>,
+    heights: Buffer,
+    terms: Buffer,
+    irradiance: Buffer,
+    compute: Option<BindGroup>,
+}
+
+/// Render world: every pool's buffers.
+#[derive(Resource, Default)]
+pub(super) struct PoolGpu(HashMap<MainEntity, PoolBuffers>);
+
+/// The compute pipelines and the projection's layouts and shader.
+#[derive(Resource)]
+pub(super) struct ConvolutionPipelines {
+    compute_layout: BindGroupLayoutDescriptor,
+    /// `[heights, terms, convolve]`.
+    compute: [CachedComputePipelineId; 3],
+    project_layouts: [BindGroupLayoutDescriptor; 2],
+    project_shader: Handle<Shader>,
+    fullscreen: FullscreenShader,
+}
+
+/// Render world: a view's projection pipeline (single-sampled or multisampled depth).
+#[derive(Component)]
+pub(super) struct ViewPoolPipeline {
+    pipeline: CachedRenderPipelineId,
+    multisampled: bool,
+}
+
+pub(super) fn build(app: &mut App) {
+    bevy::asset::embedded_asset!(app, "convolution.wgsl");
+    bevy::asset::embedded_asset!(app, "project.wgsl");
+    bevy::shader::load_shader_library!(app, "types.wgsl");
+    app.add_systems(PostUpdate, (mark_active, add_depth_prepass));
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<ExtractedPools>()
+        .init_resource::<PoolGpu>()
+        .init_resource::<SpecializedRenderPipelines<ConvolutionPipelines>>()
+        .add_systems(RenderStartup, init_pipelines)
+        .add_systems(ExtractSchedule, extract_pools)
+        .add_systems(
+            Render,
+            (
+                prepare_buffers.in_set(RenderSystems::PrepareResources),
+                prepare_view_pipelines.in_set(RenderSystems::Prepare),
+            ),
+        )
+        .add_systems(RenderGraph, compute_floor_irradiance.before(camera_driver))
+        .add_systems(
+            Core3d,
+            project_floor_irradiance
+                .after(crate::irradiance::inject_irradiance)
+                .after(Core3dSystems::Prepass)
+                .before(Core3dSystems::MainPass),
+        );
+}
+
+/// The pools whose water refracts sunlight by this technique.
+type ConvolutionPools = Query<
+    'static,
+    'static,
+    (Entity, &'static PoolRipples, &'static PoolSurface, &'static CausticGenerator, &'static GlobalTransform),
+    Without<InvalidCausticParams>,
+>;
+
+/// The sunlight a pool sees: the brightest directional light.
+type Suns = Query<'static, 'static, (&'static DirectionalLight, &'static GlobalTransform)>;
+
+fn uses_convolution(generator: &CausticGenerator) -> Option<f32> {
+    match (generator.technique, generator.interaction) {
+        (CausticTechnique::Convolution, GeneratorInteraction::Refract { ior, .. }) => Some(ior),
+        _ => None,
+    }
+}
+
+/// Main world: the views have convolution work while a pool refracts a sun.
+fn mark_active(
+    mut active: ResMut<ActiveCausticTechniques>,
+    pools: Query<&CausticGenerator, (With<PoolSurface>, Without<InvalidCausticParams>)>,
+    suns: Query<(), With<DirectionalLight>>,
+) {
+    let any = !suns.is_empty() && pools.iter().any(|generator| uses_convolution(generator).is_some());
+    active.set_if_neq(ActiveCausticTechniques { convolution: any, ..*active });
+}
+
+/// HDR 3D cameras without a depth prepass.
+type CamerasWithoutDepth = (With<Camera3d>, With<Hdr>, Without<DepthPrepass>);
+
+/// The projection reads receiver positions from Bevy's depth prepass: HDR 3D cameras
+/// get it while a pool has convolution caustics.
+fn add_depth_prepass(mut commands: Commands, active: Res<ActiveCausticTechniques>, cameras: Query<Entity, CamerasWithoutDepth>) {
+    if active.convolution {
+        for camera in &cameras {
+            commands.entity(camera).insert(DepthPrepass);
+        }
+    }
+}
+
+fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<ConvolutionPools>, suns: Extract<Suns>, time: Extract<Res<Time>>) {
+    extracted.0.clear();
+    let Some((sun, sun_transform)) = suns.iter().max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance)) else {
+        return;
+    };
+    for (entity, pool, surface, generator, transform) in &pools {
+        let Some(ior) = uses_convolution(generator) else { continue };
+        let size = pool.size();
+        let pool_from_world = Mat4::from_translation(Vec3::new(0.5 * size.x, 0.0, 0.5 * size.y)) * transform.to_matrix().inverse();
+        let direction = pool_from_world.transform_vector3(sun_transform.forward().as_vec3()).normalize_or_zero();
+        if direction.y >= 0.0 {
+            continue;
+        }
+        let ripples = surface.ripples();
+        let waves = ripples.settings();
+        let images: Vec<Vec4> = ripples
+            .impulses()
+            .iter()
+            .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
+            .collect();
+        let kernels = surface.kernels();
+        let color = sun.color.to_linear();
+        let uniform = GpuPool {
+            columns: pool.columns,
+            rows: pool.rows,
+            cell_size: pool.cell_size,
+            image_count: images.len() as u32,
+            time: time.elapsed_secs(),
+            wave_number: waves.wave_number,
+            angular_frequency: waves.angular_frequency,
+            time_damping: waves.time_damping,
+            front_damping: waves.front_damping,
+            ior,
+            exponent: pool.exponent,
+            normaliser: kernels.normaliser as f32,
+            sun: direction.extend(sun.illuminance),
+            kernel_radius: pool.kernel_radius as i32,
+            depth: pool.depth,
+            floor_tolerance: 0.05 * pool.depth,
+            pool_from_world,
+            color: Vec4::new(color.red, color.green, color.blue, 1.0),
+        };
+        extracted.0.insert(MainEntity::from(entity), ExtractedPool { uniform, images, taps: kernels.taps.clone() });
+    }
+}
+
+/// A storage buffer of `count` floats, written by the compute passes.
+fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_per_texel: u64) -> Buffer {
+    device.create_buffer(&BufferDescriptor {
+        label: Some(label),
+        size: count.max(1) as u64 * floats_per_texel * 4,
+        usage: BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    })
+}
+
+fn prepare_buffers(
+    extracted: Res<ExtractedPools>,
+    mut gpu: ResMut<PoolGpu>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    pipelines: Res<ConvolutionPipelines>,
+    cache: Res<PipelineCache>,
+) {
+    gpu.0.retain(|entity, _| extracted.0.contains_key(entity));
+    for (entity, pool) in &extracted.0 {
+        let texels = pool.uniform.columns * pool.uniform.rows;
+        let buffers = gpu.0.entry(*entity).or_insert_with(|| PoolBuffers {
+            texels: 0,
+            uniform: UniformBuffer::default(),
+            images: StorageBuffer::default(),
+            taps: StorageBuffer::default(),
+            heights: texel_buffer(&device, "pool_heights", 0, 1),
+            terms: texel_buffer(&device, "pool_terms", 0, 4),
+            irradiance: texel_buffer(&device, "pool_floor_irradiance", 0, 1),
+            compute: None,
+        });
+        if buffers.texels != texels {
+            buffers.texels = texels;
+            buffers.heights = texel_buffer(&device, "pool_heights", texels, 1);
+            buffers.terms = texel_buffer(&device, "pool_terms", texels, 4);
+            buffers.irradiance = texel_buffer(&device, "pool_floor_irradiance", texels, 1);
+        }
+        buffers.uniform.set(pool.uniform);
+        buffers.uniform.write_buffer(&device, &queue);
+        // A binding may not be empty: a still pool gets one image of zero strength.
+        let images = if pool.images.is_empty() { vec![Vec4::ZERO] } else { pool.images.clone() };
+        buffers.images.set(images);
+        buffers.images.write_buffer(&device, &queue);
+        if buffers.taps.get().len() != pool.taps.len() || buffers.taps.get() != pool.taps.as_ref() {
+            buffers.taps.set(pool.taps.as_ref().clone());
+            buffers.taps.write_buffer(&device, &queue);
+        }
+        let (Some(uniform), Some(images), Some(taps)) =
+            (buffers.uniform.binding(), buffers.images.binding(), buffers.taps.binding())
+        else {
+            continue;
+        };
+        buffers.compute = Some(device.create_bind_group(
+            "pool_convolution_bind_group",
+            &cache.get_bind_group_layout(&pipelines.compute_layout),
+            &BindGroupEntries::sequential((
+                uniform,
+                images,
+                taps,
+                buffers.heights.as_entire_binding(),
+                buffers.terms.as_entire_binding(),
+                buffers.irradiance.as_entire_binding(),
+            )),
+        ));
+    }
+}
+
+fn init_pipelines(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    cache: Res<PipelineCache>,
+    fullscreen: Res<FullscreenShader>,
+) {
+    let compute_layout = BindGroupLayoutDescriptor::new(
+        "pool_convolution_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                uniform_buffer::<GpuPool>(false),
+                storage_buffer_read_only::<Vec4>(false),
+                storage_buffer_read_only::<Vec4>(false),
+                storage_buffer::<f32>(false),
+                storage_buffer::<Vec4>(false),
+                storage_buffer::<f32>(false),
+            ),
+        ),
+    );
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
+    let compute = ["ripple_heights", "convolution_terms", "convolve"].map(|entry| {
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("pool_{entry}").into()),
+            layout: vec![compute_layout.clone()],
+            shader: shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    });
+    let project_layout = |multisampled: bool| {
+        BindGroupLayoutDescriptor::new(
+            if multisampled { "pool_project_layout_msaa" } else { "pool_project_layout" },
+            &BindGroupLayoutEntries::sequential(
+                ShaderStages::FRAGMENT,
+                (
+                    uniform_buffer::<ViewUniform>(true),
+                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                    uniform_buffer::<GpuPool>(false),
+                    storage_buffer_read_only::<f32>(false),
+                ),
+            ),
+        )
+    };
+    commands.insert_resource(ConvolutionPipelines {
+        compute_layout,
+        compute,
+        project_layouts: [project_layout(false), project_layout(true)],
+        project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
+        fullscreen: fullscreen.clone(),
+    });
+}
+
+impl SpecializedRenderPipeline for ConvolutionPipelines {
+    /// Whether the depth prepass is multisampled.
+    type Key = bool;
+
+    fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
+        let shader_defs = if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
+        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        RenderPipelineDescriptor {
+            label: Some("pool_project_pipeline".into()),
+            layout: vec![self.project_layouts[multisampled as usize].clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.project_shader.clone(),
+                shader_defs,
+                entry_point: Some("project".into()),
+                targets: vec![Some(ColorTargetState {
+                    format: crate::CAUSTIC_IRRADIANCE_FORMAT,
+                    blend: Some(BlendState { color: additive, alpha: additive }),
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            ..default()
+        }
+    }
+}
+
+fn prepare_view_pipelines(
+    mut commands: Commands,
+    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
+    pipelines: Res<ConvolutionPipelines>,
+    mut specialized: ResMut<SpecializedRenderPipelines<ConvolutionPipelines>>,
+    cache: Res<PipelineCache>,
+    gpu: Res<PoolGpu>,
+) {
+    if gpu.0.is_empty() {
+        return;
+    }
+    for (entity, msaa) in &views {
+        let multisampled = msaa.samples() > 1;
+        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
+        commands.entity(entity).insert(ViewPoolPipeline { pipeline, multisampled });
+    }
+}
+
+/// Once per frame: every pool's heights, per-texel terms and floor irradiance.
+fn compute_floor_irradiance(
+    mut ctx: RenderContext,
+    gpu: Res<PoolGpu>,
+    pipelines: Res<ConvolutionPipelines>,
+    cache: Res<PipelineCache>,
+    recorder: Res<PassRecorder>,
+) {
+    let [Some(heights), Some(terms), Some(convolve)] = pipelines.compute.map(|id| cache.get_compute_pipeline(id)) else {
+        return;
+    };
+    let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });
+    for buffers in gpu.0.values() {
+        let Some(bind_group) = &buffers.compute else { continue };
+        let uniform = buffers.uniform.get();
+        pass.set_bind_group(0, bind_group, &[]);
+        for pipeline in [heights, terms, convolve] {
+            pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(uniform.columns.div_ceil(8), uniform.rows.div_ceil(8), 1);
+        }
+        recorder.record("convolution");
+    }
+}
+
+/// Adds each pool's floor irradiance where the view sees its floor.
+fn project_floor_irradiance(
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewPoolPipeline)>,
+    gpu: Res<PoolGpu>,
+    pipelines: Res<ConvolutionPipelines>,
+    cache: Res<PipelineCache>,
+    view_uniforms: Res<ViewUniforms>,
+    recorder: Res<PassRecorder>,
+    mut ctx: RenderContext,
+) {
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    let (Some(render_pipeline), Some(depth), Some(view_binding)) =
+        (cache.get_render_pipeline(pipeline.pipeline), prepass.depth_view(), view_uniforms.uniforms.binding())
+    else {
+        return;
+    };
+    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let bind_groups: Vec<BindGroup> = gpu
+        .0
+        .values()
+        .filter_map(|buffers| {
+            let uniform = buffers.uniform.binding()?;
+            Some(ctx.render_device().create_bind_group(
+                "pool_project_bind_group",
+                &layout,
+                &BindGroupEntries::sequential((view_binding.clone(), depth, uniform, buffers.irradiance.as_entire_binding())),
+            ))
+        })
+        .collect();
+    if bind_groups.is_empty() {
+        return;
+    }
+    let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+        label: Some("pool_floor"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: &buffer.texture.default_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+        })],
+        ..default()
+    });
+    pass.set_pipeline(render_pipeline);
+    for bind_group in &bind_groups {
+        pass.set_bind_group(0, bind_group, &[offset.offset]);
+        pass.draw(0..3, 0..1);
+    }
+    recorder.record("pool floor");
+}

@@ -1,0 +1,25 @@
+// The pool as every convolution shader reads it (`GpuPool` in `render.rs`).
+
+#define_import_path bevy_caustics::convolution
+
+struct Pool {
+    columns: u32,
+    rows: u32,
+    cell_size: f32,
+    image_count: u32,       // impulses × 9 wall images
+    time: f32,
+    wave_number: f32,       // K
+    angular_frequency: f32, // ω
+    time_damping: f32,      // α
+    front_damping: f32,     // β
+    ior: f32,
+    exponent: f32,          // n
+    normaliser: f32,        // K_v, `ConvolutionKernels::normaliser`
+    sun: vec4<f32>,         // xyz: the sunlight's unit direction in pool space, w: L_s
+    kernel_radius: i32,
+    // Projection: pool space (x, z ∈ [0, size], surface rest level y = 0) from world.
+    depth: f32,
+    floor_tolerance: f32,
+    pool_from_world: mat4x4<f32>,
+    color: vec4<f32>,
+}

@@ -1,0 +1,151 @@
+//! Convolution caustics on a real adapter (lavapipe in CI) against their CPU twin in
+//! `caustics_core::convolution`: the ripples of scripted pebbles and the floor
+//! irradiance they make, and the pass report (no pool, no convolution pass).
+//!
+//! One test function: a process holds one Bevy app with a render device at a time.
+
+#![cfg(feature = "convolution")]
+
+use bevy::camera::visibility::RenderLayers;
+use bevy::camera::{Exposure, Hdr};
+use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::light::GlobalAmbientLight;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_caustics::convolution::{PoolRipples, PoolSurface};
+use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, DropPebble};
+use caustics_core::convolution::ConvolutionCaustics;
+use caustics_core::metrics::relative_l2;
+use std::f32::consts::PI;
+use std::time::Duration;
+
+const SIZE: u32 = 96;
+/// The pool and the view are `VIEW` metres across, centred on the origin, seen from above.
+const VIEW: f32 = 2.0;
+const DEPTH: f32 = 0.5;
+const EV100: f32 = 2.0;
+const SUN: Vec3 = Vec3::new(0.05, -1.0, -0.03);
+const ILLUMINANCE: f32 = 10.0;
+const IOR: f32 = 1.333;
+
+fn exposure() -> f32 {
+    1.0 / (1.2 * 2f32.powf(EV100))
+}
+
+/// The pool point (x, z from 0 to `VIEW`) seen at the centre of pixel (x, y): screen
+/// right = +x, screen up = −z.
+fn pool_point(x: u32, y: u32) -> Vec2 {
+    let s = VIEW / SIZE as f32;
+    Vec2::new((x as f32 + 0.5) * s, (y as f32 + 0.5) * s)
+}
+
+fn pool() -> PoolRipples {
+    PoolRipples { columns: 48, rows: 48, cell_size: VIEW / 48.0, depth: DEPTH, exponent: 40.0, extinction: 0.2, kernel_radius: 4, ..default() }
+}
+
+/// A floor receiver under the pool, the pool's water on render layer 1 (the camera
+/// sees the floor through it), a sun and a camera looking straight down.
+fn spawn_scene(renderer: &mut HeadlessRenderer) -> Entity {
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
+    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh());
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    world.spawn((Mesh3d(floor), MeshMaterial3d(white.clone()), CausticReceiver, Transform::from_xyz(0.0, -DEPTH, 0.0)));
+    let water = CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(IOR) };
+    let pool = world.spawn((pool(), water, MeshMaterial3d(white), RenderLayers::layer(1))).id();
+    world.spawn((
+        DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
+        Transform::default().looking_to(SUN, Vec3::Y),
+    ));
+    world.spawn((
+        Camera3d::default(),
+        target,
+        Hdr,
+        Tonemapping::None,
+        Exposure { ev100: EV100 },
+        Projection::from(OrthographicProjection { scale: VIEW / SIZE as f32, ..OrthographicProjection::default_3d() }),
+        Transform::from_xyz(0.0, 5.0, 0.0).looking_at(Vec3::new(0.0, -DEPTH, 0.0), Vec3::NEG_Z),
+    ));
+    pool
+}
+
+fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
+    renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Caustic irradiance per pixel: this image minus the one without caustics, over
+/// albedo/π · exposure (the composite's radiance).
+fn irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<f32> {
+    with.pixels.iter().zip(&without.pixels).map(|(a, b)| (a.x - b.x) * PI / exposure()).collect()
+}
+
+/// The CPU twin: the convolution of the main world's heights, interpolated between
+/// texel centres at each pixel's floor point as the projection does.
+fn cpu_twin(renderer: &mut HeadlessRenderer, pool_entity: Entity) -> Vec<f32> {
+    let world = renderer.world_mut();
+    let pool = world.get::<PoolRipples>(pool_entity).unwrap().clone();
+    let heightfield = world.get::<PoolSurface>(pool_entity).unwrap().heightfield().clone();
+    let light = pool.light(IOR, SUN.normalize(), ILLUMINANCE);
+    let floor = ConvolutionCaustics::new(&light, 48, 48, pool.cell_size).unwrap().irradiance(&heightfield).unwrap();
+    let at = |c: i32, r: i32| floor[(r.clamp(0, 47) * 48 + c.clamp(0, 47)) as usize];
+    (0..SIZE * SIZE)
+        .map(|i| {
+            let t = pool_point(i % SIZE, i / SIZE) / pool.cell_size - 0.5;
+            let (base, f) = (t.floor(), t - t.floor());
+            let (c, r) = (base.x as i32, base.y as i32);
+            let lerp = |a: f32, b: f32, s: f32| a + (b - a) * s;
+            lerp(lerp(at(c, r), at(c + 1, r), f.x), lerp(at(c, r + 1), at(c + 1, r + 1), f.x), f.y)
+        })
+        .collect()
+}
+
+fn set_technique(renderer: &mut HeadlessRenderer, pool: Entity, technique: CausticTechnique) {
+    renderer.world_mut().get_mut::<CausticGenerator>(pool).unwrap().technique = technique;
+}
+
+#[test]
+fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    let pool = spawn_scene(&mut renderer);
+
+    // A technique no pass draws: no convolution work, the baseline image.
+    set_technique(&mut renderer, pool, CausticTechnique::IlluminationTextures);
+    let without = render(&mut renderer, 3);
+    let report = renderer.pass_report();
+    assert_eq!((report.views("convolution"), report.views("pool floor")), (0, 0), "{report:?}");
+
+    // Still water: the floor gets L·T(θ)·cos θ·e^(−ε d) away from the walls.
+    set_technique(&mut renderer, pool, CausticTechnique::Convolution);
+    let still = irradiance(&render(&mut renderer, 3), &without);
+    let report = renderer.pass_report();
+    assert_eq!((report.views("convolution"), report.views("pool floor")), (1, 1), "{report:?}");
+    let cpu = cpu_twin(&mut renderer, pool);
+    let error = relative_l2(&still, &cpu);
+    eprintln!("GPU vs CPU twin, still water: relative L2 {error:.2e}");
+    assert!(error < 0.01, "still water: relative L2 {error}");
+
+    // Scripted pebbles, then time stops so that the image and the main world's heights
+    // belong to the same instant.
+    for (x, z) in [(0.3, -0.2), (-0.5, 0.4), (0.1, 0.6)] {
+        renderer.world_mut().write_message(DropPebble { position: Vec3::new(x, 0.0, z), strength: 0.004 });
+        render(&mut renderer, 4);
+    }
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::ZERO));
+    let rippled = irradiance(&render(&mut renderer, 3), &without);
+    let cpu = cpu_twin(&mut renderer, pool);
+    assert!(rippled.iter().all(|e| e.is_finite()));
+    let mean = cpu.iter().sum::<f32>() / cpu.len() as f32;
+    let spread = (cpu.iter().map(|e| (e - mean).powi(2)).sum::<f32>() / cpu.len() as f32).sqrt();
+    assert!(spread > 0.05 * mean, "the pebbles made no caustics (spread {spread}, mean {mean})");
+    // The GPU sums the ripples in f32 where the CPU sums them in f64, and stores E·exposure
+    // in half floats (11 significant bits): a few 10⁻³.
+    let error = relative_l2(&rippled, &cpu);
+    eprintln!("GPU vs CPU twin, rippled water: relative L2 {error:.2e} (mean {mean:.3} lux, spread {spread:.3})");
+    assert!(error < 0.01, "rippled water: relative L2 {error}");
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_convolution_pool.png");
+    render(&mut renderer, 1).save_png(&path, 0.5).unwrap();
+}
