@@ -148,4 +148,28 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     assert!(error < 0.01, "rippled water: relative L2 {error}");
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_convolution_pool.png");
     render(&mut renderer, 1).save_png(&path, 0.5).unwrap();
+
+    // Stiff cases, each leaving every pixel finite: a kernel wider than the pool, three
+    // hundred impulses at once, a grazing sun, extinction that absorbs everything and
+    // a lobe at the largest exponent.
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(20)));
+    let finite = |renderer: &mut HeadlessRenderer, case: &str| {
+        let image = render(renderer, 3);
+        assert!(image.pixels.iter().all(|p| p.is_finite()), "{case}: a pixel is not finite");
+        assert_eq!(renderer.pass_report().views("pool floor"), 1, "{case}: {:?}", renderer.pass_report());
+    };
+    renderer.world_mut().get_mut::<PoolRipples>(pool).unwrap().kernel_radius = 60;
+    finite(&mut renderer, "kernel wider than the pool");
+    for i in 0..300 {
+        let (x, z) = ((i % 17) as f32 / 17.0 - 0.5, (i % 23) as f32 / 23.0 - 0.5);
+        renderer.world_mut().write_message(DropPebble { position: Vec3::new(1.9 * x, 0.0, 1.9 * z), strength: 0.01 });
+    }
+    finite(&mut renderer, "300 impulses");
+    assert!(renderer.world_mut().get::<PoolSurface>(pool).unwrap().ripples().impulses().len() >= 300);
+    let mut sun = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
+    *sun.single_mut(renderer.world_mut()).unwrap() = Transform::default().looking_to(Vec3::new(1.0, -0.01, 0.0), Vec3::Y);
+    finite(&mut renderer, "grazing sun");
+    let mut settings = renderer.world_mut().get_mut::<PoolRipples>(pool).unwrap();
+    (settings.extinction, settings.exponent) = (1.0e30, caustics_core::convolution::MAX_EXPONENT);
+    finite(&mut renderer, "total extinction, narrowest lobe");
 }
