@@ -6,7 +6,9 @@
 //! `cargo run --example pool` opens a window when there is a display; otherwise, or
 //! with `--headless`, it drops a few scripted pebbles, renders offscreen and writes a
 //! PNG (`--out`, default `target/pool.png`). `--kernel R` sets the kernel radius
-//! (`(2R + 1)²` taps), `--depth M` the pool's depth.
+//! (`(2R + 1)²` taps), `--depth M` the pool's depth. With `--features egui`, a window
+//! of sliders sets the depth, the scattering a (and with it n = 2a), the extinction ε
+//! and the kernel radius while the water moves.
 
 #[path = "support/mod.rs"]
 mod support;
@@ -82,7 +84,35 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
         world.schedule_scope(Update, |_, schedule| {
             schedule.add_systems(drop_scripted_pebbles);
         });
+    } else {
+        #[cfg(feature = "egui")]
+        world.schedule_scope(bevy_caustics::debug_panel::bevy_egui::EguiPrimaryContextPass, |_, schedule| {
+            schedule.add_systems(pool_sliders);
+        });
     }
+}
+
+/// The pool's light settings as sliders (the window's `--features egui`).
+#[cfg(feature = "egui")]
+fn pool_sliders(
+    mut contexts: bevy_caustics::debug_panel::bevy_egui::EguiContexts,
+    mut pools: Query<&mut PoolRipples>,
+) -> Result {
+    use bevy_caustics::debug_panel::bevy_egui::egui::{Slider, Window};
+    let Ok(mut pool) = pools.single_mut() else { return Ok(()) };
+    let mut settings = pool.clone();
+    Window::new("Pool").show(contexts.ctx_mut()?, |ui| {
+        ui.add(Slider::new(&mut settings.depth, 0.1..=4.0).text("depth (m)"));
+        // The convolution's cosine lobe stands for the Gaussian exp(−a(1 − cos²)) with n = 2a.
+        let mut a = settings.exponent / 2.0;
+        ui.add(Slider::new(&mut a, 1.0..=5000.0).logarithmic(true).text("scattering a"));
+        settings.exponent = 2.0 * a;
+        ui.label(format!("cosine exponent n = 2a = {:.0}", settings.exponent));
+        ui.add(Slider::new(&mut settings.extinction, 0.0..=2.0).text("extinction ε (1/m)"));
+        ui.add(Slider::new(&mut settings.kernel_radius, 0..=32).text("kernel radius (texels)"));
+    });
+    pool.set_if_neq(settings);
+    Ok(())
 }
 
 /// Four tiled walls from the floor to a little above the water.

@@ -4,6 +4,8 @@
 
 use crate::{CausticGenerator, CausticPassReport, CausticReceiver, InvalidCausticParams, ParticipatingMedium};
 use bevy::prelude::*;
+/// The egui integration the panel uses, for applications that add windows of their own.
+pub use bevy_egui;
 use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 
 /// Adds the "Caustics" window (and `EguiPlugin` if the app has none).
