@@ -1,12 +1,19 @@
 //! `caustics bench`: every method at several quality settings on the built-in scenes,
 //! timed, with its error against a high-photon-count reference. Writes
 //! `bench.csv`, `bench.md`, `bench.png` (error against run time, log–log, all) and
-//! `bench-<scene>.png` (one scene each).
+//! `bench-<scene>.png` (one scene each). On the pool, `bench.md` also tabulates the
+//! convolution form of Trendall & Stewart 2000 against their direct integral (eq. 2).
 
 use crate::plot::{Series, plot_error_vs_time};
 use crate::{prepare_output, progress};
-use caustics_core::estimate::IrradianceGrid;
+use caustics_core::convolution::{
+    Boundary, ConvolutionCaustics, ConvolutionSettings, Heightfield, MAX_EXPONENT, convolution_irradiance, direct_irradiance,
+};
+use caustics_core::estimate::{GridRegion, IrradianceGrid};
+use caustics_core::glam::{Vec2, Vec3};
 use caustics_core::metrics::{relative_l1, relative_l2};
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::LightKind;
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{IntensityMode, VolumeSettings, build_scene_volumes};
@@ -38,9 +45,11 @@ pub struct Measurement {
     pub seconds: f64,
     /// Caustic irradiance on the scene's region against the reference.
     pub error: Errors,
-    /// For the volumes: against the method's own limit (constant intensity on a 4×
-    /// finer generator than the finest measured), which isolates the error the
-    /// tessellation causes from the single-bounce model's.
+    /// Against the method's own limit, which isolates the error of its approximations
+    /// from its model's. The volumes: constant intensity on a 4× finer generator than
+    /// the finest measured (the tessellation's error). The convolution: the direct
+    /// integral of eq. 2 on the same heightfield and footprint with scattering on
+    /// ([`Convolution`]; the error of the three-convolution expansion).
     pub error_vs_limit: Option<Errors>,
 }
 
@@ -68,6 +77,15 @@ pub trait BenchMethod {
     /// Irradiance per cell of the built-in scene `name` (mean of RGB, row-major) and
     /// the work done.
     fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String>;
+    /// How `quality` reads in the tables.
+    fn quality_label(&self, quality: u64) -> String {
+        quality.to_string()
+    }
+    /// The error against the method's own limit at `quality`, for methods whose limit
+    /// is computed per quality; not timed.
+    fn error_vs_own_limit(&self, _name: &str, _scene: &BenchScene, _quality: u64) -> Result<Option<Errors>, String> {
+        Ok(None)
+    }
 }
 
 /// The ground-truth tracer with `quality` photons per light.
@@ -125,27 +143,237 @@ impl BenchMethod for WarpedVolumes {
         let settings = VolumeSettings { intensity: self.intensity, ..VolumeSettings::default() };
         let set = build_scene_volumes(&tessellated.scene, &settings);
         let region = scene.region;
-        let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
-        let points: Vec<_> = (0..region.nv)
-            .flat_map(|r| (0..region.nu).map(move |c| (r, c)))
-            .flat_map(|(r, c)| {
-                let corner = region.cell_center(r, c) - 0.5 * (du + dv);
-                (0..SUPERSAMPLE * SUPERSAMPLE).map(move |k| {
-                    let (i, j) = ((k % SUPERSAMPLE) as f32 + 0.5, (k / SUPERSAMPLE) as f32 + 0.5);
-                    corner + du * (i / SUPERSAMPLE as f32) + dv * (j / SUPERSAMPLE as f32)
-                })
-            })
-            .collect();
+        let points = cell_sample_points(&region);
         // The floor faces up (the region's `edge_u × edge_v` may point either way).
         let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
         let normals = vec![up; points.len()];
-        let irradiance: Vec<f32> = set
-            .irradiance_at(&points, &normals, &settings)
-            .chunks(SUPERSAMPLE * SUPERSAMPLE)
-            .map(|cell| cell.iter().map(|e| (e.x + e.y + e.z) / 3.0).sum::<f32>() / cell.len() as f32)
-            .collect();
-        Ok((irradiance, set.volumes.len() as u64))
+        let irradiance: Vec<f32> = set.irradiance_at(&points, &normals, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
+        Ok((cell_means(&irradiance), set.volumes.len() as u64))
     }
+}
+
+/// `SUPERSAMPLE`² points spread evenly over each cell of the region, cell by cell.
+fn cell_sample_points(region: &GridRegion) -> Vec<Vec3> {
+    let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
+    (0..region.nv)
+        .flat_map(|r| (0..region.nu).map(move |c| (r, c)))
+        .flat_map(|(r, c)| {
+            let corner = region.cell_center(r, c) - 0.5 * (du + dv);
+            (0..SUPERSAMPLE * SUPERSAMPLE).map(move |k| {
+                let (i, j) = ((k % SUPERSAMPLE) as f32 + 0.5, (k / SUPERSAMPLE) as f32 + 0.5);
+                corner + du * (i / SUPERSAMPLE as f32) + dv * (j / SUPERSAMPLE as f32)
+            })
+        })
+        .collect()
+}
+
+/// The mean of each cell's values at [`cell_sample_points`].
+fn cell_means(samples: &[f32]) -> Vec<f32> {
+    samples.chunks(SUPERSAMPLE * SUPERSAMPLE).map(|cell| cell.iter().sum::<f32>() / cell.len() as f32).collect()
+}
+
+/// Pool caustics by convolution (Trendall & Stewart 2000 §4.1): the core's FFT form of
+/// eq. 2 on the traced pool's own water surface ([`PoolWater`]), at the heightfield
+/// resolutions and kernel radii of [`CONVOLUTION_GRIDS`], which `quality` indexes.
+///
+/// Against the reference, scattering off. The tracer's light goes straight along L̂t,
+/// the limit n → ∞ of the lobe (L̂t·P̂)ⁿ (n = 0 is the opposite: a flat lobe spreading
+/// each texel's light over the whole footprint). A footprint can only hold a lobe so
+/// narrow, so each run takes the narrowest one its kernel holds to three standard
+/// deviations: P̂_vⁿ ≈ exp(−nρ²/2d²) at ρ = r·cell gives n = 9 (d / r·cell)². The
+/// expansion about the vertical (§4.1) moves a lobe by d L̂t,x / L̂t,v only to first
+/// order, so a lobe narrower than that shift (0.2 m under the pool's sun, 20° off
+/// zenith) cannot land where the light does: the errors show it.
+///
+/// Against the direct integral, the form's own limit: scattering on, a = 50 and
+/// n = 2a = 100, on the same heightfield and footprint, over the same region.
+pub struct Convolution;
+
+/// `(texels along a side of the pool's water, kernel radius r)`, cheapest first.
+pub const CONVOLUTION_GRIDS: [(usize, usize); 8] =
+    [(128, 4), (128, 8), (128, 16), (256, 8), (256, 16), (256, 32), (512, 16), (512, 32)];
+
+/// The Gaussian lobe `a` and the cosine power `n = 2a` of "scattering on".
+const SCATTERING_ON: (f32, f32) = (50.0, 100.0);
+
+fn convolution_grid(quality: u64) -> Result<(usize, usize), String> {
+    CONVOLUTION_GRIDS.get(quality as usize).copied().ok_or_else(|| format!("convolution: no grid {quality}"))
+}
+
+impl BenchMethod for Convolution {
+    fn name(&self) -> &'static str {
+        "convolution"
+    }
+    fn qualities(&self, scene: &str, quick: bool) -> Vec<u64> {
+        match (scene, quick) {
+            ("pool", false) => (0..CONVOLUTION_GRIDS.len() as u64).collect(),
+            ("pool", true) => vec![1, 4],
+            _ => vec![],
+        }
+    }
+    fn run(&self, _name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
+        let (texels, radius) = convolution_grid(quality)?;
+        let water = PoolWater::new(scene, texels)?;
+        let cell = water.heightfield.cell_size();
+        let exponent = (9.0 * (water.settings.depth / (radius as f32 * cell)).powi(2)).min(MAX_EXPONENT);
+        let settings = ConvolutionSettings { scattering: 0.5 * exponent, exponent, kernel_radius: radius, ..water.settings };
+        let mut caustics = ConvolutionCaustics::new(&settings, texels, texels, cell).map_err(|e| e.to_string())?;
+        let floor = caustics.irradiance(&water.heightfield).map_err(|e| e.to_string())?;
+        Ok((water.on_region(&floor, &scene.region), (texels * texels) as u64))
+    }
+    fn quality_label(&self, quality: u64) -> String {
+        convolution_grid(quality).map_or_else(|e| e, |(texels, radius)| format!("{texels}² r{radius}"))
+    }
+    fn error_vs_own_limit(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<Option<Errors>, String> {
+        let (texels, radius) = convolution_grid(quality)?;
+        let water = PoolWater::new(scene, texels)?;
+        let (scattering, exponent) = SCATTERING_ON;
+        let settings = ConvolutionSettings { scattering, exponent, kernel_radius: radius, ..water.settings };
+        let start = Instant::now();
+        let direct = direct_irradiance(&water.heightfield, &settings).map_err(|e| e.to_string())?;
+        let seconds = start.elapsed().as_secs_f64();
+        let convolution = convolution_irradiance(&water.heightfield, &settings).map_err(|e| e.to_string())?;
+        let region = &scene.region;
+        let errors = Errors::between(&water.on_region(&convolution, region), &water.on_region(&direct, region));
+        let label = self.quality_label(quality);
+        eprintln!("{name:>8} {:>16} {label:>10}: {seconds:8.3} s direct integral, relative L2 {:.4} (scattering on)", self.name(), errors.l2);
+        Ok(Some(errors))
+    }
+}
+
+/// The traced pool's water as the convolution's input: the water mesh's heights at the
+/// texel centres, which fall on its vertices (`texels` must divide its cells an even
+/// number of times), over the mesh's whole square; the depth is their mean above the
+/// floor, the rest level. The scene's sun, its irradiance and the water's IOR; ε = 0
+/// (the traced water does not absorb). Walls: [`Boundary::Mirror`] at the mesh's edges.
+/// The traced water has none, but the region lies 1 m inside them and no footprint
+/// here reaches that far, so no light reaching the region meets one.
+struct PoolWater {
+    heightfield: Heightfield,
+    /// World `(x, z)` of texel `(0, 0)`'s outer corner.
+    origin: Vec2,
+    /// The scene's light and water; lobe and kernel left to the caller.
+    settings: ConvolutionSettings,
+}
+
+impl PoolWater {
+    fn new(scene: &BenchScene, texels: usize) -> Result<Self, String> {
+        let ([generator], [light]) = (scene.scene.generators.as_slice(), scene.scene.lights.as_slice()) else {
+            return Err("convolution: the scene must have one water surface and one light".into());
+        };
+        let (SpecularInteraction::Refract { ior, .. }, LightKind::Directional { direction, irradiance }) =
+            (generator.interaction, light.kind)
+        else {
+            return Err("convolution: the water must refract and the light must be directional".into());
+        };
+        let positions = generator.mesh.positions();
+        let side = positions.len().isqrt();
+        if side * side != positions.len() || side < 2 || (side - 1) % (2 * texels) != 0 {
+            return Err(format!("convolution: {texels}² texel centres do not fall on the {side}² water vertices"));
+        }
+        let stride = (side - 1) / texels;
+        let vertex = |column: usize, row: usize| positions[(row * stride + stride / 2) * side + column * stride + stride / 2];
+        let floor = scene.region.origin.y;
+        let above_floor: Vec<f32> =
+            (0..texels).flat_map(|row| (0..texels).map(move |column| (column, row))).map(|(c, r)| vertex(c, r).y - floor).collect();
+        let depth = (above_floor.iter().map(|&h| h as f64).sum::<f64>() / above_floor.len() as f64) as f32;
+        let (first, last) = (positions[0], positions[side * side - 1]);
+        let cell = (last.x - first.x) / texels as f32;
+        let heights = above_floor.iter().map(|h| h - depth).collect();
+        let heightfield = Heightfield::new(texels, texels, cell, heights).map_err(|e| e.to_string())?;
+        let settings = ConvolutionSettings {
+            ior,
+            sun_direction: direction,
+            sun_irradiance: irradiance * light.color.element_sum() / 3.0,
+            depth,
+            extinction: 0.0,
+            boundary: Boundary::Mirror,
+            ..ConvolutionSettings::default()
+        };
+        Ok(Self { heightfield, origin: Vec2::new(first.x, first.z), settings })
+    }
+
+    /// The floor irradiance below the texel centres, interpolated bilinearly to the
+    /// region's sample points and averaged per cell, as the tracer bins flux per cell.
+    fn on_region(&self, floor: &[f32], region: &GridRegion) -> Vec<f32> {
+        let (texels, cell) = (self.heightfield.columns(), self.heightfield.cell_size());
+        let last = (texels - 1) as f32;
+        let samples: Vec<f32> = cell_sample_points(region)
+            .iter()
+            .map(|p| {
+                let u = ((p.x - self.origin.x) / cell - 0.5).clamp(0.0, last);
+                let v = ((p.z - self.origin.y) / cell - 0.5).clamp(0.0, last);
+                let (column, row) = ((u as usize).min(texels - 2), (v as usize).min(texels - 2));
+                let (fu, fv) = (u - column as f32, v - row as f32);
+                let at = |c: usize, r: usize| floor[r * texels + c];
+                let near = at(column, row) + fu * (at(column + 1, row) - at(column, row));
+                let far = at(column, row + 1) + fu * (at(column + 1, row + 1) - at(column, row + 1));
+                near + fv * (far - near)
+            })
+            .collect();
+        cell_means(&samples)
+    }
+}
+
+/// The convolution form against the direct integral of eq. 2 on the pool's water at
+/// 128² texels, one of n (with a = n/2), depth, slope (the heights scaled) and sun
+/// angle (in the pool's sun's azimuth) varied at a time about n = 100, the pool's
+/// depth and waves and a vertical sun, then the sun again on waves a tenth as steep;
+/// ε = 0; each footprint holds its lobe to three
+/// standard deviations, r = ⌈3d / (√n·cell)⌉. Contrast is the direct pattern's relative
+/// L2 against its mean, what a uniform floor would score. Over the whole heightfield.
+fn convolution_vs_direct(scene: &BenchScene) -> Result<String, String> {
+    let water = PoolWater::new(scene, 128)?;
+    let (texels, cell) = (water.heightfield.columns(), water.heightfield.cell_size());
+    let sun = water.settings.sun_unit();
+    let azimuth = Vec2::new(sun.x, sun.z).normalize_or(Vec2::X);
+    let (pool_depth, pool_sun) = (water.settings.depth, sun.y.abs().acos().to_degrees());
+    let cases: Vec<(&str, f32, f32, f32, f32)> = [10.0, 30.0, 100.0, 300.0, 1000.0]
+        .map(|n| ("n", n, pool_depth, 1.0, 0.0))
+        .into_iter()
+        .chain([0.2, 0.4, 1.6, 3.2].map(|depth| ("depth", 100.0, depth, 1.0, 0.0)))
+        .chain([0.1, 0.3].map(|scale| ("slope", 100.0, pool_depth, scale, 0.0)))
+        .chain([1.0, 2.0, 5.0, 10.0, pool_sun].map(|angle| ("sun", 100.0, pool_depth, 1.0, angle)))
+        .chain([0.0, 1.0, 2.0, 5.0, 10.0].map(|angle| ("sun, slope", 100.0, pool_depth, 0.1, angle)))
+        .collect();
+    let mut md = format!(
+        "\nConvolution form against the direct integral (Trendall & Stewart 2000, eq. 2) on the pool's water, \
+         {texels}² texels of {:.1} cm, one setting varied at a time about n = 100 (a = n/2), depth {pool_depth:.2} m, \
+         the pool's waves and a vertical sun, then the sun again on waves a tenth as steep; ε = 0; kernel radius r holds the lobe to 3σ. \
+         Contrast: the direct pattern against its own mean (a uniform floor's error).\n\n\
+         | varied | n | depth (m) | max slope | sun (° off zenith) | r | contrast | relative L2 | relative L1 |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        100.0 * cell
+    );
+    for (varied, exponent, depth, slope_scale, sun_degrees) in cases {
+        let heights = water.heightfield.heights().iter().map(|h| slope_scale * h).collect();
+        let heightfield = Heightfield::new(texels, texels, cell, heights).map_err(|e| e.to_string())?;
+        let (sin, cos) = sun_degrees.to_radians().sin_cos();
+        let kernel_radius = (3.0 * depth / (exponent.sqrt() * cell)).ceil() as usize;
+        let settings = ConvolutionSettings {
+            scattering: 0.5 * exponent,
+            exponent,
+            depth,
+            sun_direction: Vec3::new(sin * azimuth.x, -cos, sin * azimuth.y),
+            kernel_radius,
+            ..water.settings
+        };
+        let direct = direct_irradiance(&heightfield, &settings).map_err(|e| e.to_string())?;
+        let convolution = convolution_irradiance(&heightfield, &settings).map_err(|e| e.to_string())?;
+        let mean = direct.iter().map(|&e| e as f64).sum::<f64>() / direct.len() as f64;
+        let contrast = relative_l2(&vec![mean as f32; direct.len()], &direct);
+        let errors = Errors::between(&convolution, &direct);
+        let max_slope = (0..texels * texels)
+            .map(|i| heightfield.slope(i % texels, i / texels, settings.boundary).length())
+            .fold(0.0, f64::max);
+        writeln!(
+            md,
+            "| {varied} | {exponent} | {depth:.2} | {max_slope:.2} | {sun_degrees:.1} | {kernel_radius} | {contrast:.3} | {:.3} | {:.3} |",
+            errors.l2, errors.l1
+        )
+        .unwrap();
+    }
+    Ok(md)
 }
 
 /// Traces `photons` per light into the scene's grid, BVH build included.
@@ -165,6 +393,8 @@ fn trace_grid(
 pub fn run(args: BenchArgs) -> Result<(), String> {
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];
     methods.extend(VOLUME_METHODS.iter().map(|m| m as &dyn BenchMethod));
+    methods.push(&Convolution);
+    let mut notes = String::new();
     let reference_photons: u64 = if args.quick { 1 << 21 } else { 1 << 26 };
     let mut rows = Vec::new();
     for name in &args.scenes {
@@ -190,13 +420,17 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                 let (image, work) = method.run(name, &scene, quality)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let error = Errors::between(&image, &truth);
+                let label = method.quality_label(quality);
+                eprintln!("{name:>8} {:>16} {label:>10}: {seconds:8.3} s, relative L2 {:.4}", method.name(), error.l2);
                 let is_volumes = VOLUME_METHODS.iter().any(|m| m.name == method.name());
-                let error_vs_limit = volumes_limit.as_ref().filter(|_| is_volumes).map(|limit| Errors::between(&image, limit));
-                eprintln!("{name:>8} {:>16} {quality:>10}: {seconds:8.3} s, relative L2 {:.4}", method.name(), error.l2);
+                let error_vs_limit = match volumes_limit.as_ref().filter(|_| is_volumes) {
+                    Some(limit) => Some(Errors::between(&image, limit)),
+                    None => method.error_vs_own_limit(name, &scene, quality)?,
+                };
                 rows.push(Measurement {
                     scene: name.clone(),
                     method: method.name().into(),
-                    quality: quality.to_string(),
+                    quality: label,
                     work,
                     seconds,
                     error,
@@ -204,9 +438,14 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                 });
             }
         }
+        if name == "pool" {
+            let start = Instant::now();
+            notes.push_str(&convolution_vs_direct(&scene)?);
+            eprintln!("{name:>8}: convolution against the direct integral tabulated in {:.3} s", start.elapsed().as_secs_f64());
+        }
     }
     let throughput = photon_throughput(if args.quick { 1 << 20 } else { 1 << 23 })?;
-    write_outputs(&args.out, &rows, throughput)
+    write_outputs(&args.out, &rows, throughput, &notes)
 }
 
 /// Photons per second of the reference tracer on the 128 × 128-vertex rippled pool.
@@ -236,7 +475,8 @@ fn convergence_slope(rows: &[&Measurement]) -> f64 {
     sxy / sxx
 }
 
-fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64) -> Result<(), String> {
+/// Writes the tables and plots; `notes` go at the end of `bench.md`.
+fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, notes: &str) -> Result<(), String> {
     let csv_path = prepare_output(&dir.join("bench.csv"))?;
     let limit = |r: &Measurement, sep: &str| {
         r.error_vs_limit.map_or(sep.to_string(), |e| format!("{:.4}{sep}{:.4}", e.l2, e.l1))
@@ -252,9 +492,11 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64) -
 
     let mut md = String::from(
         "Quality: photons for the reference tracer, generator cells (segments around the ring, \
-         grid cells per side of the pool) for the volumes; work: photons or volumes.\n\n\
-         Relative L2 and L1 against the reference tracer; for the volumes also against their own limit \
-         (constant intensity on a 4× finer generator than the finest here).\n\n\
+         grid cells per side of the pool) for the volumes, texels along a side of the pool's 4 m water and \
+         kernel radius for the convolution; work: photons, volumes or texels.\n\n\
+         Relative L2 and L1 against the reference tracer (the convolution with the narrowest lobe its kernel holds); \
+         also against the method's own limit: for the volumes constant intensity on a 4× finer generator than the \
+         finest here, for the convolution the direct integral of eq. 2 with scattering on (a = 50, n = 100).\n\n\
          | scene | method | quality | work | time (s) | relative L2 | relative L1 | L2 vs limit | L1 vs limit |\n\
          |---|---|---|---:|---:|---:|---:|---:|---:|\n",
     );
@@ -279,6 +521,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64) -
         }
     }
     md.push_str(&paper_claim(rows));
+    md.push_str(notes);
     writeln!(md, "\nReference tracer throughput: {:.2} M photons/s on {} threads.", throughput / 1e6, rayon::current_num_threads())
         .unwrap();
     let md_path = dir.join("bench.md");
@@ -332,4 +575,32 @@ fn paper_claim(rows: &[Measurement]) -> String {
         .unwrap();
     }
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_pool_water_is_the_traced_mesh_at_its_texel_centres() {
+        let scene = wave_pool(129, 32);
+        let water = PoolWater::new(&scene, 32).unwrap();
+        let (heightfield, depth) = (&water.heightfield, water.settings.depth);
+        assert_eq!(heightfield.cell_size(), 0.125);
+        let positions = scene.scene.generators[0].mesh.positions();
+        // Texel (3, 5) has its centre on vertex (3·4 + 2, 5·4 + 2) of the 129² grid.
+        let vertex = positions[22 * 129 + 14];
+        let centre = water.origin + heightfield.cell_size() * Vec2::new(3.5, 5.5);
+        assert!((Vec2::new(vertex.x, vertex.z) - centre).length() < 1e-5);
+        assert!((heightfield.height(3, 5) + depth - vertex.y).abs() < 1e-5);
+        assert!((depth - 0.8).abs() < 0.01, "{depth}");
+        // A uniform floor stays uniform on the region; a ramp along x is sampled at the cells' centres.
+        assert!(water.on_region(&[2.0; 32 * 32], &scene.region).iter().all(|&e| (e - 2.0).abs() < 1e-6));
+        let ramp: Vec<f32> = (0..32 * 32).map(|i| (i % 32) as f32).collect();
+        let on_region = water.on_region(&ramp, &scene.region);
+        let x = scene.region.cell_center(0, 7).x;
+        assert!((on_region[7] - ((x - water.origin.x) / 0.125 - 0.5)).abs() < 1e-4);
+        // Texel centres between the vertices: refused.
+        assert!(PoolWater::new(&scene, 128).is_err());
+    }
 }
