@@ -6,32 +6,27 @@
 
 #![cfg(feature = "convolution")]
 
+mod support;
+
 use bevy::camera::visibility::RenderLayers;
-use bevy::camera::{Exposure, Hdr};
-use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_caustics::convolution::{PoolRipples, PoolSurface};
-use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
+use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, DropPebble};
 use caustics_core::convolution::ConvolutionCaustics;
 use caustics_core::metrics::relative_l2;
-use std::f32::consts::PI;
 use std::time::Duration;
+use support::{caustic_irradiance, render};
 
 const SIZE: u32 = 96;
 /// The pool and the view are `VIEW` metres across, centred on the origin, seen from above.
 const VIEW: f32 = 2.0;
 const DEPTH: f32 = 0.5;
-const EV100: f32 = 2.0;
 const SUN: Vec3 = Vec3::new(0.05, -1.0, -0.03);
 const ILLUMINANCE: f32 = 10.0;
 const IOR: f32 = 1.333;
-
-fn exposure() -> f32 {
-    1.0 / (1.2 * 2f32.powf(EV100))
-}
 
 /// The pool point (x, z from 0 to `VIEW`) seen at the centre of pixel (x, y): screen
 /// right = +x, screen up = −z.
@@ -61,26 +56,8 @@ fn spawn_scene(renderer: &mut HeadlessRenderer) -> Entity {
         DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
         Transform::default().looking_to(SUN, Vec3::Y),
     ));
-    world.spawn((
-        Camera3d::default(),
-        target,
-        Hdr,
-        Tonemapping::None,
-        Exposure { ev100: EV100 },
-        Projection::from(OrthographicProjection { scale: VIEW / SIZE as f32, ..OrthographicProjection::default_3d() }),
-        Transform::from_xyz(0.0, 5.0, 0.0).looking_at(Vec3::new(0.0, -DEPTH, 0.0), Vec3::NEG_Z),
-    ));
+    world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::new(0.0, -DEPTH, 0.0)));
     pool
-}
-
-fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
-    renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// Caustic irradiance per pixel: this image minus the one without caustics, over
-/// albedo/π · exposure (the composite's radiance).
-fn irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<f32> {
-    with.pixels.iter().zip(&without.pixels).map(|(a, b)| (a.x - b.x) * PI / exposure()).collect()
 }
 
 /// The CPU twin: the convolution of the main world's heights, interpolated between
@@ -120,7 +97,7 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
 
     // Still water: the floor gets L·T(θ)·cos θ·e^(−ε d) away from the walls.
     set_technique(&mut renderer, pool, CausticTechnique::Convolution);
-    let still = irradiance(&render(&mut renderer, 3), &without);
+    let still = caustic_irradiance(&render(&mut renderer, 3), &without);
     let report = renderer.pass_report();
     assert_eq!((report.views("convolution"), report.views("pool floor")), (1, 1), "{report:?}");
     let cpu = cpu_twin(&mut renderer, pool);
@@ -135,7 +112,7 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
         render(&mut renderer, 4);
     }
     renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::ZERO));
-    let rippled = irradiance(&render(&mut renderer, 3), &without);
+    let rippled = caustic_irradiance(&render(&mut renderer, 3), &without);
     let cpu = cpu_twin(&mut renderer, pool);
     assert!(rippled.iter().all(|e| e.is_finite()));
     let mean = cpu.iter().sum::<f32>() / cpu.len() as f32;

@@ -4,9 +4,9 @@
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
+mod support;
+
 use bevy::camera::visibility::RenderLayers;
-use bevy::camera::{Exposure, Hdr};
-use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
@@ -19,18 +19,13 @@ use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
 use caustics_core::volumes::{MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
-use std::f32::consts::PI;
+use support::{caustic_irradiance, exposure, render};
 
 const SIZE: u32 = 96;
 /// The view is `VIEW` metres across, centred on the origin, looking down.
 const VIEW: f32 = 2.0;
-const EV100: f32 = 2.0;
 const SUN: Vec3 = Vec3::new(0.25, -1.0, -0.15);
 const ILLUMINANCE: f32 = 10.0;
-
-fn exposure() -> f32 {
-    1.0 / (1.2 * 2f32.powf(EV100))
-}
 
 /// World point seen at the centre of pixel (x, y): screen right = +x, screen up = −z.
 fn world_at(x: u32, y: u32) -> Vec3 {
@@ -59,22 +54,8 @@ fn spawn_scene(renderer: &mut HeadlessRenderer, generator_mesh: &TriMesh, genera
         DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
         Transform::default().looking_to(sun, Vec3::Y),
     ));
-    world.spawn((
-        Camera3d::default(),
-        target,
-        Hdr,
-        Tonemapping::None,
-        Exposure { ev100: EV100 },
-        Projection::from(OrthographicProjection { scale: VIEW / SIZE as f32, ..OrthographicProjection::default_3d() }),
-        Transform::from_xyz(0.0, 5.0, 0.0).looking_at(Vec3::ZERO, Vec3::NEG_Z),
-    ));
+    world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
     generator
-}
-
-/// Caustic irradiance per pixel: this image minus the one without caustics, over
-/// albedo/π · exposure (the composite's radiance).
-fn irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<f32> {
-    with.pixels.iter().zip(&without.pixels).map(|(a, b)| (a.x - b.x) * PI / exposure()).collect()
 }
 
 /// The CPU twin's volumes for the scene `spawn_scene` builds.
@@ -98,10 +79,6 @@ fn cpu_twin(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, setting
 
 fn set_technique(renderer: &mut HeadlessRenderer, generator: Entity, technique: CausticTechnique) {
     renderer.world_mut().get_mut::<CausticGenerator>(generator).unwrap().technique = technique;
-}
-
-fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
-    renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn save(image: &RenderedImage, name: &str) {
@@ -134,7 +111,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     // (11 significant bits, ~5·10⁻⁴), and pixel centres on a caustic triangle's edge
     // may fall on either side of it: a relative L2 of a few 10⁻³ is the expected
     // agreement; 1 % is the bound.
-    let gpu = irradiance(&with, &without);
+    let gpu = caustic_irradiance(&with, &without);
     let cpu = cpu_twin(&mesh, water.specular_interaction(), SUN, &settings);
     assert!(gpu.iter().all(|e| e.is_finite()));
     let mean = cpu.iter().sum::<f32>() / cpu.len() as f32;
@@ -155,7 +132,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         set_technique(&mut renderer, generator, CausticTechnique::Convolution);
         let without = render(&mut renderer, 3);
         set_technique(&mut renderer, generator, CausticTechnique::WarpedVolumes);
-        let gpu = irradiance(&render(&mut renderer, 3), &without);
+        let gpu = caustic_irradiance(&render(&mut renderer, 3), &without);
         let error = relative_l2(&gpu, &cpu_twin(&mesh, water.specular_interaction(), SUN, &settings));
         eprintln!("GPU vs CPU twin, {intensity:?}, {msaa:?}: {error:.2e}");
         assert!(error < 0.01, "{intensity:?} {msaa:?}: relative L2 {error}");
