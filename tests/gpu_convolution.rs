@@ -1,6 +1,7 @@
 //! Convolution caustics on a real adapter (lavapipe in CI) against their CPU twin in
-//! `caustics_core::convolution`: the ripples of scripted pebbles and the floor
-//! irradiance they make, and the pass report (no pool, no convolution pass).
+//! `caustics_core::convolution`: the heights of scripted pebbles' ripples and the floor
+//! irradiance they make, the pass report (no pool work, no convolution pass) and
+//! stiff cases that must leave every pixel finite.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
@@ -12,7 +13,7 @@ use bevy::camera::visibility::RenderLayers;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use bevy_caustics::convolution::{PoolRipples, PoolSurface};
+use bevy_caustics::convolution::{PoolGpu, PoolRipples, PoolSurface};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, DropPebble};
 use caustics_core::convolution::ConvolutionCaustics;
@@ -80,6 +81,25 @@ fn cpu_twin(renderer: &mut HeadlessRenderer, pool_entity: Entity) -> Vec<f32> {
         .collect()
 }
 
+/// The heights the GPU computed in the last frame, copied back from its buffer.
+fn gpu_heights(renderer: &mut HeadlessRenderer, pool: Entity) -> Vec<f32> {
+    use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    let world = renderer.app.sub_app_mut(bevy::render::RenderApp).world_mut();
+    let (device, queue) = (world.resource::<RenderDevice>().clone(), world.resource::<RenderQueue>().clone());
+    let heights = world.resource::<PoolGpu>().heights(pool).expect("the pool's heights are on the GPU").clone();
+    let usage = BufferUsages::COPY_DST | BufferUsages::MAP_READ;
+    let staging = device.create_buffer(&BufferDescriptor { label: Some("heights_readback"), size: heights.size(), usage, mapped_at_creation: false });
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
+    encoder.copy_buffer_to_buffer(&heights, 0, &staging, 0, heights.size());
+    queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    slice.map_async(MapMode::Read, |mapped| mapped.expect("the readback buffer maps"));
+    device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
+    let bytes = slice.get_mapped_range();
+    bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+}
+
 fn set_technique(renderer: &mut HeadlessRenderer, pool: Entity, technique: CausticTechnique) {
     renderer.world_mut().get_mut::<CausticGenerator>(pool).unwrap().technique = technique;
 }
@@ -113,6 +133,14 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     }
     renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::ZERO));
     let rippled = caustic_irradiance(&render(&mut renderer, 3), &without);
+    // The same ripples on both sides: the GPU's f32 sums against the core's f64 ones.
+    let gpu = gpu_heights(&mut renderer, pool);
+    let cpu = renderer.world_mut().get::<PoolSurface>(pool).unwrap().heightfield().heights().to_vec();
+    let highest = cpu.iter().fold(0.0f32, |m, h| m.max(h.abs()));
+    let worst = gpu.iter().zip(&cpu).map(|(g, c)| (g - c).abs()).fold(0.0f32, f32::max);
+    eprintln!("GPU vs CPU heights: largest difference {worst:.2e} m, highest wave {highest:.2e} m");
+    assert_eq!(gpu.len(), cpu.len());
+    assert!(highest > 1e-4 && worst < 1e-4 * highest, "heights differ by {worst} (waves up to {highest})");
     let cpu = cpu_twin(&mut renderer, pool);
     assert!(rippled.iter().all(|e| e.is_finite()));
     let mean = cpu.iter().sum::<f32>() / cpu.len() as f32;

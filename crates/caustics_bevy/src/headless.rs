@@ -99,7 +99,10 @@ impl HeadlessRenderer {
             DefaultPlugins
                 .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
                 .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
-                .disable::<WinitPlugin>(),
+                .disable::<WinitPlugin>()
+                // Each update renders the frame it extracted, and the render world stays
+                // in the app where tests can read the GPU's buffers.
+                .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>(),
         )
         .add_plugins(CausticsPlugin);
         app.finish();
@@ -126,7 +129,7 @@ impl HeadlessRenderer {
     }
 
     /// Runs `frames` updates, then reads back the next frame that reaches the image
-    /// (a few more updates: rendering is pipelined and readback asynchronous).
+    /// (a few more updates: the readback is asynchronous).
     pub fn render(&mut self, frames: u32) -> Result<RenderedImage, HeadlessError> {
         for _ in 0..frames {
             self.app.update();

@@ -11,6 +11,7 @@
 mod render;
 mod ripples;
 
+pub use render::PoolGpu;
 pub use ripples::{PoolKernels, PoolSurface};
 
 use bevy::prelude::*;

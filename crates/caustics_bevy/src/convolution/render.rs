@@ -59,7 +59,7 @@ struct ExtractedPool {
 struct ExtractedPools(HashMap<MainEntity, ExtractedPool>);
 
 /// Render world: a pool's buffers on the GPU and the bind groups over them.
-pub(super) struct PoolBuffers {
+struct PoolBuffers {
     texels: u32,
     uniform: UniformBuffer<GpuPool>,
     images: StorageBuffer<Vec<Vec4>>,
@@ -70,9 +70,17 @@ pub(super) struct PoolBuffers {
     compute: Option<BindGroup>,
 }
 
-/// Render world: every pool's buffers.
+/// Render world: every pool's buffers on the GPU.
 #[derive(Resource, Default)]
-pub(super) struct PoolGpu(HashMap<MainEntity, PoolBuffers>);
+pub struct PoolGpu(HashMap<MainEntity, PoolBuffers>);
+
+impl PoolGpu {
+    /// The heights the GPU computed for the pool on main-world entity `pool` in the last
+    /// frame, one `f32` per texel, row-major (copyable: `COPY_SRC`).
+    pub fn heights(&self, pool: Entity) -> Option<&Buffer> {
+        self.0.get(&MainEntity::from(pool)).map(|buffers| &buffers.heights)
+    }
+}
 
 /// The compute pipelines and the projection's layouts and shader.
 #[derive(Resource)]
@@ -210,12 +218,13 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
     }
 }
 
-/// A storage buffer of `count` floats, written by the compute passes.
+/// A storage buffer of `floats_per_texel` floats per texel, written by the compute
+/// passes (and copyable, so that applications and tests can read it back).
 fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_per_texel: u64) -> Buffer {
     device.create_buffer(&BufferDescriptor {
         label: Some(label),
         size: count.max(1) as u64 * floats_per_texel * 4,
-        usage: BufferUsages::STORAGE,
+        usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     })
 }
