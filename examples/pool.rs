@@ -7,8 +7,8 @@
 //! with `--headless`, it drops a few scripted pebbles, renders offscreen and writes a
 //! PNG (`--out`, default `target/pool.png`). `--kernel R` sets the kernel radius
 //! (`(2R + 1)²` taps), `--depth M` the pool's depth. With `--features egui`, a window
-//! of sliders sets the depth, the scattering a (and with it n = 2a), the extinction ε
-//! and the kernel radius while the water moves.
+//! of sliders sets the depth, the scattering a and the cosine exponent n (one lobe,
+//! n = 2a), the extinction ε and the kernel radius while the water moves.
 
 #[path = "support/mod.rs"]
 mod support;
@@ -103,11 +103,12 @@ fn pool_sliders(
     let mut settings = pool.clone();
     Window::new("Pool").show(contexts.ctx_mut()?, |ui| {
         ui.add(Slider::new(&mut settings.depth, 0.1..=4.0).text("depth (m)"));
-        // The convolution's cosine lobe stands for the Gaussian exp(−a(1 − cos²)) with n = 2a.
+        // The convolution's cosine lobe cosⁿ stands for the Gaussian exp(−a(1 − cos²)) of
+        // eq. 2 with n = 2a: two handles on the one lobe.
         let mut a = settings.exponent / 2.0;
         ui.add(Slider::new(&mut a, 1.0..=5000.0).logarithmic(true).text("scattering a"));
         settings.exponent = 2.0 * a;
-        ui.label(format!("cosine exponent n = 2a = {:.0}", settings.exponent));
+        ui.add(Slider::new(&mut settings.exponent, 2.0..=10000.0).logarithmic(true).text("cosine exponent n = 2a"));
         ui.add(Slider::new(&mut settings.extinction, 0.0..=2.0).text("extinction ε (1/m)"));
         ui.add(Slider::new(&mut settings.kernel_radius, 0..=32).text("kernel radius (texels)"));
     });
