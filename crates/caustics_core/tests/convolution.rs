@@ -113,9 +113,12 @@ fn extinction_dims_the_flat_floor_uniformly_by_beer_lambert_along_the_refracted_
         assert!(irradiance.iter().all(|e| (e - first).abs() <= 4.0 * f32::EPSILON * first));
     }
     assert!((direct[0] / beer_lambert - 1.0).abs() < 0.01, "{} vs {beer_lambert}", direct[0]);
-    // The linearised lobe is centred straight down: the convolution form's path is d.
+    // The lobe expanded about the refracted sun follows the same path; the paper's,
+    // expanded about the vertical, is centred straight down: its path is d.
+    assert!((convolution[0] / beer_lambert - 1.0).abs() < 0.01, "{} vs {beer_lambert}", convolution[0]);
+    let paper = convolution_irradiance(&flat, &ConvolutionSettings { lobe_axis: LobeAxis::Vertical, ..settings }).unwrap();
     let vertical = clear * (-settings.extinction * settings.depth).exp();
-    assert!((convolution[0] / vertical - 1.0).abs() < 0.01, "{} vs {vertical}", convolution[0]);
+    assert!((paper[0] / vertical - 1.0).abs() < 0.01, "{} vs {vertical}", paper[0]);
 }
 
 #[test]
@@ -142,12 +145,18 @@ fn the_convolution_form_approaches_the_direct_integral_where_the_approximations_
     let matched = at(2.0 * settings.scattering);
     assert!(matched < 0.5 * at(settings.scattering) && matched < 0.5 * at(4.0 * settings.scattering));
 
-    // L̂t,v ≫ L̂t,x: a high sun.
-    let suns: Vec<f32> = [0.4f32, 0.2, 0.1, 0.0]
-        .iter()
-        .map(|&x| error(&surface, &ConvolutionSettings { sun_direction: Vec3::new(x, -1.0, 0.0), boundary: Boundary::Periodic, ..settings }))
-        .collect();
+    // About the vertical (the paper) the expansion needs L̂t,v ≫ L̂t,x: a high sun. About
+    // the refracted sun it needs only gentle waves, whatever the sun's height.
+    let tilted = |x: f32, lobe_axis: LobeAxis| {
+        let sun_direction = Vec3::new(x, -1.0, 0.0);
+        error(&surface, &ConvolutionSettings { sun_direction, lobe_axis, boundary: Boundary::Periodic, ..settings })
+    };
+    let suns: Vec<f32> = [0.4f32, 0.2, 0.1, 0.0].iter().map(|&x| tilted(x, LobeAxis::Vertical)).collect();
     decreasing(&suns, "sun angle");
+    let refracted: Vec<f32> = [0.4f32, 0.2, 0.1, 0.0].iter().map(|&x| tilted(x, LobeAxis::RefractedSun)).collect();
+    assert_eq!(refracted[3], suns[3], "overhead, both axes are the vertical");
+    assert!(refracted.iter().all(|&e| e < 2.0 * refracted[3]), "{refracted:?}");
+    assert!(refracted[0] < 0.2 * suns[0], "{refracted:?} against the paper's {suns:?}");
 }
 
 #[test]
@@ -434,18 +443,22 @@ fn the_kernels_are_the_expansion_of_eq_2() {
     let tap = |dx: isize, dz: isize| kernels.taps()[((dz + 2) * 5 + dx + 2) as usize];
     assert_eq!(tap(1, 2)[0], -tap(-1, 2)[0]);
     assert_eq!(tap(1, 2)[2], tap(-1, -2)[2]);
-    // One tap against P̂_vⁿ P̂_x e^{−ε‖P‖} by hand.
+    // One tap against n P̂_vⁿ P̂_x e^{−ε‖P‖} by hand (the sun is overhead: the axis is
+    // the vertical, whose tilt kernels are odd and need no share taken).
     let (x, z, d) = (2.0 * cell as f64, cell as f64, settings.depth as f64);
     let length = (x * x + z * z + d * d).sqrt();
-    let expected = (d / length).powi(7) * (x / length) * (-(settings.extinction as f64) * length).exp();
+    let expected = 7.0 * (d / length).powi(7) * (x / length) * (-(settings.extinction as f64) * length).exp();
     assert!((tap(2, 1)[0] / expected - 1.0).abs() < 1e-12);
+    // Seen across a wall along x, the x kernel flips; the others do not.
+    let mirrored = kernels.mirrored_taps(true, false)[((1 + 2) * 5 + 2 + 2) as usize];
+    assert_eq!(mirrored, [-tap(2, 1)[0], tap(2, 1)[1], tap(2, 1)[2]]);
 
-    // The per-texel terms: [n L̂t,x / L̂t,v, n L̂t,z / L̂t,v, 1] F / K_v.
+    // The per-texel terms: [L̂t,x / L̂t,v, L̂t,z / L̂t,v, 1] F / K.
     let light = TransmittedLight { flux: 2.0, direction: Vec3::new(0.1, -0.9, 0.2).normalize() };
     let terms = kernels.terms(&light);
     let scale = 2.0 / kernels.normaliser();
     assert!((terms[2] - scale).abs() < 1e-12);
-    assert!((terms[0] / (7.0 * scale * light.direction.x as f64 / -light.direction.y as f64) - 1.0).abs() < 1e-6);
+    assert!((terms[0] / (scale * light.direction.x as f64 / -light.direction.y as f64) - 1.0).abs() < 1e-6);
     assert_eq!(kernels.terms(&TransmittedLight { flux: 0.0, direction: Vec3::NEG_Y }), [0.0; 3]);
 }
 

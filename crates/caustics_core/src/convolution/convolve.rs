@@ -1,26 +1,40 @@
 //! Eq. 2 as the paper's sum of three convolutions (§4.1), by FFT.
 
 use super::heightfield::check_grid;
-use super::{ConvolutionSettings, Heightfield, TransmittedLight, transmitted_light};
+use super::{Boundary, ConvolutionSettings, Heightfield, MIN_DOWNWARD_COSINE, TransmittedLight, transmitted_light};
+use glam::DVec3;
 use crate::params::ParamError;
 use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 
 /// The three kernels of §4.1 and the per-texel terms they convolve, in the order
-/// `[x, z, vertical]` (the paper's `j = x, y, z`).
+/// `[first, second, axis]`.
 ///
 /// With `d ≫ h`, `P = (Δx, −d, Δz)` for a floor point `(Δx, Δz)` from the texel, and
-/// `P̂_v = d/‖P‖`. The integrand of eq. 2 with the linearised lobe is
-/// `F L̂t,vⁿ [n (L̂t,x/L̂t,v) P̂_vⁿ P̂_x + n (L̂t,z/L̂t,v) P̂_vⁿ P̂_z + P̂_vⁿ⁺¹] e^{−ε‖P‖}`
-/// with `F = L_s T(θi) cos θi`; the bracket splits into the kernels
-/// `k = [P̂_vⁿ P̂_x, P̂_vⁿ P̂_z, P̂_vⁿ⁺¹] e^{−ε‖P‖}` and the terms
-/// `[n L̂t,x/L̂t,v, n L̂t,z/L̂t,v, 1] F / K_v`, where the normaliser
-/// `K_v = Σ P̂_vⁿ⁺¹` (no extinction) replaces `L̂t,vⁿ` and `∼` (module documentation).
+/// `P̂_v = d/‖P‖`. The lobe is expanded about a unit axis `D` ([`LobeAxis`]) with
+/// `e₁, e₂` completing it to an orthonormal frame: writing a texel's light as
+/// `L̂t = c (D + t₁e₁ + t₂e₂)` with `c = L̂t·D` and `tᵢ = (L̂t·eᵢ)/c`, to first order in
+/// the `tᵢ`, `(L̂t·P̂)ⁿ ≈ cⁿ [(D·P̂)ⁿ + n (D·P̂)ⁿ⁻¹ (t₁ e₁·P̂ + t₂ e₂·P̂)]`. Times eq. 2's
+/// `F P̂_v e^{−ε‖P‖}` (`F = L_s T(θi) cos θi`), this splits into the kernels
+/// `k = [n (D·P̂)ⁿ⁻¹ e₁·P̂, n (D·P̂)ⁿ⁻¹ e₂·P̂, (D·P̂)ⁿ] P̂_v e^{−ε‖P‖}` and the terms
+/// `[t₁, t₂, 1] F / K`, where the normaliser `K = Σ (D·P̂)ⁿ P̂_v` (no extinction)
+/// replaces `cⁿ` and `∼` (module documentation). The paper's axis is the vertical
+/// (`e₁ = x`, `e₂ = z`, `tᵢ = L̂t,ᵢ/L̂t,v`). All three are scaled by the footprint's
+/// largest `(D·P̂)`ⁿ, which cancels in `k/K` and keeps a narrow lobe about a tilted
+/// axis from underflowing.
+///
+/// Behind a mirror wall the light is mirrored, and so is its frame: the terms, dot
+/// products with the frame, are the same, and the kernels are those of the mirrored
+/// frame — one set per mirror parity ([`Self::mirrored_taps`]). About a tilted axis
+/// the tilt kernels `k₁, k₂` do not sum to zero over the footprint as the vertical's
+/// do; each is taken less its share `(Σk₁/Σk₀) k₀` (sums without extinction), so that
+/// the expansion moves a texel's light without changing how much reaches the floor.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ConvolutionKernels {
     radius: usize,
-    exponent: f64,
+    frame: [DVec3; 3],
+    /// The taps of the four mirror parities, `x + 2z`, one after the other.
     taps: Vec<[f64; 3]>,
     normaliser: f64,
 }
@@ -32,21 +46,44 @@ impl ConvolutionKernels {
         check_grid(1, 1, cell_size)?;
         let (cell, depth) = (cell_size as f64, settings.depth as f64);
         let (exponent, extinction) = (settings.exponent as f64, settings.extinction as f64);
+        let frame = settings.lobe_frame();
         let radius = settings.kernel_radius as isize;
+        let offsets: Vec<DVec3> = (-radius..=radius)
+            .flat_map(|dz| (-radius..=radius).map(move |dx| DVec3::new(dx as f64 * cell, -depth, dz as f64 * cell)))
+            .collect();
+        let nearest = offsets.iter().map(|p| frame[2].dot(*p) / p.length()).fold(f64::MIN_POSITIVE, f64::max);
         let mut normaliser = 0.0;
-        let taps = (-radius..=radius)
-            .flat_map(|dz| (-radius..=radius).map(move |dx| (dx, dz)))
-            .map(|(dx, dz)| {
-                let (x, z) = (dx as f64 * cell, dz as f64 * cell);
-                let distance = (x * x + z * z + depth * depth).sqrt();
-                let vertical = depth / distance;
-                let lobe = vertical.powf(exponent);
-                normaliser += lobe * vertical;
-                let attenuated = lobe * (-extinction * distance).exp() / distance;
-                [attenuated * x, attenuated * z, attenuated * depth]
+        for p in &offsets {
+            let along = (frame[2].dot(*p) / p.length() / nearest).max(0.0);
+            normaliser += along.powf(exponent) * depth / p.length();
+        }
+        let taps = (0..4)
+            .flat_map(|parity| {
+                let mirror = DVec3::new(if parity & 1 == 1 { -1.0 } else { 1.0 }, 1.0, if parity & 2 == 2 { -1.0 } else { 1.0 });
+                let [e1, e2, axis] = frame.map(|v| v * mirror);
+                // `[k₁, k₂, k₀]` at an offset, with and without extinction.
+                let tap = |p: &DVec3| {
+                    let distance = p.length();
+                    let unit = *p / distance;
+                    let along = (axis.dot(unit) / nearest).max(0.0);
+                    if along == 0.0 {
+                        return ([0.0; 3], 1.0);
+                    }
+                    let slope = if exponent == 0.0 { 0.0 } else { exponent * along.powf(exponent - 1.0) / nearest };
+                    let clear = depth / distance;
+                    ([slope * e1.dot(unit) * clear, slope * e2.dot(unit) * clear, along.powf(exponent) * clear], (-extinction * distance).exp())
+                };
+                // Each tilt kernel less its share of the lobe, so that it moves light
+                // without adding or removing any (the vertical's are odd: nothing to take).
+                let sums = offsets.iter().map(|p| tap(p).0).fold([0.0; 3], |a, k| [a[0] + k[0], a[1] + k[1], a[2] + k[2]]);
+                let shares = [sums[0] / sums[2], sums[1] / sums[2]];
+                offsets.iter().map(move |p| {
+                    let ([k1, k2, k0], attenuation) = tap(p);
+                    [(k1 - shares[0] * k0) * attenuation, (k2 - shares[1] * k0) * attenuation, k0 * attenuation]
+                }).collect::<Vec<_>>()
             })
             .collect();
-        Ok(Self { radius: settings.kernel_radius, exponent, taps, normaliser })
+        Ok(Self { radius: settings.kernel_radius, frame, taps, normaliser })
     }
 
     /// The kernel radius `r`: the kernels have `(2r + 1)²` taps.
@@ -54,40 +91,55 @@ impl ConvolutionKernels {
         self.radius
     }
 
-    /// `k(Δx, Δz)` as `[x, z, vertical]`, row-major over `Δz, Δx ∈ −r..=r` texels (the
-    /// floor point's offset from the surface texel).
+    /// `k(Δx, Δz)`, row-major over `Δz, Δx ∈ −r..=r` texels (the floor point's offset
+    /// from the surface texel), for light seen directly.
     pub fn taps(&self) -> &[[f64; 3]] {
-        &self.taps
+        self.mirrored_taps(false, false)
     }
 
-    /// `K_v = Σ P̂_vⁿ⁺¹` over the taps, by which every term is divided; ≥ 1 (the centre tap).
+    /// The taps for light seen mirrored across the walls along x and/or z.
+    pub fn mirrored_taps(&self, mirrored_x: bool, mirrored_z: bool) -> &[[f64; 3]] {
+        let count = (2 * self.radius + 1).pow(2);
+        let parity = mirrored_x as usize + 2 * mirrored_z as usize;
+        &self.taps[parity * count..(parity + 1) * count]
+    }
+
+    /// `K`, by which every term is divided (see the type's documentation).
     pub fn normaliser(&self) -> f64 {
         self.normaliser
     }
 
-    /// The functions to be convolved at a texel (§4.2 pass 5), `[x, z, vertical]`.
+    /// The lobe's frame `[e₁, e₂, D]` for light seen directly.
+    pub fn frame(&self) -> [DVec3; 3] {
+        self.frame
+    }
+
+    /// The functions to be convolved at a texel (§4.2 pass 5), `[t₁, t₂, 1] F / K`; zero
+    /// for light that leaves within [`MIN_DOWNWARD_COSINE`] of the axis's normal plane.
     pub fn terms(&self, light: &TransmittedLight) -> [f64; 3] {
-        if light.flux == 0.0 {
+        let direction = light.direction.as_dvec3();
+        let along = direction.dot(self.frame[2]);
+        if light.flux == 0.0 || along < MIN_DOWNWARD_COSINE as f64 {
             return [0.0; 3];
         }
-        let direction = light.direction.as_dvec3();
         let scale = light.flux as f64 / self.normaliser;
-        let tilt = self.exponent * scale / -direction.y;
-        [tilt * direction.x, tilt * direction.z, scale]
+        [scale * direction.dot(self.frame[0]) / along, scale * direction.dot(self.frame[1]) / along, scale]
     }
 }
 
 /// The convolution form for one heightfield size, planned once: the kernels' spectra
 /// on the extended surface's period ([`super::Boundary::period`]) and the FFTs.
 /// Circular convolution over that period is exactly the footprint sum over the
-/// extended surface; a kernel wider than the period wraps onto it.
+/// extended surface; a kernel wider than the period wraps onto it. Behind mirror walls
+/// each mirror parity of the extended surface is convolved with its own kernels.
 pub struct ConvolutionCaustics {
     settings: ConvolutionSettings,
     columns: usize,
     rows: usize,
     cell_size: f32,
     kernels: ConvolutionKernels,
-    kernel_spectra: [Vec<Complex64>; 3],
+    /// Per mirror parity seen on the extended surface (one without mirrors), per kernel.
+    kernel_spectra: Vec<[Vec<Complex64>; 3]>,
     forward: Fft2d,
     inverse: Fft2d,
     term: Vec<Complex64>,
@@ -105,17 +157,23 @@ impl ConvolutionCaustics {
         let mut forward = Fft2d::new(&mut planner, width, height, rustfft::FftDirection::Forward);
         let inverse = Fft2d::new(&mut planner, width, height, rustfft::FftDirection::Inverse);
         let radius = kernels.radius() as isize;
-        let kernel_spectra = std::array::from_fn(|j| {
-            let mut folded = vec![Complex64::ZERO; width * height];
-            let offsets = (-radius..=radius).flat_map(|dz| (-radius..=radius).map(move |dx| (dx, dz)));
-            for ((dx, dz), tap) in offsets.zip(kernels.taps()) {
-                let x = dx.rem_euclid(width as isize) as usize;
-                let z = dz.rem_euclid(height as isize) as usize;
-                folded[z * width + x].re += tap[j];
-            }
-            forward.process(&mut folded);
-            folded
-        });
+        let parities = if settings.boundary == Boundary::Mirror { 4 } else { 1 };
+        let kernel_spectra = (0..parities)
+            .map(|parity| {
+                let taps = kernels.mirrored_taps(parity & 1 == 1, parity & 2 == 2);
+                std::array::from_fn(|j| {
+                    let mut folded = vec![Complex64::ZERO; width * height];
+                    let offsets = (-radius..=radius).flat_map(|dz| (-radius..=radius).map(move |dx| (dx, dz)));
+                    for ((dx, dz), tap) in offsets.zip(taps) {
+                        let x = dx.rem_euclid(width as isize) as usize;
+                        let z = dz.rem_euclid(height as isize) as usize;
+                        folded[z * width + x].re += tap[j];
+                    }
+                    forward.process(&mut folded);
+                    folded
+                })
+            })
+            .collect();
         let zeros = vec![Complex64::ZERO; width * height];
         Ok(Self {
             settings: *settings,
@@ -152,17 +210,18 @@ impl ConvolutionCaustics {
         let (width, height) = (self.forward.width, self.forward.height);
         let boundary = self.settings.boundary;
         self.spectrum.fill(Complex64::ZERO);
-        for (j, kernel_spectrum) in self.kernel_spectra.iter().enumerate() {
-            for (index, value) in self.term.iter_mut().enumerate() {
-                let (column, mirrored_x) = boundary.fold((index % width) as isize, self.columns);
-                let (row, mirrored_z) = boundary.fold((index / width) as isize, self.rows);
-                let term = terms[row * self.columns + column][j];
-                let flipped = (j == 0 && mirrored_x) || (j == 1 && mirrored_z);
-                *value = Complex64::new(if flipped { -term } else { term }, 0.0);
-            }
-            self.forward.process(&mut self.term);
-            for ((sum, term), kernel) in self.spectrum.iter_mut().zip(&self.term).zip(kernel_spectrum) {
-                *sum += term * kernel;
+        for (parity, spectra) in self.kernel_spectra.iter().enumerate() {
+            for (j, kernel_spectrum) in spectra.iter().enumerate() {
+                for (index, value) in self.term.iter_mut().enumerate() {
+                    let (column, mirrored_x) = boundary.fold((index % width) as isize, self.columns);
+                    let (row, mirrored_z) = boundary.fold((index / width) as isize, self.rows);
+                    let seen = mirrored_x as usize + 2 * mirrored_z as usize == parity;
+                    *value = Complex64::new(if seen { terms[row * self.columns + column][j] } else { 0.0 }, 0.0);
+                }
+                self.forward.process(&mut self.term);
+                for ((sum, term), kernel) in self.spectrum.iter_mut().zip(&self.term).zip(kernel_spectrum) {
+                    *sum += term * kernel;
+                }
             }
         }
         self.inverse.process(&mut self.spectrum);

@@ -69,6 +69,20 @@ pub const MAX_EXPONENT: f32 = 1.0e5;
 /// module documentation).
 pub const MIN_DOWNWARD_COSINE: f32 = 1.0e-3;
 
+/// The direction about which the convolution form expands each texel's lobe
+/// ([`ConvolutionKernels`]); the expansion is first order in the light's departure
+/// from it, so it is accurate while every texel's light leaves close to it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LobeAxis {
+    /// The vertical (§4.1): accurate under a high sun only (the light of a sun θ off
+    /// zenith leaves every texel about θ/n_water off the vertical).
+    Vertical,
+    /// The sunlight refracted by the flat surface: only the ripples' own bending must
+    /// be small, whatever the sun's height, and flat water stays exact. Beyond the paper.
+    #[default]
+    RefractedSun,
+}
+
 /// How the surface and the floor continue past the heightfield's edges, for both forms.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Boundary {
@@ -127,6 +141,8 @@ pub struct ConvolutionSettings {
     pub kernel_radius: usize,
     /// How the surface continues past its edges.
     pub boundary: Boundary,
+    /// The convolution form's expansion axis (the direct form has none).
+    pub lobe_axis: LobeAxis,
 }
 
 impl Default for ConvolutionSettings {
@@ -141,6 +157,7 @@ impl Default for ConvolutionSettings {
             extinction: 0.1,
             kernel_radius: 3,
             boundary: Boundary::Mirror,
+            lobe_axis: LobeAxis::RefractedSun,
         }
     }
 }
@@ -172,6 +189,21 @@ impl ConvolutionSettings {
             return Err(ParamError::OutOfRange { name: "kernel radius", value, expected });
         }
         Ok(())
+    }
+
+    /// The frame `[e₁, e₂, D]` the convolution form expands the lobe in: the axis `D`
+    /// ([`LobeAxis`], pointing down) and two unit vectors completing it, `e₁` in the
+    /// plane of `D` and x (the vertical's frame is `[x, z, −y]`).
+    pub fn lobe_frame(&self) -> [glam::DVec3; 3] {
+        let axis = match self.lobe_axis {
+            LobeAxis::Vertical => Vec3::NEG_Y,
+            LobeAxis::RefractedSun => {
+                refract(self.sun_unit(), Vec3::Y, 1.0 / self.ior).direction().filter(|d| d.y < 0.0).unwrap_or(Vec3::NEG_Y)
+            }
+        };
+        let axis = axis.as_dvec3().normalize();
+        let e1 = (glam::DVec3::X - axis.x * axis).normalize();
+        [e1, axis.cross(e1), axis]
     }
 
     /// The unit direction of the sunlight (also for directions whose squared length
