@@ -8,7 +8,7 @@
 
 @group(0) @binding(0) var<uniform> pool: Pool;
 @group(0) @binding(1) var<storage, read> images: array<vec4<f32>>;  // x, z, strength, drop time
-@group(0) @binding(2) var<storage, read> taps: array<vec4<f32>>;    // k_x, k_z, k_v over −r..=r²
+@group(0) @binding(2) var<storage, read> taps: array<vec4<f32>>;    // k₁, k₂, k₀ over −r..=r², per mirror parity
 @group(0) @binding(3) var<storage, read_write> heights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;
 @group(0) @binding(5) var<storage, read_write> irradiance: array<f32>;
@@ -95,18 +95,20 @@ fn convolution_terms(@builtin(global_invocation_id) id: vec3<u32>) {
         if eta != 1.0 {
             direction = normalize(eta * sun + (eta * min(cos_i, 1.0) - cos_t) * normal);
         }
-        if -direction.y >= MIN_DOWNWARD_COSINE {
+        let along = dot(direction, pool.lobe_axis.xyz);
+        if -direction.y >= MIN_DOWNWARD_COSINE && along >= MIN_DOWNWARD_COSINE {
             let flux = pool.sun.w * fresnel_transmittance(cos_i, eta) * cos_i;
             let per_tap = flux / pool.normaliser;
-            let tilt = pool.exponent * per_tap / -direction.y;
-            term = vec4(tilt * direction.x, tilt * direction.z, per_tap, 0.0);
+            let tilt = vec2(dot(direction, pool.lobe_first.xyz), dot(direction, pool.lobe_second.xyz)) / along;
+            term = vec4(per_tap * tilt, per_tap, 0.0);
         }
     }
     terms[texel_index(id.x, id.y)] = term;
 }
 
 // `ConvolutionCaustics::irradiance` as a direct sum over the (2r + 1)² taps: the floor
-// below texel x₀ gets Σ k(x₀ − x)·term(x) over the extended surface.
+// below texel x₀ gets Σ k(x₀ − x)·term(x) over the extended surface, with the kernels
+// of the mirror parity the source texel is seen in.
 @compute @workgroup_size(8, 8, 1)
 fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= pool.columns || id.y >= pool.rows {
@@ -120,10 +122,9 @@ fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
         for (var dx = -r; dx <= r; dx++) {
             let column = fold(i32(id.x) - dx, pool.columns);
             let term = terms[texel_index(u32(column.x), u32(row.x))];
-            // Seen in a mirror, the horizontal direction across it flips.
-            let flip = vec2(1.0 - 2.0 * f32(column.y), 1.0 - 2.0 * f32(row.y));
-            let k = taps[(dz + r) * width + dx + r];
-            e += k.x * term.x * flip.x + k.y * term.y * flip.y + k.z * term.z;
+            let parity = column.y + 2 * row.y;
+            let k = taps[(parity * width + dz + r) * width + dx + r];
+            e += dot(k.xyz, term.xyz);
         }
     }
     irradiance[texel_index(id.x, id.y)] = e;

@@ -36,9 +36,11 @@ pub(super) struct GpuPool {
     time_damping: f32,
     front_damping: f32,
     ior: f32,
-    exponent: f32,
     normaliser: f32,
     sun: Vec4,
+    lobe_first: Vec4,
+    lobe_second: Vec4,
+    lobe_axis: Vec4,
     kernel_radius: i32,
     depth: f32,
     floor_tolerance: f32,
@@ -104,7 +106,7 @@ pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "convolution.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
-    app.add_systems(PostUpdate, (mark_active, add_depth_prepass));
+    app.add_systems(PostUpdate, (mark_active, add_depth_prepass, aim_kernels.after(bevy::transform::TransformSystems::Propagate)));
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -149,6 +151,36 @@ fn uses_convolution(generator: &CausticGenerator) -> Option<f32> {
     }
 }
 
+/// The pool space (x, z from 0 to the pool's size, the rest surface at y = 0) of a pool
+/// from world space.
+fn pool_from_world(pool: &PoolRipples, transform: &GlobalTransform) -> Mat4 {
+    let size = pool.size();
+    Mat4::from_translation(Vec3::new(0.5 * size.x, 0.0, 0.5 * size.y)) * transform.to_matrix().inverse()
+}
+
+/// The brightest directional light and its direction of travel in world space.
+fn brightest_sun<'a>(suns: impl Iterator<Item = (&'a DirectionalLight, &'a GlobalTransform)>) -> Option<(&'a DirectionalLight, Vec3)> {
+    suns.max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance)).map(|(sun, t)| (sun, t.forward().as_vec3()))
+}
+
+/// Main world: aims each pool's kernels at the sunlight it refracts (the lobe is
+/// expanded about it); only a change of light, index or pool orientation redraws them.
+fn aim_kernels(
+    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, &CausticGenerator, &GlobalTransform), Without<InvalidCausticParams>>,
+    suns: Query<(&DirectionalLight, &GlobalTransform)>,
+) {
+    let Some((_, sun)) = brightest_sun(suns.iter()) else { return };
+    for (entity, pool, mut surface, generator, transform) in &mut pools {
+        let Some(ior) = uses_convolution(generator) else { continue };
+        let direction = pool_from_world(pool, transform).transform_vector3(sun).normalize_or_zero();
+        if direction.y < 0.0
+            && let Err(e) = surface.bypass_change_detection().aim_kernels(pool, ior, direction)
+        {
+            warn!("bevy_caustics: the pool {entity} keeps its kernels: {e}");
+        }
+    }
+}
+
 /// Main world: the views have convolution work while a pool refracts a sun.
 fn mark_active(
     mut active: ResMut<ActiveCausticTechniques>,
@@ -174,15 +206,15 @@ fn add_depth_prepass(mut commands: Commands, active: Res<ActiveCausticTechniques
 
 fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<ConvolutionPools>, suns: Extract<Suns>, time: Extract<Res<Time>>) {
     extracted.0.clear();
-    let Some((sun, sun_transform)) = suns.iter().max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance)) else {
+    let Some((sun, sun_direction)) = brightest_sun(suns.iter()) else {
         return;
     };
     for (entity, pool, surface, generator, transform) in &pools {
         let Some(ior) = uses_convolution(generator) else { continue };
-        let size = pool.size();
-        let pool_from_world = Mat4::from_translation(Vec3::new(0.5 * size.x, 0.0, 0.5 * size.y)) * transform.to_matrix().inverse();
-        let direction = pool_from_world.transform_vector3(sun_transform.forward().as_vec3()).normalize_or_zero();
-        if direction.y >= 0.0 {
+        let pool_from_world = pool_from_world(pool, transform);
+        let direction = pool_from_world.transform_vector3(sun_direction).normalize_or_zero();
+        // Kernels aimed at other light (the frame before the light moved) wait a frame.
+        if direction.y >= 0.0 || surface.kernels().aimed != (ior, direction) {
             continue;
         }
         let ripples = surface.ripples();
@@ -205,9 +237,11 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
             time_damping: waves.time_damping,
             front_damping: waves.front_damping,
             ior,
-            exponent: pool.exponent,
             normaliser: kernels.normaliser as f32,
             sun: direction.extend(sun.illuminance),
+            lobe_first: kernels.frame[0].extend(0.0),
+            lobe_second: kernels.frame[1].extend(0.0),
+            lobe_axis: kernels.frame[2].extend(0.0),
             kernel_radius: pool.kernel_radius as i32,
             depth: pool.depth,
             floor_tolerance: 0.05 * pool.depth,

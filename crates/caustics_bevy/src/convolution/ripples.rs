@@ -18,22 +18,40 @@ pub struct PoolSurface {
     kernels: PoolKernels,
 }
 
-/// The three kernels of §4.1 for a pool's depth, exponent, extinction and texels, as
-/// the GPU reads them (`caustics_core::convolution::ConvolutionKernels`).
+/// The three kernels of §4.1 for a pool's depth, exponent, extinction and texels and
+/// for the sunlight it refracts, as the GPU reads them
+/// (`caustics_core::convolution::ConvolutionKernels`, expanded about the refracted sun).
 #[derive(Clone, Debug)]
 pub struct PoolKernels {
-    /// `[k_x, k_z, k_v, 0]` row-major over `Δz, Δx ∈ −r..=r`.
+    /// `[k₁, k₂, k₀, 0]` row-major over `Δz, Δx ∈ −r..=r`, for each mirror parity
+    /// (`x + 2z`) in turn.
     pub taps: Arc<Vec<Vec4>>,
-    /// `K_v`, by which every texel's terms are divided.
+    /// `K`, by which every texel's terms are divided.
     pub normaliser: f64,
+    /// The lobe's frame `[e₁, e₂, D]` in pool space.
+    pub frame: [Vec3; 3],
+    /// The water's index of refraction and the sunlight's direction in pool space they
+    /// were made for.
+    pub aimed: (f32, Vec3),
 }
 
 impl PoolKernels {
-    fn new(pool: &PoolRipples) -> Result<Self, String> {
-        let settings = pool.light(1.333, Vec3::NEG_Y, 1.0);
+    /// The kernels for `pool`'s settings under sunlight along `sun` (pool space) into
+    /// water of index `ior`.
+    pub fn new(pool: &PoolRipples, ior: f32, sun: Vec3) -> Result<Self, String> {
+        let settings = pool.light(ior, sun, 1.0);
         let kernels = ConvolutionKernels::new(&settings, pool.cell_size).map_err(|e| e.to_string())?;
-        let taps = kernels.taps().iter().map(|t| Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, 0.0)).collect();
-        Ok(Self { taps: Arc::new(taps), normaliser: kernels.normaliser() })
+        let taps = (0..4)
+            .flat_map(|parity| kernels.mirrored_taps(parity & 1 == 1, parity & 2 == 2).to_vec())
+            .map(|t| Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, 0.0))
+            .collect();
+        let frame = kernels.frame().map(|v| Vec3::new(v.x as f32, v.y as f32, v.z as f32));
+        Ok(Self { taps: Arc::new(taps), normaliser: kernels.normaliser(), frame, aimed: (ior, sun) })
+    }
+
+    /// The kernels for the same pool under other light.
+    fn reaimed(&self, pool: &PoolRipples) -> Result<Self, String> {
+        Self::new(pool, self.aimed.0, self.aimed.1)
     }
 }
 
@@ -53,12 +71,21 @@ impl PoolSurface {
         &self.kernels
     }
 
+    /// Aims the kernels at new light (`PoolKernels::new`) if it is not the light they
+    /// were made for.
+    pub fn aim_kernels(&mut self, pool: &PoolRipples, ior: f32, sun: Vec3) -> Result<(), String> {
+        if self.kernels.aimed != (ior, sun) {
+            self.kernels = PoolKernels::new(pool, ior, sun)?;
+        }
+        Ok(())
+    }
+
     /// A still pool for `pool`'s settings, or why there is none.
     fn new(pool: &PoolRipples) -> Result<Self, String> {
         let (columns, rows) = (pool.columns as usize, pool.rows as usize);
         let ripples = Ripples::new(columns, rows, pool.cell_size, pool.waves()).map_err(|e| e.to_string())?;
         let heightfield = Heightfield::flat(columns, rows, pool.cell_size).map_err(|e| e.to_string())?;
-        Ok(Self { ripples, heightfield, kernels: PoolKernels::new(pool)? })
+        Ok(Self { ripples, heightfield, kernels: PoolKernels::new(pool, 1.333, Vec3::NEG_Y)? })
     }
 }
 
@@ -90,7 +117,7 @@ fn configure_pools(
                 && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
         });
         let made = match surface {
-            Some(mut surface) if same_water => PoolKernels::new(pool).map(|kernels| surface.kernels = kernels),
+            Some(mut surface) if same_water => surface.kernels.reaimed(pool).map(|kernels| surface.kernels = kernels),
             _ => PoolSurface::new(pool).map(|surface| {
                 commands.entity(entity).insert(surface);
             }),

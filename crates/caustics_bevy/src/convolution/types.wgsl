@@ -13,9 +13,11 @@ struct Pool {
     time_damping: f32,      // α
     front_damping: f32,     // β
     ior: f32,
-    exponent: f32,          // n
-    normaliser: f32,        // K_v, `ConvolutionKernels::normaliser`
+    normaliser: f32,        // K, `ConvolutionKernels::normaliser`
     sun: vec4<f32>,         // xyz: the sunlight's unit direction in pool space, w: L_s
+    lobe_first: vec4<f32>,     // the lobe's frame [e₁, e₂, D] (`ConvolutionKernels::frame`)
+    lobe_second: vec4<f32>,
+    lobe_axis: vec4<f32>,
     kernel_radius: i32,
     // Projection: pool space (x, z ∈ [0, size], surface rest level y = 0) from world.
     depth: f32,
