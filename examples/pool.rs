@@ -1,7 +1,7 @@
-//! A tiled pool under the sun, its caustics by convolution (Trendall & Stewart 2000):
-//! click the water to drop a pebble. The ripples (§4.3) bounce off the walls; the
-//! floor irradiance is the paper's three convolutions of the refracted sunlight, on
-//! the GPU every frame.
+//! A tiled pool under the afternoon sun, its caustics by convolution (Trendall &
+//! Stewart 2000): click the water to drop a pebble. The ripples (§4.3) bounce off the
+//! walls; the floor irradiance is the paper's three convolutions of the refracted
+//! sunlight, on the GPU every frame.
 //!
 //! `cargo run --example pool` opens a window when there is a display; otherwise, or
 //! with `--headless`, it drops a few scripted pebbles, renders offscreen and writes a
@@ -64,12 +64,13 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
         CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(1.333) },
         MeshMaterial3d(water),
     ));
-    // The sun overhead: the paper's expansion of the scattering lobe about the vertical
-    // holds within a few degrees of it (see the README's error table).
+    // An afternoon sun, 20° off zenith: the lobe is expanded about its refracted
+    // direction (the paper's expansion about the vertical holds only a few degrees
+    // from overhead; see the README's error tables).
     world.spawn((
         // The water casts the sun's shadow: below it the caustics carry the transmitted light.
         DirectionalLight { illuminance: light_consts::lux::AMBIENT_DAYLIGHT, shadow_maps_enabled: true, ..default() },
-        Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z),
+        Transform::default().looking_to(Vec3::new(0.3, -1.0, -0.2), Vec3::Y),
     ));
     world.spawn((
         Camera3d::default(),
@@ -77,7 +78,7 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
         // A white floor under the midday sun.
         bevy::camera::Exposure { ev100: 11.0 },
         target,
-        Transform::from_xyz(0.0, 3.6, 4.4).looking_at(Vec3::new(0.0, -0.6, 0.2), Vec3::Y),
+        Transform::from_xyz(0.0, 4.8, 3.4).looking_at(Vec3::new(0.0, -0.8, 0.1), Vec3::Y),
     ));
     if headless {
         world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
@@ -124,6 +125,10 @@ fn spawn_walls(world: &mut World, tiles: Image, depth: f32) {
         base_color_texture: Some(texture),
         uv_transform: bevy::math::Affine2::from_scale(Vec2::new(8.0, 2.0 * height)),
         perceptual_roughness: 0.9,
+        // Both faces cast the sun's shadow: the wall the sun stands behind shades the
+        // floor beside it, which the water's shadow does not reach.
+        double_sided: true,
+        cull_mode: None,
         ..default()
     });
     let wall = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Z, Vec2::new(SIZE / 2.0, height / 2.0)).mesh());
