@@ -11,6 +11,8 @@ pub mod convolution;
 #[cfg(feature = "egui")]
 pub mod debug_panel;
 pub mod gltf_tagging;
+#[cfg(any(feature = "ocean", feature = "convolution"))]
+mod grid_mesh;
 pub mod headless;
 pub mod irradiance;
 #[cfg(feature = "ocean")]

@@ -5,8 +5,7 @@
 //! `Mesh` asset behind a `Mesh3d` in place (`Assets<Mesh>::get_mut`), and Bevy
 //! re-uploads it and recomputes the entity's `Aabb`.
 
-use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use crate::grid_mesh::{grid_mesh, rewrite_grid};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
@@ -144,57 +143,25 @@ fn animate_oceans(
         {
             continue;
         }
-        commands.entity(entity).insert(Mesh3d(meshes.add(grid_mesh(surface))));
+        commands.entity(entity).insert(Mesh3d(meshes.add(new_grid_mesh(surface))));
     }
 }
 
-/// Rewrites the positions and normals of `mesh` if it is this surface's grid (a
-/// triangle list with (N + 1)² float positions and 6N² indices, its data in the main
-/// world); false, with nothing changed, if not.
+/// Rewrites the positions and normals of `mesh` if it is this surface's grid ((N + 1)²
+/// vertices, 6N² indices); false, with nothing changed, if not.
 fn write_in_place(mesh: &mut Mesh, surface: &OceanSurface) -> bool {
     let n = surface.resolution;
-    let count = (n + 1) * (n + 1);
-    let grid = mesh.primitive_topology() == PrimitiveTopology::TriangleList
-        && mesh.try_indices().is_ok_and(|indices| indices.len() == 6 * n * n);
-    if !grid {
-        return false;
-    }
     let vertices = (0..=n).flat_map(|j| (0..=n).map(move |i| surface.vertex(i, j)));
-    match mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION) {
-        Ok(VertexAttributeValues::Float32x3(positions)) if positions.len() == count => {
-            for (slot, (position, _)) in positions.iter_mut().zip(vertices.clone()) {
-                *slot = position.to_array();
-            }
-        }
-        _ => return false,
-    }
-    match mesh.try_attribute_mut(Mesh::ATTRIBUTE_NORMAL) {
-        Ok(VertexAttributeValues::Float32x3(normals)) if normals.len() == count => {
-            for (slot, (_, normal)) in normals.iter_mut().zip(vertices) {
-                *slot = normal.to_array();
-            }
-        }
-        _ => {
-            let normals: Vec<[f32; 3]> = vertices.map(|(_, normal)| normal.to_array()).collect();
-            // The data is in the main world (the positions were), so this cannot fail.
-            return mesh.try_insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals).is_ok();
-        }
-    }
-    true
+    let positions = vertices.clone().map(|(position, _)| position.to_array());
+    let normals = vertices.map(|(_, normal)| normal.to_array());
+    rewrite_grid(mesh, (6 * n * n, (n + 1) * (n + 1)), positions, normals)
 }
 
 /// A new grid mesh of the surface: positions, normals, UVs over [0, 1]² and indices.
-fn grid_mesh(surface: &OceanSurface) -> Mesh {
+fn new_grid_mesh(surface: &OceanSurface) -> Mesh {
     let n = surface.resolution;
     let (positions, normals) = surface.vertices();
-    let positions: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
-    let normals: Vec<[f32; 3]> = normals.iter().map(|n| n.to_array()).collect();
-    let uvs: Vec<[f32; 2]> =
-        (0..=n).flat_map(|j| (0..=n).map(move |i| [i as f32 / n as f32, j as f32 / n as f32])).collect();
+    let uvs = (0..=n).flat_map(|j| (0..=n).map(move |i| [i as f32 / n as f32, j as f32 / n as f32])).collect();
     let indices = surface.triangles().into_iter().flatten().collect();
-    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
-        .with_inserted_indices(Indices::U32(indices))
+    grid_mesh(positions.iter().map(|p| p.to_array()).collect(), normals.iter().map(|n| n.to_array()).collect(), uvs, indices)
 }

@@ -1,8 +1,7 @@
 //! Main world: the pool's water, simulated from its impulses and written into its mesh.
 
 use super::{DropPebble, PoolRipples};
-use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::convolution::ripples::PoolRipples as Ripples;
@@ -173,7 +172,10 @@ fn animate_pools(
         let surface = &mut *surface;
         surface.ripples.remove_expired(now);
         let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
-        let has_grid = mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| is_grid(mesh, &surface.heightfield));
+        let has_grid = mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| {
+            let (indices, vertices) = grid_counts(&surface.heightfield);
+            is_grid(mesh, indices, vertices)
+        });
         if surface.ripples.impulses().is_empty() && was_still && has_grid {
             continue;
         }
@@ -192,50 +194,41 @@ fn animate_pools(
         {
             continue;
         }
-        commands.entity(entity).insert(Mesh3d(meshes.add(grid_mesh(&surface.heightfield))));
+        commands.entity(entity).insert(Mesh3d(meshes.add(new_grid_mesh(&surface.heightfield))));
     }
 }
 
-/// The mesh vertex over each texel centre, centred on the pool, with its normal.
-fn vertices(heightfield: &Heightfield) -> impl Iterator<Item = ([f32; 3], [f32; 3])> + Clone + '_ {
-    let (columns, rows, cell) = (heightfield.columns(), heightfield.rows(), heightfield.cell_size());
-    let half = 0.5 * Vec2::new(columns as f32, rows as f32) * cell;
-    (0..rows).flat_map(move |row| {
-        (0..columns).map(move |column| {
-            let x = (column as f32 + 0.5) * cell - half.x;
-            let z = (row as f32 + 0.5) * cell - half.y;
-            let normal = heightfield.normal(column, row, Boundary::Mirror).to_array();
-            ([x, heightfield.height(column, row), z], normal)
-        })
+/// The texels `(column, row)`, row-major.
+fn texels(heightfield: &Heightfield) -> impl Iterator<Item = (usize, usize)> + use<> {
+    let columns = heightfield.columns();
+    (0..heightfield.rows()).flat_map(move |row| (0..columns).map(move |column| (column, row)))
+}
+
+/// The mesh vertex over each texel centre, centred on the pool.
+fn positions(heightfield: &Heightfield) -> impl Iterator<Item = [f32; 3]> + '_ {
+    let cell = heightfield.cell_size();
+    let half = 0.5 * Vec2::new(heightfield.columns() as f32, heightfield.rows() as f32) * cell;
+    texels(heightfield).map(move |(column, row)| {
+        let (x, z) = ((column as f32 + 0.5) * cell - half.x, (row as f32 + 0.5) * cell - half.y);
+        [x, heightfield.height(column, row), z]
     })
 }
 
-/// Whether `mesh` is this pool's grid: a triangle list with its indices and a float
-/// position and normal per texel, its data in the main world.
-fn is_grid(mesh: &Mesh, heightfield: &Heightfield) -> bool {
-    let count = heightfield.columns() * heightfield.rows();
-    let sized = |values: &VertexAttributeValues| matches!(values, VertexAttributeValues::Float32x3(v) if v.len() == count);
-    mesh.primitive_topology() == PrimitiveTopology::TriangleList
-        && mesh.try_indices().is_ok_and(|indices| indices.len() == 6 * (heightfield.columns() - 1) * (heightfield.rows() - 1))
-        && [Mesh::ATTRIBUTE_POSITION, Mesh::ATTRIBUTE_NORMAL]
-            .into_iter()
-            .all(|attribute| mesh.try_attribute(attribute).is_ok_and(sized))
+/// The surface normal at each texel centre.
+fn normals(heightfield: &Heightfield) -> impl Iterator<Item = [f32; 3]> + '_ {
+    texels(heightfield).map(|(column, row)| heightfield.normal(column, row, Boundary::Mirror).to_array())
+}
+
+/// The index and vertex counts of the pool's grid mesh.
+fn grid_counts(heightfield: &Heightfield) -> (usize, usize) {
+    let (columns, rows) = (heightfield.columns(), heightfield.rows());
+    (6 * (columns - 1) * (rows - 1), columns * rows)
 }
 
 /// Rewrites the positions and normals of `mesh` if it is this pool's grid; false, with
 /// nothing changed, if not.
 fn write_in_place(mesh: &mut Mesh, heightfield: &Heightfield) -> bool {
-    if !is_grid(mesh, heightfield) {
-        return false;
-    }
-    for (attribute, pick) in [(Mesh::ATTRIBUTE_POSITION, 0), (Mesh::ATTRIBUTE_NORMAL, 1)] {
-        if let Ok(VertexAttributeValues::Float32x3(values)) = mesh.try_attribute_mut(attribute) {
-            for (slot, (position, normal)) in values.iter_mut().zip(vertices(heightfield)) {
-                *slot = if pick == 0 { position } else { normal };
-            }
-        }
-    }
-    true
+    rewrite_grid(mesh, grid_counts(heightfield), positions(heightfield), normals(heightfield))
 }
 
 /// Two triangles between each four neighbouring texel centres, wound counter-clockwise
@@ -252,14 +245,9 @@ fn grid_indices(heightfield: &Heightfield) -> Vec<u32> {
 }
 
 /// A new grid mesh of the surface: positions, normals, UVs over [0, 1]² and indices.
-fn grid_mesh(heightfield: &Heightfield) -> Mesh {
+fn new_grid_mesh(heightfield: &Heightfield) -> Mesh {
     let (columns, rows) = (heightfield.columns(), heightfield.rows());
-    let (positions, normals): (Vec<[f32; 3]>, Vec<[f32; 3]>) = vertices(heightfield).unzip();
     let uv = |i: usize, n: usize| (i as f32 + 0.5) / n as f32;
-    let uvs: Vec<[f32; 2]> = (0..rows).flat_map(|r| (0..columns).map(move |c| [uv(c, columns), uv(r, rows)])).collect();
-    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::default())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_UV_0, uvs)
-        .with_inserted_indices(Indices::U32(grid_indices(heightfield)))
+    let uvs = texels(heightfield).map(|(c, r)| [uv(c, columns), uv(r, rows)]).collect();
+    grid_mesh(positions(heightfield).collect(), normals(heightfield).collect(), uvs, grid_indices(heightfield))
 }
