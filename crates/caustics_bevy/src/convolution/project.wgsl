@@ -5,6 +5,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::convolution::Pool
+#import bevy_caustics::receiver::world_at
 
 @group(0) @binding(0) var<uniform> view: View;
 #ifdef MULTISAMPLED

@@ -94,6 +94,7 @@ struct ExtractedReceivers(HashMap<MainEntity, ReceiverAlbedo>);
 pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "composite.wgsl");
     bevy::asset::embedded_asset!(app, "inject.wgsl");
+    bevy::shader::load_shader_library!(app, "receiver.wgsl");
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());

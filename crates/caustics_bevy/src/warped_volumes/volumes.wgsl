@@ -5,6 +5,7 @@
 // (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
 
 #import bevy_render::view::View
+#import bevy_caustics::receiver::world_at
 
 struct CausticVolume {
     origin: vec4<f32>,          // xyz: origin (a generator vertex), w: depth
@@ -163,13 +164,6 @@ fn load_depth(pixel: vec2<i32>) -> f32 {
     return textureLoad(depth_prepass, pixel, 0);
 }
 
-// World position at a pixel for an NDC depth (reverse Z: 1 near, 0 infinitely far).
-fn world_at(frag: vec2<f32>, depth: f32) -> vec3<f32> {
-    let uv = (frag - view.viewport.xy) / view.viewport.zw;
-    let clip = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
-    return clip.xyz / clip.w;
-}
-
 @fragment
 fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     let pixel = vec2<i32>(in.position.xy);
@@ -178,7 +172,7 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let v = volumes[in.volume];
-    let s = sample_volume(v, world_at(in.position.xy, depth));
+    let s = sample_volume(v, world_at(view, in.position.xy, depth));
     if !s.inside {
         discard;
     }
@@ -304,11 +298,11 @@ fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
     let depth = load_depth(pixel);
     // The eye ray starts on the near plane (any projection) and ends at the surface,
     // or far away where the pixel sees the sky.
-    let eye = world_at(in.position.xy, 1.0);
-    let dir = normalize(world_at(in.position.xy, 0.5) - eye);
+    let eye = world_at(view, in.position.xy, 1.0);
+    let dir = normalize(world_at(view, in.position.xy, 0.5) - eye);
     var len = 1.0e5;
     if depth > 0.0 {
-        len = distance(world_at(in.position.xy, depth), eye);
+        len = distance(world_at(view, in.position.xy, depth), eye);
     }
     let v = volumes[in.volume];
     var radiance = vec3(0.0);
