@@ -22,6 +22,7 @@ use bevy::render::{
     view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
 };
 use caustics_core::convolution::ripples::mirror_images;
+use std::sync::Arc;
 
 /// `Pool` in `types.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
@@ -51,9 +52,10 @@ pub(super) struct GpuPool {
 /// Render world: one pool to draw this frame.
 struct ExtractedPool {
     uniform: GpuPool,
-    /// Every impulse's nine wall images: x, z, strength, drop time.
+    /// Every impulse's nine wall images: x, z, strength, drop time (one of zero
+    /// strength for a still pool: a binding may not be empty).
     images: Vec<Vec4>,
-    taps: std::sync::Arc<Vec<Vec4>>,
+    taps: Arc<Vec<Vec4>>,
 }
 
 /// Render world: the pools of this frame, by main-world entity.
@@ -66,10 +68,28 @@ struct PoolBuffers {
     uniform: UniformBuffer<GpuPool>,
     images: StorageBuffer<Vec<Vec4>>,
     taps: StorageBuffer<Vec<Vec4>>,
+    /// The kernels `taps` holds, so that unchanged ones are not written again.
+    taps_written: Option<Arc<Vec<Vec4>>>,
     heights: Buffer,
     terms: Buffer,
     irradiance: Buffer,
     compute: Option<BindGroup>,
+}
+
+impl PoolBuffers {
+    fn new(device: &RenderDevice, texels: u32) -> Self {
+        Self {
+            texels,
+            uniform: UniformBuffer::default(),
+            images: StorageBuffer::default(),
+            taps: StorageBuffer::default(),
+            taps_written: None,
+            heights: texel_buffer(device, "pool_heights", texels, 1),
+            terms: texel_buffer(device, "pool_terms", texels, 4),
+            irradiance: texel_buffer(device, "pool_floor_irradiance", texels, 1),
+            compute: None,
+        }
+    }
 }
 
 /// Render world: every pool's buffers on the GPU.
@@ -219,7 +239,7 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
         }
         let ripples = surface.ripples();
         let waves = ripples.settings();
-        let images: Vec<Vec4> = ripples
+        let mut images: Vec<Vec4> = ripples
             .impulses()
             .iter()
             .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
@@ -248,6 +268,9 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
             pool_from_world,
             color: Vec4::new(color.red, color.green, color.blue, 1.0),
         };
+        if images.is_empty() {
+            images.push(Vec4::ZERO);
+        }
         extracted.0.insert(MainEntity::from(entity), ExtractedPool { uniform, images, taps: kernels.taps.clone() });
     }
 }
@@ -264,7 +287,7 @@ fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_p
 }
 
 fn prepare_buffers(
-    extracted: Res<ExtractedPools>,
+    mut extracted: ResMut<ExtractedPools>,
     mut gpu: ResMut<PoolGpu>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
@@ -272,33 +295,20 @@ fn prepare_buffers(
     cache: Res<PipelineCache>,
 ) {
     gpu.0.retain(|entity, _| extracted.0.contains_key(entity));
-    for (entity, pool) in &extracted.0 {
+    for (entity, pool) in &mut extracted.0 {
         let texels = pool.uniform.columns * pool.uniform.rows;
-        let buffers = gpu.0.entry(*entity).or_insert_with(|| PoolBuffers {
-            texels: 0,
-            uniform: UniformBuffer::default(),
-            images: StorageBuffer::default(),
-            taps: StorageBuffer::default(),
-            heights: texel_buffer(&device, "pool_heights", 0, 1),
-            terms: texel_buffer(&device, "pool_terms", 0, 4),
-            irradiance: texel_buffer(&device, "pool_floor_irradiance", 0, 1),
-            compute: None,
-        });
+        let buffers = gpu.0.entry(*entity).or_insert_with(|| PoolBuffers::new(&device, texels));
         if buffers.texels != texels {
-            buffers.texels = texels;
-            buffers.heights = texel_buffer(&device, "pool_heights", texels, 1);
-            buffers.terms = texel_buffer(&device, "pool_terms", texels, 4);
-            buffers.irradiance = texel_buffer(&device, "pool_floor_irradiance", texels, 1);
+            *buffers = PoolBuffers::new(&device, texels);
         }
         buffers.uniform.set(pool.uniform);
         buffers.uniform.write_buffer(&device, &queue);
-        // A binding may not be empty: a still pool gets one image of zero strength.
-        let images = if pool.images.is_empty() { vec![Vec4::ZERO] } else { pool.images.clone() };
-        buffers.images.set(images);
+        buffers.images.set(std::mem::take(&mut pool.images));
         buffers.images.write_buffer(&device, &queue);
-        if buffers.taps.get().len() != pool.taps.len() || buffers.taps.get() != pool.taps.as_ref() {
+        if !buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps)) {
             buffers.taps.set(pool.taps.as_ref().clone());
             buffers.taps.write_buffer(&device, &queue);
+            buffers.taps_written = Some(pool.taps.clone());
         }
         let (Some(uniform), Some(images), Some(taps)) =
             (buffers.uniform.binding(), buffers.images.binding(), buffers.taps.binding())
