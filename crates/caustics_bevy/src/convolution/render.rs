@@ -5,8 +5,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, CausticTechnique, GeneratorInteraction, InvalidCausticParams};
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
-use bevy::camera::Hdr;
-use bevy::core_pipeline::prepass::{DepthPrepass, ViewPrepassTextures};
+use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::platform::collections::HashMap;
@@ -126,7 +125,7 @@ pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "convolution.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
-    app.add_systems(PostUpdate, (mark_active, add_depth_prepass, aim_kernels.after(bevy::transform::TransformSystems::Propagate)));
+    app.add_systems(PostUpdate, (mark_active, aim_kernels.after(bevy::transform::TransformSystems::Propagate)));
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -209,19 +208,6 @@ fn mark_active(
 ) {
     let any = !suns.is_empty() && pools.iter().any(|generator| uses_convolution(generator).is_some());
     active.set_if_neq(ActiveCausticTechniques { convolution: any, ..*active });
-}
-
-/// HDR 3D cameras without a depth prepass.
-type CamerasWithoutDepth = (With<Camera3d>, With<Hdr>, Without<DepthPrepass>);
-
-/// The projection reads receiver positions from Bevy's depth prepass: HDR 3D cameras
-/// get it while a pool has convolution caustics.
-fn add_depth_prepass(mut commands: Commands, active: Res<ActiveCausticTechniques>, cameras: Query<Entity, CamerasWithoutDepth>) {
-    if active.convolution {
-        for camera in &cameras {
-            commands.entity(camera).insert(DepthPrepass);
-        }
-    }
 }
 
 fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<ConvolutionPools>, suns: Extract<Suns>, time: Extract<Res<Time>>) {

@@ -19,6 +19,7 @@ mod composite;
 use crate::components::{CausticReceiver, InvalidCausticParams};
 use crate::report::PassRecorder;
 use bevy::camera::Hdr;
+use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
 use bevy::pbr::{MeshMaterial3d, StandardMaterial};
 use bevy::platform::collections::{HashMap, HashSet};
@@ -68,6 +69,26 @@ impl ActiveCausticTechniques {
     }
 }
 
+/// A camera and whether it has the depth and normal prepasses.
+type CameraPrepasses = (Entity, Has<DepthPrepass>, Has<NormalPrepass>);
+/// HDR 3D cameras, the ones caustics are drawn for.
+type HdrCameras = (With<Camera3d>, With<Hdr>);
+
+/// The techniques read receiver points from Bevy's prepasses: HDR 3D cameras get the
+/// depth prepass while any technique has work, and the normal prepass while caustic
+/// volumes do (the one pass that reads receiver normals). In `Last`, after every
+/// technique has said whether it has work this frame.
+fn add_prepasses(mut commands: Commands, active: Res<ActiveCausticTechniques>, cameras: Query<CameraPrepasses, HdrCameras>) {
+    for (camera, depth, normal) in &cameras {
+        if active.any() && !depth {
+            commands.entity(camera).insert(DepthPrepass);
+        }
+        if active.warped_volumes && !normal {
+            commands.entity(camera).insert(NormalPrepass);
+        }
+    }
+}
+
 /// Render world: this view has caustics work this frame.
 #[derive(Component)]
 pub struct ViewCausticWork;
@@ -97,6 +118,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::shader::load_shader_library!(app, "receiver.wgsl");
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
+        .add_systems(Last, add_prepasses)
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;

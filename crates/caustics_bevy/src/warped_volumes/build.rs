@@ -7,8 +7,6 @@ use crate::irradiance::ActiveCausticTechniques;
 use crate::reference::{core_light, core_mesh, to_core};
 use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::VisibilitySystems;
-use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
-use bevy::camera::Hdr;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
@@ -32,8 +30,7 @@ pub struct CausticVolumes {
 pub(super) fn build(app: &mut App) {
     app.init_resource::<CausticVolumes>().add_systems(
         PostUpdate,
-        (build_volumes, add_prepasses)
-            .chain()
+        build_volumes
             .after(TransformSystems::Propagate)
             .after(VisibilitySystems::CalculateBounds)
             .after(VisibilitySystems::VisibilityPropagate)
@@ -222,22 +219,4 @@ fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
         hi = hi.max(p);
     }
     (lo, hi)
-}
-
-/// A camera without one of the prepasses the surface pass reads.
-type MissingPrepasses = Or<(Without<DepthPrepass>, Without<NormalPrepass>)>;
-
-/// The surface pass reads receiver positions and normals from Bevy's prepasses: HDR
-/// 3D cameras get them while the scene has caustic volumes.
-fn add_prepasses(
-    mut commands: Commands,
-    volumes: Res<CausticVolumes>,
-    cameras: Query<Entity, (With<Camera3d>, With<Hdr>, MissingPrepasses)>,
-) {
-    if volumes.volumes.is_empty() {
-        return;
-    }
-    for camera in &cameras {
-        commands.entity(camera).insert((DepthPrepass, NormalPrepass));
-    }
 }
