@@ -117,7 +117,9 @@ impl SceneBvh {
         if self.triangles.is_empty() {
             return None;
         }
-        let (o, d) = (to_bvh(origin), to_bvh(dir));
+        // `−0.0` components (a negated axis-aligned direction) make obvhs' slab test miss
+        // every node; adding `+0.0` turns them into `+0.0` and changes nothing else.
+        let (o, d) = (to_bvh(origin), to_bvh(dir + Vec3::ZERO));
         let ray = Ray::new(o, d, tmin, tmax);
         let mut hit = RayHit::none();
         let mut best_uv = (0.0, 0.0);
@@ -149,5 +151,23 @@ impl SceneBvh {
             uv: Vec2::new(best_uv.0, best_uv.1),
             geometric_normal: Vec3::new(n.x, n.y, n.z).normalize_or(Vec3::Y),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::TriMesh;
+    use crate::scene::Receiver;
+
+    #[test]
+    fn axis_aligned_rays_hit_whatever_the_sign_of_their_zeros() {
+        let floor = TriMesh::quad(Vec3::ZERO, Vec3::Z, Vec3::X);
+        let scene = Scene { receivers: vec![Receiver { mesh: floor, albedo: Vec3::ONE }], ..Scene::default() };
+        let bvh = SceneBvh::build(&scene);
+        let down = Vec3::new(0.0, -1.0, 0.0);
+        assert!(bvh.intersect(Vec3::new(0.2, 1.0, 0.1), down, 0.0, f32::INFINITY).is_some());
+        // −(0, −1, 0) = (−0, 1, −0).
+        assert!(bvh.intersect(Vec3::new(0.2, -1.0, 0.1), -down, 0.0, f32::INFINITY).is_some());
     }
 }

@@ -7,6 +7,7 @@
 pub mod bvh;
 pub mod convolution;
 pub mod estimate;
+pub mod hierarchical;
 pub mod mesh;
 pub mod metrics;
 pub mod ocean;

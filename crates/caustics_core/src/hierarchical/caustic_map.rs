@@ -1,0 +1,291 @@
+//! Splatting gathered photons into a caustic map, and reading it back as irradiance
+//! (Wyman 2008 §3.3).
+//!
+//! Every splat is a separable tent `(1 − |dx|/r)(1 − |dy|/r)` of radius `r ≥ 1` texel
+//! at texel centres, normalised by its discrete sum, so a splat deposits exactly its
+//! photon's flux (less what falls off the map); radius 1 is bilinear splatting.
+//! **Fixed** splats have one diameter in the full-resolution map. **Variable** splats
+//! take their diameter from the photon's divergence: twice the largest distance (in
+//! caustic-map texels) from the photon to its four neighbours in the photon buffer —
+//! the paper's max-distance approximation of eqs. 1–2, kept because the area spanned
+//! by the neighbours shrinks to nothing where photons spread in one direction and
+//! converge in the other, leaving holes between splats that the largest distance
+//! bridges (§3.3: it "slightly enlarges splats where photons diverge more strongly in
+//! one direction"). A splat of diameter `D` goes into level `L = ⌊log₂ max(1, D/5)⌋`
+//! of a mipmap pyramid of maps with diameter `D/2ᴸ` there, so no splat costs more than
+//! one of diameter 10 at its level; the levels are summed as `C = Σ Cᵢ/4ⁱ` (eq. 3),
+//! each upsampled bilinearly (which keeps each level's sum exactly). The paper drops
+//! splats above level 3; [`LevelOverflow`] measures that against clamping them into
+//! the top level.
+//!
+//! Flux accumulates in fixed point (2⁻²⁰ of a photon unit, 64 bits): sums do not
+//! depend on the order photons arrive in, so gathers that hand on the same photons
+//! make the same map, bit for bit, on the CPU as on the GPU's integer atomics.
+
+use super::hierarchy::{GatherEntry, PhotonPyramid, children};
+use super::light_maps::{LightMaps, NO_SURFACE};
+use super::light_view::LightView;
+use super::photons::PhotonBuffer;
+use super::{LevelOverflow, MIN_SPLAT_DIAMETER, SPLAT_LEVEL_THRESHOLD, Splats};
+use glam::{Vec2, Vec3};
+
+/// Fixed-point units per photon flux unit.
+pub const FLUX_UNITS: f32 = 1_048_576.0;
+
+/// Largest splat radius, in texels of its level, that a clamped splat keeps.
+pub const MAX_SPLAT_RADIUS: f32 = 16.0;
+
+/// A multi-resolution caustic map: level `i` is `(resolution >> i)²` texels of
+/// fixed-point flux, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CausticMap {
+    pub resolution: u32,
+    pub levels: Vec<Vec<u64>>,
+}
+
+/// What splatting did with the flux it was handed (photon units, f64).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SplatStats {
+    /// Splats written to each level.
+    pub per_level: Vec<u64>,
+    /// Flux handed to the splats.
+    pub flux_in: f64,
+    /// Flux of the splats above the top level that were dropped (the paper's cap).
+    pub flux_dropped_by_cap: f64,
+    /// Flux of kernels that fell off the map.
+    pub flux_off_map: f64,
+}
+
+/// A splat: where, how much and how wide (diameter in full-resolution texels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    pub uv: Vec2,
+    pub flux: f32,
+    pub diameter: f32,
+}
+
+/// The level of a splat of `diameter` full-resolution texels: `⌊log₂ max(1, D/5)⌋`,
+/// by exact doublings so that the CPU and the GPU agree at powers of two.
+#[inline]
+pub fn splat_level(diameter: f32) -> u32 {
+    let mut level = 0;
+    while level < 31 && diameter >= SPLAT_LEVEL_THRESHOLD * (2u32 << level) as f32 {
+        level += 1;
+    }
+    level
+}
+
+/// Diameter of a variable splat for photon `(x, y)`: twice the largest distance to its
+/// valid 4-neighbours in caustic-map texels, or twice the photon spacing of an
+/// unoccluded beam where it has none; at least [`MIN_SPLAT_DIAMETER`].
+pub fn divergence_diameter(photons: &PhotonBuffer, x: u32, y: u32, map_resolution: u32) -> f32 {
+    let n = photons.resolution;
+    let here = photons.photon(x, y).uv;
+    let mut largest = -1.0f32;
+    let neighbours = [(x.wrapping_sub(1), y), (x + 1, y), (x, y.wrapping_sub(1)), (x, y + 1)];
+    for (nx, ny) in neighbours {
+        if nx < n && ny < n {
+            let p = photons.photon(nx, ny);
+            if p.is_valid() {
+                largest = largest.max(((p.uv - here) * map_resolution as f32).length());
+            }
+        }
+    }
+    let spacing = if largest < 0.0 { map_resolution as f32 / n as f32 } else { largest };
+    (2.0 * spacing).max(MIN_SPLAT_DIAMETER)
+}
+
+/// The splat of a gathered entry.
+pub fn entry_splat(photons: &PhotonBuffer, pyramid: &PhotonPyramid, entry: GatherEntry, splats: Splats, map_resolution: u32) -> Splat {
+    let node = pyramid.node(entry.level, entry.node);
+    let fixed = match splats {
+        Splats::Fixed { diameter } => Some(diameter.max(MIN_SPLAT_DIAMETER)),
+        Splats::Variable { .. } => None,
+    };
+    if entry.level == 0 {
+        let (x, y) = (entry.node % photons.resolution, entry.node / photons.resolution);
+        let photon = photons.photon(x, y);
+        let diameter = fixed.unwrap_or_else(|| divergence_diameter(photons, x, y, map_resolution));
+        Splat { uv: photon.uv, flux: photon.flux, diameter }
+    } else {
+        // Converged photons share a texel: a cluster is as narrow as a splat gets.
+        Splat { uv: node.moment / node.flux, flux: node.flux, diameter: fixed.unwrap_or(MIN_SPLAT_DIAMETER) }
+    }
+}
+
+/// The separable tent weight at offset `t` for radius `r`.
+#[inline]
+fn tent(t: f32, r: f32) -> f32 {
+    (1.0 - t.abs() / r).max(0.0)
+}
+
+impl CausticMap {
+    /// An empty map with levels `0..=top_level`.
+    pub fn new(resolution: u32, top_level: u32) -> Self {
+        let levels = (0..=top_level).map(|l| vec![0u64; ((resolution >> l).max(1) as usize).pow(2)]).collect();
+        Self { resolution, levels }
+    }
+
+    /// Splats every entry. Fixed splats use level 0; variable ones the level their
+    /// diameter picks, up to `max_level`.
+    pub fn splat_all(photons: &PhotonBuffer, pyramid: &PhotonPyramid, entries: &[GatherEntry], splats: Splats, resolution: u32) -> (Self, SplatStats) {
+        let top = match splats {
+            Splats::Fixed { .. } => 0,
+            Splats::Variable { max_level, .. } => max_level.min(resolution.ilog2()),
+        };
+        let mut map = Self::new(resolution, top);
+        let mut stats = SplatStats { per_level: vec![0; top as usize + 1], ..SplatStats::default() };
+        for &entry in entries {
+            let splat = entry_splat(photons, pyramid, entry, splats, resolution);
+            stats.flux_in += splat.flux as f64;
+            let mut level = splat_level(splat.diameter);
+            if level > top {
+                match splats {
+                    Splats::Variable { overflow: LevelOverflow::Discard, .. } => {
+                        stats.flux_dropped_by_cap += splat.flux as f64;
+                        continue;
+                    }
+                    _ => level = top,
+                }
+            }
+            stats.per_level[level as usize] += 1;
+            stats.flux_off_map += map.splat(splat, level);
+        }
+        (map, stats)
+    }
+
+    /// Adds one splat to `level`; returns the flux that fell off the map.
+    pub fn splat(&mut self, splat: Splat, level: u32) -> f64 {
+        let width = (self.resolution >> level).max(1);
+        let radius = (0.5 * splat.diameter / (1u32 << level) as f32).clamp(1.0, MAX_SPLAT_RADIUS);
+        let p = splat.uv * width as f32 - 0.5;
+        let (x0, x1) = ((p.x - radius).floor() as i64, (p.x + radius).ceil() as i64);
+        let (y0, y1) = ((p.y - radius).floor() as i64, (p.y + radius).ceil() as i64);
+        let sum = |a: i64, b: i64, c: f32| (a..=b).fold(0.0f32, |s, i| s + tent(i as f32 - c, radius));
+        let (sx, sy) = (sum(x0, x1, p.x), sum(y0, y1, p.y));
+        let scale = splat.flux * FLUX_UNITS / (sx * sy);
+        let texels = &mut self.levels[level as usize];
+        let mut off_map = 0.0f64;
+        for y in y0..=y1 {
+            let wy = tent(y as f32 - p.y, radius);
+            for x in x0..=x1 {
+                let w = wy * tent(x as f32 - p.x, radius);
+                if w <= 0.0 {
+                    continue;
+                }
+                if x < 0 || y < 0 || x >= width as i64 || y >= width as i64 {
+                    off_map += (splat.flux * w / (sx * sy)) as f64;
+                    continue;
+                }
+                texels[(y as u32 * width + x as u32) as usize] += fixed_point(scale * w);
+            }
+        }
+        off_map
+    }
+
+    /// Level `level`'s texel `(x, y)` in photon units.
+    #[inline]
+    pub fn value(&self, level: u32, x: u32, y: u32) -> f32 {
+        let width = (self.resolution >> level).max(1);
+        from_fixed_point(self.levels[level as usize][(y * width + x) as usize])
+    }
+
+    /// The full-resolution map `C = Σᵢ Cᵢ / 4ⁱ` (eq. 3), each level bilinearly
+    /// upsampled to the full-resolution texel centres (clamped at the edges): photon
+    /// units per full-resolution texel, row-major.
+    pub fn resolve(&self) -> Vec<f32> {
+        let m = self.resolution;
+        (0..m * m)
+            .map(|i| {
+                let (x, y) = (i % m, i / m);
+                let mut c = 0.0f32;
+                for level in 0..self.levels.len() as u32 {
+                    let width = (m >> level).max(1);
+                    let q = (Vec2::new(x as f32, y as f32) + 0.5) / (1u32 << level) as f32 - 0.5;
+                    let v = bilinear(q, width, |tx, ty| self.value(level, tx, ty));
+                    c += v / (1u32 << (2 * level)) as f32;
+                }
+                c
+            })
+            .collect()
+    }
+
+    /// Total flux in the map (eq. 3's sum over the full-resolution texels, exactly:
+    /// each level's sum).
+    pub fn total_flux(&self) -> f64 {
+        self.levels.iter().flatten().map(|&v| v as f64 / FLUX_UNITS as f64).sum()
+    }
+}
+
+/// Fixed-point units of a non-negative flux, rounded to nearest, as the GPU splits it
+/// into two 32-bit words.
+#[inline]
+pub fn fixed_point(value: f32) -> u64 {
+    let x = value + 0.5;
+    let high = (x * (1.0 / 4_294_967_296.0)).floor();
+    let low = x - high * 4_294_967_296.0;
+    ((high as u64) << 32) + low as u64
+}
+
+/// Photon units of a fixed-point sum, as the GPU converts its two words.
+#[inline]
+pub fn from_fixed_point(units: u64) -> f32 {
+    ((units >> 32) as f32 * 4_294_967_296.0 + (units & 0xffff_ffff) as f32) / FLUX_UNITS
+}
+
+/// Bilinear interpolation of a `width²` grid at continuous texel coordinates `q`
+/// (texel centres at integers), clamped to the edge texels.
+#[inline]
+pub fn bilinear(q: Vec2, width: u32, at: impl Fn(u32, u32) -> f32) -> f32 {
+    let last = (width - 1) as f32;
+    let q = q.clamp(Vec2::ZERO, Vec2::splat(last));
+    let base = q.floor();
+    let f = q - base;
+    let (x0, y0) = (base.x as u32, base.y as u32);
+    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(width - 1));
+    let top = at(x0, y0) + (at(x1, y0) - at(x0, y0)) * f.x;
+    let bottom = at(x0, y1) + (at(x1, y1) - at(x0, y1)) * f.x;
+    top + (bottom - top) * f.y
+}
+
+/// Whether `p` (with unit normal `n`) is the receiver surface the light sees, not one
+/// hidden behind it: its depth is within a slope-scaled bias of the receiver map's.
+pub fn visible_from_light(view: &LightView, maps: &LightMaps, p: Vec3, n: Vec3) -> bool {
+    let Some(uv) = view.uv(p) else { return false };
+    let Some((x, y)) = super::photons::texel_of(uv, maps.map_resolution) else { return false };
+    let surface = maps.receiver(x, y);
+    if surface >= NO_SURFACE {
+        return false;
+    }
+    let z = view.depth(p);
+    let cos = n.dot(view.ray(uv).1).abs().max(0.1);
+    let tan = (1.0 - cos * cos).sqrt() / cos;
+    z <= surface + view.texel_size(z, maps.map_resolution) * (1.0 + tan) + 1e-5 * z.abs()
+}
+
+/// Caustic irradiance at receiver point `p` (unit normal `n`) from a resolved map of
+/// `view` (photons traced at `photon_resolution`, a light of `intensity`: irradiance
+/// for parallel light, intensity per steradian for a point light): zero where the light
+/// does not see `p`. Photon units per texel become flux per image-plane area by
+/// `(M/P)²` (a photon's measure over a texel's), and irradiance by the receiver's
+/// Jacobian.
+pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photon_resolution: u32, intensity: f32, p: Vec3, n: Vec3) -> f32 {
+    if !visible_from_light(view, maps, p, n) {
+        return 0.0;
+    }
+    let m = maps.map_resolution;
+    let Some(uv) = view.uv(p) else { return 0.0 };
+    let c = bilinear(uv * m as f32 - 0.5, m, |x, y| resolved[(y * m + x) as usize]);
+    let ratio = m as f32 / photon_resolution as f32;
+    c * intensity * ratio * ratio * view.receiver_jacobian(p, n)
+}
+
+/// The photons of node `index` of `level` (for tests): the photon buffer texels below it.
+pub fn photons_below(pyramid: &PhotonPyramid, level: u32, index: u32) -> Vec<u32> {
+    let mut nodes = vec![index];
+    for l in (1..=level).rev() {
+        let width = pyramid.width(l);
+        nodes = nodes.iter().flat_map(|&i| children(i % width, i / width).map(|(x, y)| y * 2 * width + x)).collect();
+    }
+    nodes
+}

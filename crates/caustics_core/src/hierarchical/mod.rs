@@ -1,0 +1,247 @@
+//! Hierarchical caustic maps (Wyman 2008).
+//!
+//! Caustic mapping in three passes (Fig. 2): a **photon buffer** per light view — one
+//! photon per texel, reflected or refracted through the generators in image space and
+//! landed on the receivers ([`photons`]) — gathered and **splatted** into a light-space
+//! **caustic map** ([`caustic_map`]), which receivers **look up** like a shadow map.
+//! The paper's three improvements:
+//!
+//! 1. **Hierarchical gather** (§3.1): a mipmap of photon validity, traversed breadth
+//!    first, discards whole groups of photons that never met a generator ([`hierarchy`]);
+//! 2. **Clustering** (§3.2): photons that converge on one caustic-map texel are
+//!    splatted once, with their summed flux;
+//! 3. **Variable splats in a multi-resolution map** (§3.3): a splat as wide as its
+//!    photons diverge, written into the mipmap level that keeps it small, and the levels
+//!    summed (eq. 3).
+//!
+//! Everything here is the CPU twin of the GPU passes in `caustics_bevy`, stage by
+//! stage: [`light_maps`] casts rays where the GPU rasterises, the rest is the same
+//! arithmetic. [`ViewCaustics::compute`] runs all stages for one light view and times
+//! each.
+
+pub mod caustic_map;
+pub mod hierarchy;
+pub mod light_maps;
+pub mod light_view;
+pub mod photons;
+
+pub use caustic_map::{CausticMap, SplatStats};
+pub use hierarchy::{GatherEntry, GatherStats, PhotonPyramid};
+pub use light_maps::LightMaps;
+pub use light_view::{LightView, Projection};
+pub use photons::{Photon, PhotonBuffer, PhotonStats};
+
+use crate::params::ParamError;
+use crate::scene::{Light, LightKind, Scene};
+use glam::Vec3;
+use std::time::Instant;
+
+/// Width of the pyramid level the hierarchical gather starts from (§3.1: "our
+/// implementation starts with a mipmap of resolution 16²").
+pub const START_RESOLUTION: u32 = 16;
+/// A variable splat's diameter, in texels of its level, above which it moves one level
+/// up (§3.3's 5.0).
+pub const SPLAT_LEVEL_THRESHOLD: f32 = 5.0;
+/// The narrowest splat: radius one texel, bilinear splatting.
+pub const MIN_SPLAT_DIAMETER: f32 = 2.0;
+/// Largest photon buffer and caustic map side: 4096² photons (the paper's largest)
+/// address 24 bits of nodes.
+pub const MAX_RESOLUTION: u32 = 4096;
+
+/// How the photon buffer is gathered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Gather {
+    /// Every photon of the buffer is processed (the baseline).
+    Flat,
+    /// The pyramid is traversed from [`START_RESOLUTION`]² nodes (§3.1), with or
+    /// without clustering (§3.2).
+    Hierarchical { clustering: Clustering },
+}
+
+/// Where the hierarchical gather clusters converging photons (§3.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clustering {
+    Off,
+    /// At the level just above the photon buffer only ("combine last").
+    LastLevel,
+    /// At every level ("combine all").
+    AllLevels,
+}
+
+/// How photons are splatted (§3.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Splats {
+    /// One diameter, in caustic-map texels, for every splat, in the full-resolution map.
+    Fixed { diameter: f32 },
+    /// Diameters from photon divergence, in a pyramid of maps up to `max_level` (the
+    /// paper sums levels 0–3).
+    Variable { max_level: u32, overflow: LevelOverflow },
+}
+
+/// What happens to a variable splat too wide for the top level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LevelOverflow {
+    /// Dropped, as the paper does ("such photons contribute little").
+    Discard,
+    /// Splatted into the top level (radius capped at [`caustic_map::MAX_SPLAT_RADIUS`]
+    /// texels there), keeping its flux.
+    Clamp,
+}
+
+/// Everything one light view's caustic map is made with.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CausticMapSettings {
+    /// Photon buffer side (a power of two, 16 to 4096): `photon_resolution²` photons.
+    pub photon_resolution: u32,
+    /// Caustic map (and receiver map) side, a power of two, 16 to 4096.
+    pub map_resolution: u32,
+    pub gather: Gather,
+    pub splats: Splats,
+    /// Refinements of a photon's exit point from a closed refractor.
+    pub exit_iterations: u32,
+}
+
+impl Default for CausticMapSettings {
+    /// 1024² photons into a 1024² map, hierarchical with clustering at the last level
+    /// and variable splats into levels 0–3 (clamped): the paper's fastest gather (§5)
+    /// with its splats.
+    fn default() -> Self {
+        Self {
+            photon_resolution: 1024,
+            map_resolution: 1024,
+            gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
+            splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
+            exit_iterations: 4,
+        }
+    }
+}
+
+impl CausticMapSettings {
+    /// Checks the resolutions (powers of two within range) and the fixed splat size.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        for (name, value) in [("photon resolution", self.photon_resolution), ("caustic map resolution", self.map_resolution)] {
+            if !value.is_power_of_two() || !(16..=MAX_RESOLUTION).contains(&value) {
+                return Err(ParamError::OutOfRange { name, value: value as f32, expected: "a power of two from 16 to 4096" });
+            }
+        }
+        if let Splats::Fixed { diameter } = self.splats
+            && !(diameter.is_finite() && diameter > 0.0 && diameter <= 64.0)
+        {
+            return Err(ParamError::OutOfRange { name: "splat diameter", value: diameter, expected: "between 0 and 64 texels" });
+        }
+        if let Splats::Variable { max_level, .. } = self.splats
+            && max_level > 8
+        {
+            return Err(ParamError::OutOfRange { name: "top splat level", value: max_level as f32, expected: "at most 8" });
+        }
+        Ok(())
+    }
+}
+
+/// The light's intensity as the caustic map scales it: irradiance across the beam for
+/// parallel light, intensity per steradian for point and spot lights (times its colour).
+pub fn light_intensity(light: &Light) -> f32 {
+    match light.kind {
+        LightKind::Directional { irradiance, .. } => irradiance,
+        LightKind::Point { intensity, .. } | LightKind::Spot { intensity, .. } => intensity,
+    }
+}
+
+/// Seconds each stage took (the paper's Tables 3–4 stages).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes {
+    /// The light-space maps (on a GPU, rasterisation; here ray casting).
+    pub light_maps: f64,
+    /// Tracing the photon buffer.
+    pub photons: f64,
+    /// Building the pyramid and gathering.
+    pub gather: f64,
+    /// Splatting and resolving the levels.
+    pub splat: f64,
+}
+
+/// One light view's caustic map, computed on the CPU with every stage's result kept.
+#[derive(Clone, Debug)]
+pub struct ViewCaustics {
+    pub light: Light,
+    pub view: LightView,
+    pub settings: CausticMapSettings,
+    pub maps: LightMaps,
+    pub photons: PhotonBuffer,
+    pub pyramid: PhotonPyramid,
+    pub entries: Vec<GatherEntry>,
+    pub gather_stats: GatherStats,
+    pub map: CausticMap,
+    pub splat_stats: SplatStats,
+    /// The resolved full-resolution map (eq. 3), photon units per texel.
+    pub resolved: Vec<f32>,
+    pub times: StageTimes,
+}
+
+impl ViewCaustics {
+    /// Runs every stage for `view` of `light` in `scene`.
+    pub fn compute(scene: &Scene, light: &Light, view: &LightView, settings: &CausticMapSettings) -> Self {
+        let clock = Instant::now();
+        let maps = LightMaps::ray_cast(scene, view, settings.photon_resolution, settings.map_resolution);
+        Self::from_maps(scene, light, view, settings, maps, clock.elapsed().as_secs_f64())
+    }
+
+    /// Runs the stages after the light maps (given, e.g. read back from a GPU).
+    pub fn from_maps(scene: &Scene, light: &Light, view: &LightView, settings: &CausticMapSettings, maps: LightMaps, light_maps: f64) -> Self {
+        let materials: Vec<_> = scene.generators.iter().map(|g| g.interaction).collect();
+        let clock = Instant::now();
+        let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.exit_iterations);
+        let traced = clock.elapsed().as_secs_f64();
+        Self::from_photons(light, view, settings, maps, photons, StageTimes { light_maps, photons: traced, ..StageTimes::default() })
+    }
+
+    /// Runs the stages after the photon buffer.
+    pub fn from_photons(light: &Light, view: &LightView, settings: &CausticMapSettings, maps: LightMaps, photons: PhotonBuffer, mut times: StageTimes) -> Self {
+        let clock = Instant::now();
+        let pyramid = PhotonPyramid::new(&photons, settings.map_resolution);
+        let (entries, gather_stats) = hierarchy::gather(&pyramid, settings.gather);
+        times.gather = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let (map, splat_stats) = CausticMap::splat_all(&photons, &pyramid, &entries, settings.splats, settings.map_resolution);
+        let resolved = map.resolve();
+        times.splat = clock.elapsed().as_secs_f64();
+        Self { light: *light, view: *view, settings: *settings, maps, photons, pyramid, entries, gather_stats, map, splat_stats, resolved, times }
+    }
+
+    /// Caustic irradiance (the light's colour mean) at receiver point `p` with unit normal `n`.
+    pub fn irradiance_at(&self, p: Vec3, n: Vec3) -> f32 {
+        let intensity = light_intensity(&self.light) * self.light.color.element_sum() / 3.0;
+        caustic_map::irradiance_at(&self.view, &self.maps, &self.resolved, self.settings.photon_resolution, intensity, p, n)
+    }
+
+    /// Bytes this view's buffers take on a GPU: the front and back maps (two `vec4`
+    /// a texel), their depth, the photon buffer, the pyramid, two traversal lists and
+    /// the gathered list (one `u32` a photon each at worst), the receiver map with its
+    /// depth, the map levels (two `u32` a texel) and the resolved map.
+    pub fn gpu_bytes(&self) -> u64 {
+        let p = self.settings.photon_resolution as u64 * self.settings.photon_resolution as u64;
+        let m = self.settings.map_resolution as u64 * self.settings.map_resolution as u64;
+        let levels: u64 = self.map.levels.iter().map(|l| l.len() as u64 * 8).sum();
+        p * (32 + 4) + self.photons.gpu_bytes() + self.pyramid.gpu_bytes() + 3 * 4 * p + m * (4 + 4 + 4) + levels
+    }
+}
+
+/// Every light view of every light of `scene` with its caustic map; empty without
+/// generators or receivers.
+pub fn scene_caustics(scene: &Scene, settings: &CausticMapSettings) -> Vec<ViewCaustics> {
+    let Some(generators) = scene.generator_bounds() else { return Vec::new() };
+    let Some(receivers) = scene.receivers.iter().map(|r| r.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))) else {
+        return Vec::new();
+    };
+    scene
+        .lights
+        .iter()
+        .flat_map(|light| LightView::for_light(light, generators, receivers).into_iter().map(move |view| (light, view)))
+        .map(|(light, view)| ViewCaustics::compute(scene, light, &view, settings))
+        .collect()
+}
+
+/// Caustic irradiance at `p` (unit normal `n`) summed over every light view.
+pub fn irradiance_at(views: &[ViewCaustics], p: Vec3, n: Vec3) -> f32 {
+    views.iter().map(|v| v.irradiance_at(p, n)).sum()
+}

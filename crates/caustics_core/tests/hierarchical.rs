@@ -1,0 +1,504 @@
+//! Hierarchical caustic maps (Wyman 2008) on the CPU: light views, analytic answers
+//! (flat water and a glass slab transmit their Fresnel fractions, a lens conserves
+//! energy), the traversal against the flat gather, clustering, the multi-resolution
+//! map's energy, and the stiff cases: total internal reflection, photons leaving the
+//! map, all photons on one texel, a refractor filling the view, a light inside a
+//! generator, 4096² buffers and an empty one.
+
+use caustics_core::hierarchical::caustic_map::{self, CausticMap, FLUX_UNITS, photons_below, splat_level};
+use caustics_core::hierarchical::hierarchy::{self, DIVERSE, EMPTY, Node, PhotonPyramid};
+use caustics_core::hierarchical::photons::{Photon, PhotonBuffer, PhotonStats};
+use caustics_core::hierarchical::{
+    CausticMapSettings, Clustering, Gather, LevelOverflow, LightView, Projection, Splats, ViewCaustics, scene_caustics,
+};
+use caustics_core::mesh::TriMesh;
+use caustics_core::optics::{fresnel_transmittance, refract};
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
+use caustics_core::scenes::glass_sphere;
+use caustics_core::tracer::{PhotonTracer, TraceSettings};
+use caustics_core::estimate::{GridRegion, IrradianceGrid};
+use glam::{Vec2, Vec3};
+use std::collections::HashSet;
+
+const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
+const VARIABLE: Splats = Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp };
+
+fn settings(photons: u32, map: u32, gather: Gather, splats: Splats) -> CausticMapSettings {
+    CausticMapSettings { photon_resolution: photons, map_resolution: map, gather, splats, exit_iterations: 4 }
+}
+
+const HIERARCHICAL: Gather = Gather::Hierarchical { clustering: Clustering::Off };
+const CLUSTERED: Gather = Gather::Hierarchical { clustering: Clustering::AllLevels };
+
+fn floor(size: f32, y: f32) -> Receiver {
+    Receiver { mesh: TriMesh::quad(Vec3::Y * y, Vec3::Z * (0.5 * size), Vec3::X * (0.5 * size)), albedo: Vec3::ONE }
+}
+
+fn sun(direction: Vec3) -> Light {
+    Light::white(LightKind::Directional { direction, irradiance: 2.0 })
+}
+
+fn glass(mesh: TriMesh, ior: f32) -> Generator {
+    Generator { mesh, interaction: SpecularInteraction::Refract { ior, dispersion: None } }
+}
+
+/// A closed axis-aligned box, faces wound counter-clockwise from outside.
+fn cuboid(lo: Vec3, hi: Vec3) -> TriMesh {
+    let c = 0.5 * (lo + hi);
+    let h = 0.5 * (hi - lo);
+    let mut mesh = TriMesh::quad(c + Vec3::Y * h.y, Vec3::Z * h.z, Vec3::X * h.x);
+    for (n, u, v) in [
+        (Vec3::NEG_Y, Vec3::X * h.x, Vec3::Z * h.z),
+        (Vec3::X, Vec3::Y * h.y, Vec3::Z * h.z),
+        (Vec3::NEG_X, Vec3::Z * h.z, Vec3::Y * h.y),
+        (Vec3::Z, Vec3::X * h.x, Vec3::Y * h.y),
+        (Vec3::NEG_Z, Vec3::Y * h.y, Vec3::X * h.x),
+    ] {
+        mesh.append(&TriMesh::quad(c + n * (n.abs().dot(h)), u, v));
+    }
+    mesh
+}
+
+/// The only view of the scene's only light.
+fn only_view(scene: &Scene, settings: &CausticMapSettings) -> ViewCaustics {
+    let mut views = scene_caustics(scene, settings);
+    assert_eq!(views.len(), 1, "one light view");
+    views.remove(0)
+}
+
+fn assert_all_finite(view: &ViewCaustics) {
+    assert!(view.photons.photons.iter().all(|p| p.uv.is_finite() && p.flux.is_finite() && p.flux >= 0.0));
+    assert!(view.resolved.iter().all(|c| c.is_finite() && *c >= 0.0), "non-finite or negative caustic map");
+}
+
+/// Irradiance at the centres of `n × n` cells of the square `[−half, half]²` at height `y`.
+fn floor_samples(view: &ViewCaustics, half: f32, y: f32, n: usize) -> Vec<f32> {
+    (0..n * n)
+        .map(|i| {
+            let (c, r) = ((i % n) as f32 + 0.5, (i / n) as f32 + 0.5);
+            let p = Vec3::new(-half + 2.0 * half * c / n as f32, y, -half + 2.0 * half * r / n as f32);
+            view.irradiance_at(p, Vec3::Y)
+        })
+        .collect()
+}
+
+#[test]
+fn light_views_project_and_rasterise_consistently() {
+    let light = Light::white(LightKind::Spot {
+        position: Vec3::new(0.3, 3.0, 0.2),
+        direction: Vec3::new(0.1, -1.0, 0.05),
+        intensity: 1.0,
+        inner_angle: 0.3,
+        outer_angle: 0.5,
+    });
+    let bounds = (Vec3::splat(-1.0), Vec3::splat(1.0));
+    for light in [light, sun(Vec3::new(0.4, -1.0, 0.3)), Light::white(LightKind::Point { position: Vec3::Y * 3.0, intensity: 1.0 })] {
+        for view in LightView::for_light(&light, bounds, bounds) {
+            let clip_from_world = view.clip_from_world();
+            for uv in [Vec2::new(0.25, 0.75), Vec2::new(0.5, 0.5), Vec2::new(0.9, 0.1)] {
+                let (origin, dir) = view.ray(uv);
+                let p = origin + dir * 1.7;
+                // The ray's points project back to its map point, on the GPU's clip space too.
+                assert!((view.uv(p).unwrap() - uv).length() < 1e-5);
+                let clip = clip_from_world * p.extend(1.0);
+                let ndc = clip.truncate() / clip.w;
+                assert!((Vec2::new(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y) - uv).length() < 1e-5);
+                let z = (view.depth(p) - view.near) / (view.far - view.near);
+                if let Projection::Orthographic { .. } = view.projection {
+                    assert!((ndc.z - z).abs() < 1e-5);
+                }
+            }
+            // The frame is a camera's: right × up = −forward.
+            assert!((view.right.cross(view.up) + view.forward).length() < 1e-5);
+        }
+    }
+    // A point light above the box sees it through the −y face only; inside it, all six.
+    let above = Light::white(LightKind::Point { position: Vec3::Y * 3.0, intensity: 1.0 });
+    let views = LightView::for_light(&above, (Vec3::splat(-0.5), Vec3::splat(0.5)), bounds);
+    assert_eq!(views.len(), 1);
+    assert_eq!(views[0].forward, Vec3::NEG_Y);
+    let inside = Light::white(LightKind::Point { position: Vec3::ZERO, intensity: 1.0 });
+    assert_eq!(LightView::for_light(&inside, bounds, bounds).len(), 6);
+}
+
+#[test]
+fn the_receiver_jacobian_is_the_solid_angle_per_image_area() {
+    // Perspective: a small patch at p, normal n, covers dω = dA cos θ / r²; on the
+    // image plane that is dω / cos³α. Compare with the image of the patch's corners.
+    let light = Light::white(LightKind::Point { position: Vec3::new(0.0, 3.0, 0.0), intensity: 1.0 });
+    let view = LightView::for_light(&light, (Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 1.0, 1.0)), (Vec3::splat(-2.0), Vec3::splat(2.0)))[0];
+    let (p, n) = (Vec3::new(0.7, 0.0, -0.4), Vec3::new(0.2, 1.0, 0.1).normalize());
+    let (u, v) = caustics_core::tracer::orthonormal_basis(n);
+    let h = 1e-3;
+    let image = |q: Vec3| {
+        let t = view.uv(q).unwrap();
+        view.half_extent() * 2.0 * Vec2::new(t.x, -t.y)
+    };
+    let (a, b, c) = (image(p), image(p + u * h), image(p + v * h));
+    let image_area = ((b - a).perp_dot(c - a)).abs();
+    let jacobian = image_area / (h * h);
+    assert!((view.receiver_jacobian(p, n) / jacobian - 1.0).abs() < 2e-3, "{} vs {jacobian}", view.receiver_jacobian(p, n));
+}
+
+#[test]
+fn flat_water_transmits_exactly_the_fresnel_fraction() {
+    let l = Vec3::new(0.3, -1.0, -0.2).normalize();
+    let water = TriMesh::heightfield(5, 6.0, |_, _| 0.8, |_, _| Vec3::Y).unwrap();
+    let scene = Scene { lights: vec![sun(l)], generators: vec![glass(water, 1.333)], receivers: vec![floor(6.0, 0.0)] };
+    let expected = 2.0 * l.y.abs() * fresnel_transmittance(l.y, 1.0 / 1.333);
+    for (gather, splats) in [(Gather::Flat, FIXED), (CLUSTERED, FIXED), (CLUSTERED, VARIABLE)] {
+        let view = only_view(&scene, &settings(256, 256, gather, splats));
+        assert_all_finite(&view);
+        // Away from the edges, where the refracted beam's shift leaves the floor unlit.
+        let samples = floor_samples(&view, 1.5, 0.0, 16);
+        for e in samples {
+            assert!((e / expected - 1.0).abs() < 2e-3, "{gather:?} {splats:?}: {e} against {expected}");
+        }
+    }
+}
+
+#[test]
+fn a_glass_slab_transmits_the_fresnel_fractions_of_both_faces() {
+    let l = Vec3::new(0.25, -1.0, 0.1).normalize();
+    let slab = cuboid(Vec3::new(-2.5, 0.5, -2.5), Vec3::new(2.5, 0.9, 2.5));
+    let scene = Scene { lights: vec![sun(l)], generators: vec![glass(slab, 1.5)], receivers: vec![floor(6.0, 0.0)] };
+    let inside = refract(l, Vec3::Y, 1.0 / 1.5).direction().unwrap();
+    let expected = 2.0 * l.y.abs() * fresnel_transmittance(l.y, 1.0 / 1.5) * fresnel_transmittance(inside.y, 1.5);
+    let view = only_view(&scene, &settings(256, 256, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    for e in floor_samples(&view, 1.5, 0.0, 16) {
+        assert!((e / expected - 1.0).abs() < 2e-3, "{e} against {expected}");
+    }
+}
+
+#[test]
+fn a_glass_ball_conserves_the_energy_it_transmits_and_focuses_like_the_tracer() {
+    let bench = glass_sphere(64);
+    let scene = &bench.scene;
+    let view = only_view(scene, &settings(512, 512, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    // Energy: every photon that crosses both faces lands, and the map holds its flux.
+    // Image-space refraction finds the far side's normal a texel or so off; at the rim,
+    // where the refracted ray runs nearly along it, that turns a few photons past the
+    // critical angle (a sphere has none): they are dropped and counted.
+    let stats = view.photons.stats;
+    let lost = stats.flux_total_internal_reflection + stats.flux_left_map;
+    assert!(lost < 0.03 * stats.flux_caustic, "{stats:?}");
+    let deposited = view.map.total_flux();
+    assert!((deposited / stats.flux_caustic - 1.0).abs() < 1e-3, "{deposited} of {}", stats.flux_caustic);
+    // The irradiance on the floor against the ground-truth tracer.
+    let region = bench.region;
+    let tracer = PhotonTracer::new(scene).unwrap();
+    let mut grid = IrradianceGrid::new(region);
+    tracer.trace(&TraceSettings { photons_per_light: 1 << 21, ..Default::default() }, &mut grid, &|_, _| {});
+    let truth = grid.irradiance_mean();
+    let ours = cell_means(&view, &region);
+    let flux = |v: &[f32]| v.iter().map(|&e| e as f64).sum::<f64>() * region.cell_area() as f64;
+    // Image-space refraction sees one pass through the ball; the tracer also follows its
+    // internal reflections (a few per cent of the flux, spread wide).
+    assert!((flux(&ours) / flux(&truth) - 1.0).abs() < 0.05, "{} vs {}", flux(&ours), flux(&truth));
+    let l1 = caustics_core::metrics::relative_l1(&ours, &truth);
+    // 0.17 here: the splats' blur, one pass, and the reference's own noise (2²¹ photons).
+    assert!(l1 < 0.25, "relative L1 {l1}");
+}
+
+/// Mean irradiance of 2 × 2 samples per cell of a horizontal region facing up.
+fn cell_means(view: &ViewCaustics, region: &GridRegion) -> Vec<f32> {
+    let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
+    (0..region.nu * region.nv)
+        .map(|i| {
+            let corner = region.cell_center(i / region.nu, i % region.nu) - 0.5 * (du + dv);
+            (0..4)
+                .map(|k| {
+                    let (a, b) = ((k % 2) as f32 * 0.5 + 0.25, (k / 2) as f32 * 0.5 + 0.25);
+                    view.irradiance_at(corner + du * a + dv * b, Vec3::Y)
+                })
+                .sum::<f32>()
+                / 4.0
+        })
+        .collect()
+}
+
+/// A photon buffer of `n²` photons from a function of the texel.
+fn synthetic(n: u32, photon: impl Fn(u32, u32) -> Photon) -> PhotonBuffer {
+    let photons = (0..n * n).map(|i| photon(i % n, i / n)).collect();
+    PhotonBuffer { resolution: n, photons, stats: PhotonStats::default() }
+}
+
+/// Photons through a wavy lens: valid inside a disc, landing on a squeezed grid.
+fn lens_photons(n: u32) -> PhotonBuffer {
+    synthetic(n, |x, y| {
+        let q = (Vec2::new(x as f32, y as f32) + 0.5) / n as f32 - 0.5;
+        if q.length() > 0.3 {
+            return Photon::default();
+        }
+        let focus = q * (0.2 + 2.0 * q.length()) + Vec2::splat(0.5) + 0.01 * Vec2::new((40.0 * q.y).sin(), (30.0 * q.x).cos());
+        Photon { uv: focus, flux: 0.5 + q.x, solid_angle: 1.0 }
+    })
+}
+
+#[test]
+fn the_hierarchical_gather_keeps_exactly_the_valid_photons_and_the_same_map() {
+    let photons = lens_photons(256);
+    let pyramid = PhotonPyramid::new(&photons, 128);
+    let (flat, flat_stats) = hierarchy::gather(&pyramid, Gather::Flat);
+    let (tree, tree_stats) = hierarchy::gather(&pyramid, HIERARCHICAL);
+    let valid: HashSet<u32> = (0..256 * 256).filter(|&i| photons.photons[i as usize].is_valid()).collect();
+    let as_set = |entries: &[hierarchy::GatherEntry]| entries.iter().map(|e| { assert_eq!(e.level, 0); e.node }).collect::<HashSet<_>>();
+    assert_eq!(as_set(&flat), valid);
+    assert_eq!(as_set(&tree), valid);
+    // The flat gather processes every photon; the traversal far fewer (a disc of
+    // π·0.3² ≈ 28 % of the buffer, plus the nodes around it).
+    assert_eq!(flat_stats.total_processed(), 256 * 256);
+    assert!(tree_stats.total_processed() < 256 * 256 / 2, "{tree_stats:?}");
+    assert_eq!(tree_stats.processed[hierarchy::start_level(256, 16) as usize], 16 * 16);
+    // Same photons, same splats: the same fixed-point map, bit for bit, both splat kinds.
+    for splats in [FIXED, VARIABLE] {
+        let a = CausticMap::splat_all(&photons, &pyramid, &flat, splats, 128).0;
+        let b = CausticMap::splat_all(&photons, &pyramid, &tree, splats, 128).0;
+        assert_eq!(a, b, "{splats:?}");
+    }
+}
+
+#[test]
+fn clusters_cover_every_photon_once_and_converge_on_one_texel() {
+    let photons = lens_photons(256);
+    let map = 64;
+    let pyramid = PhotonPyramid::new(&photons, map);
+    for clustering in [Clustering::LastLevel, Clustering::AllLevels] {
+        let (entries, stats) = hierarchy::gather(&pyramid, Gather::Hierarchical { clustering });
+        assert!(stats.clusters > 0, "{clustering:?}: the lens converges, there are clusters");
+        let mut covered = Vec::new();
+        for e in &entries {
+            let below = photons_below(&pyramid, e.level, e.node);
+            let valid: Vec<u32> = below.into_iter().filter(|&i| photons.photons[i as usize].is_valid()).collect();
+            if e.level > 0 {
+                assert!(valid.len() >= 2);
+                if clustering == Clustering::LastLevel {
+                    assert_eq!(e.level, 1);
+                }
+                let texels: HashSet<u32> = valid.iter().map(|&i| Node::of_photon(&photons.photons[i as usize], map).texel).collect();
+                assert_eq!(texels.len(), 1, "a cluster's photons land in one texel");
+                let flux: f32 = valid.iter().map(|&i| photons.photons[i as usize].flux).sum();
+                assert!((pyramid.node(e.level, e.node).flux / flux - 1.0).abs() < 1e-5);
+            }
+            covered.extend(valid);
+        }
+        let n = covered.len();
+        let unique: HashSet<u32> = covered.into_iter().collect();
+        assert_eq!(n, unique.len(), "no photon twice");
+        assert_eq!(unique.len(), photons.photons.iter().filter(|p| p.is_valid()).count(), "every photon once");
+        assert_eq!(stats.clustered_photons + stats.photons, n as u64);
+        // The map keeps the flux: clusters carry their photons' sum.
+        let (clustered, _) = CausticMap::splat_all(&photons, &pyramid, &entries, FIXED, map);
+        let (flat, _) = CausticMap::splat_all(&photons, &pyramid, &hierarchy::gather(&pyramid, Gather::Flat).0, FIXED, map);
+        assert!((clustered.total_flux() / flat.total_flux() - 1.0).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn pyramid_nodes_know_emptiness_and_convergence() {
+    let one = Photon { uv: Vec2::new(0.3, 0.3), flux: 1.0, solid_angle: 1.0 };
+    let other = Photon { uv: Vec2::new(0.7, 0.3), ..one };
+    let node = |p: Photon| Node::of_photon(&p, 4);
+    let none = Node::of_photon(&Photon::default(), 4);
+    assert_eq!(Node::parent([none; 4]).texel, EMPTY);
+    assert_eq!(Node::parent([none, node(one), none, none]).texel, node(one).texel);
+    assert!(!Node::parent([none, node(one), none, none]).converges(), "one photon is not a cluster");
+    assert!(Node::parent([node(one), node(one), none, none]).converges());
+    assert_eq!(Node::parent([node(one), node(other), none, none]).texel, DIVERSE);
+    let diverse = Node::parent([node(one), node(other), none, none]);
+    assert_eq!(Node::parent([diverse, node(one), node(one), node(one)]).texel, DIVERSE);
+}
+
+#[test]
+fn the_multiresolution_map_keeps_each_splat_small_and_its_flux() {
+    assert_eq!([1.0, 4.99, 5.0, 9.99, 10.0, 19.9, 20.0, 40.0, 80.0].map(splat_level), [0, 0, 0, 0, 1, 1, 2, 3, 4]);
+    // One splat per level: each deposits its flux, eq. 3 keeps it in the resolved sum.
+    let m = 64;
+    let mut map = CausticMap::new(m, 3);
+    for (level, diameter) in [(0, 3.0), (1, 12.0), (2, 25.0), (3, 50.0)] {
+        assert_eq!(splat_level(diameter), level);
+        let off = map.splat(caustic_map::Splat { uv: Vec2::new(0.43, 0.57), flux: 1.0, diameter }, level);
+        assert_eq!(off, 0.0);
+    }
+    assert!((map.total_flux() - 4.0).abs() < 1e-4);
+    let resolved: f64 = map.resolve().iter().map(|&c| c as f64).sum();
+    assert!((resolved - 4.0).abs() < 1e-4, "{resolved}");
+    // A wide splat in a coarse level is the same light as in the fine one, spread out:
+    // resolved, its peak is a quarter per level (the 1/4ⁱ of eq. 3).
+    let peak = |level: u32| {
+        let mut one = CausticMap::new(m, 3);
+        one.splat(caustic_map::Splat { uv: Vec2::splat(0.5), flux: 1.0, diameter: 2.0 * (1 << level) as f32 }, level);
+        one.resolve().iter().copied().fold(0.0, f32::max)
+    };
+    assert!(peak(1) < peak(0) && peak(2) < peak(1));
+}
+
+#[test]
+fn the_paper_level_cap_drops_energy_clamping_keeps_it() {
+    // Photons 64 texels apart (16² of them over a 1024² map): splats 128 texels wide,
+    // level 4.
+    let photons = synthetic(16, |x, y| Photon { uv: Vec2::new(x as f32 + 0.5, y as f32 + 0.5) / 16.0, flux: 1.0, solid_angle: 1.0 });
+    let pyramid = PhotonPyramid::new(&photons, 1024);
+    let (entries, _) = hierarchy::gather(&pyramid, HIERARCHICAL);
+    let discard = Splats::Variable { max_level: 3, overflow: LevelOverflow::Discard };
+    let (_, dropped) = CausticMap::splat_all(&photons, &pyramid, &entries, discard, 1024);
+    let (map, clamped) = CausticMap::splat_all(&photons, &pyramid, &entries, VARIABLE, 1024);
+    assert!(dropped.flux_dropped_by_cap > 0.9 * dropped.flux_in, "{dropped:?}");
+    assert_eq!(clamped.flux_dropped_by_cap, 0.0);
+    assert!((map.total_flux() + clamped.flux_off_map) / clamped.flux_in > 0.999);
+}
+
+#[test]
+fn total_internal_reflection_inside_the_refractor_is_dropped_and_counted() {
+    // A diamond bar with a square cross-section standing on its edge, under an overhead
+    // sun: light that enters an upper face near the side corners meets the lower face
+    // below at 73°, past the critical angle of 24°.
+    let bar = cuboid(Vec3::new(-0.5, -0.5, -1.0), Vec3::new(0.5, 0.5, 1.0));
+    let on_edge = bar.transformed(&glam::Affine3A::from_rotation_translation(
+        glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4),
+        Vec3::Y * 1.5,
+    ));
+    let scene = Scene { lights: vec![sun(Vec3::NEG_Y)], generators: vec![glass(on_edge, 2.42)], receivers: vec![floor(8.0, 0.0)] };
+    let view = only_view(&scene, &settings(128, 128, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    let stats = view.photons.stats;
+    assert!(stats.total_internal_reflection > 0, "{stats:?}");
+    assert!(stats.flux_total_internal_reflection > 0.0);
+}
+
+#[test]
+fn photons_that_leave_the_map_are_counted_and_nothing_breaks() {
+    // A mirror tilted so that it throws the light back up, away from every receiver.
+    let mirror = TriMesh::quad(Vec3::Y, Vec3::X * 0.5, Vec3::new(0.0, 0.3, -1.0).normalize() * 0.5);
+    let scene = Scene {
+        lights: vec![sun(Vec3::NEG_Y)],
+        generators: vec![Generator { mesh: mirror, interaction: SpecularInteraction::Reflect }],
+        receivers: vec![floor(4.0, 0.0)],
+    };
+    let view = only_view(&scene, &settings(64, 64, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    assert!(view.photons.stats.left_map > 0);
+    assert_eq!(view.photons.stats.caustic, 0);
+    assert_eq!(view.map.total_flux(), 0.0);
+}
+
+#[test]
+fn all_photons_converging_on_one_texel_make_one_cluster() {
+    let photons = synthetic(256, |_, _| Photon { uv: Vec2::new(0.5001, 0.4999), flux: 1.0, solid_angle: 1.0 });
+    let pyramid = PhotonPyramid::new(&photons, 256);
+    let (entries, stats) = hierarchy::gather(&pyramid, CLUSTERED);
+    // The traversal starts at 16² nodes, each one converged cluster of 256 photons.
+    assert_eq!(entries.len(), 256);
+    assert_eq!(stats.clustered_photons, 256 * 256);
+    assert_eq!(stats.total_processed(), 256);
+    for splats in [FIXED, VARIABLE] {
+        let (map, _) = CausticMap::splat_all(&photons, &pyramid, &entries, splats, 256);
+        let resolved = map.resolve();
+        assert!(resolved.iter().all(|c| c.is_finite()));
+        assert!((map.total_flux() - 65536.0).abs() < 1e-2, "{}", map.total_flux());
+    }
+}
+
+#[test]
+fn a_refractor_filling_the_whole_view_leaves_nothing_to_discard() {
+    let water = TriMesh::heightfield(33, 12.0, |x, z| 0.8 + 0.05 * (3.0 * x).sin() * (2.0 * z).cos(), |_, _| Vec3::Y).unwrap();
+    let scene = Scene { lights: vec![sun(Vec3::NEG_Y)], generators: vec![glass(water, 1.333)], receivers: vec![floor(12.0, 0.0)] };
+    let view = only_view(&scene, &settings(128, 128, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    assert!(view.photons.stats.caustic as f64 > 0.9 * 128.0 * 128.0, "{:?}", view.photons.stats);
+    // With nothing to discard the traversal processes the whole buffer plus its pyramid.
+    let stats = &view.gather_stats;
+    assert!(stats.total_processed() >= stats.splats());
+}
+
+#[test]
+fn a_light_inside_a_generator_sees_it_through_every_cube_face() {
+    let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 24, 48);
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Point { position: Vec3::Y, intensity: 1.0 })],
+        generators: vec![glass(ball, 1.5)],
+        receivers: vec![floor(4.0, 0.0)],
+    };
+    let views = scene_caustics(&scene, &settings(64, 64, CLUSTERED, VARIABLE));
+    assert_eq!(views.len(), 6);
+    for view in &views {
+        assert_all_finite(view);
+    }
+    // From inside the front map sees the inside of the ball: back faces only, culled.
+    // Light leaves through the glass unbent at the centre: no caustic photons, and no NaN.
+    let lit: f32 = views.iter().map(|v| v.irradiance_at(Vec3::new(0.3, 0.0, 0.2), Vec3::Y)).sum();
+    assert!(lit.is_finite());
+}
+
+#[test]
+fn a_4096_squared_buffer_is_gathered_in_bounded_memory() {
+    let photons = synthetic(4096, |x, y| {
+        let q = (Vec2::new(x as f32, y as f32) + 0.5) / 4096.0;
+        if (q - 0.5).length() < 0.1 { Photon { uv: 0.5 + (q - 0.5) * 0.5, flux: 1.0, solid_angle: 1.0 } } else { Photon::default() }
+    });
+    let pyramid = PhotonPyramid::new(&photons, 1024);
+    let (entries, stats) = hierarchy::gather(&pyramid, CLUSTERED);
+    // The traversal processes the disc's share (π·0.1² ≈ 3 %) and its neighbourhood.
+    assert!(stats.total_processed() < 4096 * 4096 / 10, "{}", stats.total_processed());
+    assert!(stats.clusters > 0);
+    let (map, _) = CausticMap::splat_all(&photons, &pyramid, &entries, VARIABLE, 1024);
+    assert!(map.resolve().iter().all(|c| c.is_finite()));
+    // The GPU's photon buffer is 16 bytes a photon (268 MB) and its pyramid 20 a node.
+    assert_eq!(photons.gpu_bytes(), 4096 * 4096 * 16);
+    assert!(pyramid.gpu_bytes() < 4096 * 4096 * 20 / 3 + 1);
+}
+
+#[test]
+fn an_empty_buffer_gathers_nothing_and_makes_a_dark_map() {
+    let photons = synthetic(64, |_, _| Photon::default());
+    let pyramid = PhotonPyramid::new(&photons, 64);
+    for gather in [Gather::Flat, HIERARCHICAL, CLUSTERED] {
+        let (entries, stats) = hierarchy::gather(&pyramid, gather);
+        assert!(entries.is_empty());
+        assert_eq!(stats.splats(), 0);
+    }
+    // The traversal discards the whole buffer at its first level.
+    assert_eq!(hierarchy::gather(&pyramid, HIERARCHICAL).1.total_processed(), 16 * 16);
+    let (map, _) = CausticMap::splat_all(&photons, &pyramid, &[], VARIABLE, 64);
+    assert!(map.resolve().iter().all(|&c| c == 0.0));
+    // A scene whose light misses its generator has no view to compute.
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Spot { position: Vec3::Y * 3.0, direction: Vec3::Y, intensity: 1.0, inner_angle: 0.2, outer_angle: 0.3 })],
+        generators: vec![glass(TriMesh::uv_sphere(Vec3::Y, 0.5, 8, 16), 1.5)],
+        receivers: vec![floor(4.0, 0.0)],
+    };
+    assert!(scene_caustics(&scene, &CausticMapSettings::default()).is_empty());
+}
+
+#[test]
+fn grazing_light_and_degenerate_triangles_stay_finite() {
+    let mut water = TriMesh::heightfield(17, 4.0, |x, _| 0.8 + 0.1 * (4.0 * x).sin(), |x, _| Vec3::new(-0.4 * (4.0 * x).cos(), 1.0, 0.0)).unwrap();
+    // A zero-area sliver.
+    water.append(&TriMesh::new(vec![Vec3::Y; 3], vec![Vec3::Y; 3], vec![[0, 1, 2]]).unwrap());
+    let scene = Scene {
+        lights: vec![sun(Vec3::new(1.0, -0.02, 0.0))],
+        generators: vec![glass(water, 1.333)],
+        receivers: vec![floor(4.0, 0.0)],
+    };
+    let view = only_view(&scene, &settings(64, 64, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+}
+
+#[test]
+fn settings_outside_their_range_are_refused() {
+    let good = CausticMapSettings::default();
+    assert!(good.validate().is_ok());
+    for bad in [
+        CausticMapSettings { photon_resolution: 1000, ..good },
+        CausticMapSettings { map_resolution: 8192, ..good },
+        CausticMapSettings { splats: Splats::Fixed { diameter: f32::NAN }, ..good },
+        CausticMapSettings { splats: Splats::Variable { max_level: 12, overflow: LevelOverflow::Clamp }, ..good },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+    assert_eq!(FLUX_UNITS, 1048576.0);
+}
+
