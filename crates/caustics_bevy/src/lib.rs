@@ -14,6 +14,8 @@ pub mod gltf_tagging;
 #[cfg(any(feature = "ocean", feature = "convolution"))]
 mod grid_mesh;
 pub mod headless;
+#[cfg(feature = "hierarchical-maps")]
+pub mod hierarchical_maps;
 pub mod irradiance;
 #[cfg(feature = "ocean")]
 pub mod ocean;
@@ -58,6 +60,8 @@ impl Plugin for CausticsPlugin {
         app.add_plugins(ocean::OceanPlugin);
         #[cfg(feature = "convolution")]
         convolution::build(app);
+        #[cfg(feature = "hierarchical-maps")]
+        hierarchical_maps::build(app);
     }
 }
 
@@ -67,6 +71,8 @@ pub mod prelude {
     pub use crate::Ocean;
     #[cfg(feature = "convolution")]
     pub use crate::{DropPebble, PoolRipples};
+    #[cfg(feature = "hierarchical-maps")]
+    pub use crate::hierarchical_maps::{CausticMapGather, HierarchicalMapsSettings};
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{

@@ -5,6 +5,7 @@
 
 use crate::{CausticGenerator, CausticReceiver, GeneratorInteraction, InjectedIrradiance};
 use bevy::asset::RenderAssetUsages;
+use bevy::camera::primitives::Aabb;
 use bevy::camera::{Exposure, Hdr, RenderTarget};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
@@ -83,6 +84,20 @@ pub fn core_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, St
     }
     .map_err(|e| e.to_string())?;
     Ok(local.transformed(&glam::Affine3A::from_cols_array(&transform.affine().to_cols_array())))
+}
+
+/// World-space bounds `(min, max)` of an entity's local `Aabb` placed by `transform`.
+pub fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
+    let (c, h) = (Vec3::from(aabb.center), Vec3::from(aabb.half_extents));
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for i in 0..8 {
+        let corner = c + h * Vec3::new([-1.0, 1.0][i & 1], [-1.0, 1.0][(i >> 1) & 1], [-1.0, 1.0][i >> 2]);
+        let p = transform.transform_point(corner);
+        lo = lo.min(p);
+        hi = hi.max(p);
+    }
+    (lo, hi)
 }
 
 /// A core mesh as a Bevy triangle list with positions and normals.

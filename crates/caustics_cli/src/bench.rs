@@ -63,7 +63,7 @@ pub struct Errors {
 }
 
 impl Errors {
-    fn between(image: &[f32], truth: &[f32]) -> Self {
+    pub fn between(image: &[f32], truth: &[f32]) -> Self {
         Self { l2: relative_l2(image, truth), l1: relative_l1(image, truth) }
     }
 }
@@ -154,7 +154,7 @@ impl BenchMethod for WarpedVolumes {
 }
 
 /// `SUPERSAMPLE`² points spread evenly over each cell of the region, cell by cell.
-fn cell_sample_points(region: &GridRegion) -> Vec<Vec3> {
+pub fn cell_sample_points(region: &GridRegion) -> Vec<Vec3> {
     let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
     (0..region.nv)
         .flat_map(|r| (0..region.nu).map(move |c| (r, c)))
@@ -169,7 +169,7 @@ fn cell_sample_points(region: &GridRegion) -> Vec<Vec3> {
 }
 
 /// The mean of each cell's values at [`cell_sample_points`].
-fn cell_means(samples: &[f32]) -> Vec<f32> {
+pub fn cell_means(samples: &[f32]) -> Vec<f32> {
     samples.chunks(SUPERSAMPLE * SUPERSAMPLE).map(|cell| cell.iter().sum::<f32>() / cell.len() as f32).collect()
 }
 
@@ -456,6 +456,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                 });
             }
         }
+        // Caustic maps run on the scene's own tessellation, measured on its region.
+        let own = crate::scenes::built_in(name).ok_or_else(|| format!("unknown scene {name:?}"))?;
+        notes.push_str(&crate::hierarchical::bench_scene(name, &own, &truth, args.quick, &args.out, &mut rows)?);
         if name == "pool" {
             let start = Instant::now();
             notes.push_str(&convolution_vs_direct(&scene)?);
@@ -511,7 +514,8 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, n
     let mut md = String::from(
         "Quality: photons for the reference tracer, generator cells (segments around the ring, \
          grid cells per side of the pool) for the volumes, texels along a side of the pool's 4 m water and \
-         kernel radius for the convolution; work: photons, volumes or texels.\n\n\
+         kernel radius for the convolution, photons per light view for the caustic maps; work: photons, volumes, \
+         texels, or the photons the caustic maps' gather processed.\n\n\
          Relative L2 and L1 against the reference tracer (the convolution with the narrowest lobe its kernel holds); \
          also against the method's own limit: for the volumes constant intensity on a 4× finer generator than the \
          finest here, for the convolution the direct integral of eq. 2 with scattering on (a = 50, n = 100).\n\n\

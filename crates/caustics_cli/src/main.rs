@@ -3,6 +3,7 @@
 
 mod bench;
 mod gltf;
+mod hierarchical;
 mod images;
 mod plot;
 mod render;

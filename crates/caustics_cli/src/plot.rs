@@ -1,5 +1,5 @@
-//! The bench figure: relative L2 error against run time, log–log, one line per
-//! scene and method.
+//! The bench figures: log–log line plots, one line per scene and method — relative L2
+//! error against run time, and the caustic maps' processed photons against photon count.
 
 use plotters::coord::combinators::{LogCoord, WithKeyPoints};
 use plotters::prelude::*;
@@ -12,7 +12,23 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
+/// A plot's caption and axis descriptions.
+pub struct Axes {
+    pub caption: &'static str,
+    pub x: &'static str,
+    pub y: &'static str,
+}
+
+/// The main bench figure.
+pub const ERROR_VS_TIME: Axes =
+    Axes { caption: "Caustic irradiance error against run time", x: "run time (s)", y: "relative L2 vs reference" };
+
 pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String> {
+    plot_log_log(path, &ERROR_VS_TIME, series)
+}
+
+/// Draws `series` on log–log axes into a 900 × 600 PNG.
+pub fn plot_log_log(path: &Path, axes: &Axes, series: &[&Series]) -> Result<(), String> {
     // ab_glyph needs one font; egui's default font is small, free and ships as a crate.
     register_font(
         "sans-serif",
@@ -38,10 +54,7 @@ pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String>
         let root = BitMapBackend::with_buffer(&mut pixels, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "Caustic irradiance error against run time",
-                ("sans-serif", 24),
-            )
+            .caption(axes.caption, ("sans-serif", 24))
             .margin(16)
             .x_label_area_size(48)
             .y_label_area_size(64)
@@ -49,8 +62,8 @@ pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String>
             .map_err(|e| err(&e))?;
         chart
             .configure_mesh()
-            .x_desc("run time (s)")
-            .y_desc("relative L2 vs reference")
+            .x_desc(axes.x)
+            .y_desc(axes.y)
             .label_style(("sans-serif", 15))
             .x_label_formatter(&|v| tick(*v))
             .y_label_formatter(&|v| tick(*v))

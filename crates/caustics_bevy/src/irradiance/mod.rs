@@ -61,11 +61,17 @@ pub struct InjectedIrradiance(pub Handle<Image>);
 pub struct ActiveCausticTechniques {
     pub warped_volumes: bool,
     pub convolution: bool,
+    pub hierarchical_maps: bool,
 }
 
 impl ActiveCausticTechniques {
     pub fn any(&self) -> bool {
-        self.warped_volumes || self.convolution
+        self.warped_volumes || self.convolution || self.hierarchical_maps
+    }
+
+    /// Whether a technique reads receiver normals (the normal prepass).
+    pub fn needs_normals(&self) -> bool {
+        self.warped_volumes || self.hierarchical_maps
     }
 }
 
@@ -75,15 +81,15 @@ type CameraPrepasses = (Entity, Has<DepthPrepass>, Has<NormalPrepass>);
 type HdrCameras = (With<Camera3d>, With<Hdr>);
 
 /// The techniques read receiver points from Bevy's prepasses: HDR 3D cameras get the
-/// depth prepass while any technique has work, and the normal prepass while caustic
-/// volumes do (the one pass that reads receiver normals). In `Last`, after every
-/// technique has said whether it has work this frame.
+/// depth prepass while any technique has work, and the normal prepass while a technique
+/// that reads receiver normals does (caustic volumes, caustic maps). In `Last`, after
+/// every technique has said whether it has work this frame.
 fn add_prepasses(mut commands: Commands, active: Res<ActiveCausticTechniques>, cameras: Query<CameraPrepasses, HdrCameras>) {
     for (camera, depth, normal) in &cameras {
         if active.any() && !depth {
             commands.entity(camera).insert(DepthPrepass);
         }
-        if active.warped_volumes && !normal {
+        if active.needs_normals() && !normal {
             commands.entity(camera).insert(NormalPrepass);
         }
     }

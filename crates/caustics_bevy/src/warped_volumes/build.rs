@@ -4,7 +4,7 @@
 use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{core_light, core_mesh, to_core};
+use crate::reference::{core_light, core_mesh, to_core, world_aabb};
 use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::platform::collections::{HashMap, HashSet};
@@ -206,17 +206,4 @@ fn build_volumes(
         }
         (built, stats, kept)
     }));
-}
-
-fn world_aabb(transform: &GlobalTransform, aabb: &Aabb) -> (Vec3, Vec3) {
-    let (c, h) = (Vec3::from(aabb.center), Vec3::from(aabb.half_extents));
-    let mut lo = Vec3::splat(f32::INFINITY);
-    let mut hi = Vec3::splat(f32::NEG_INFINITY);
-    for i in 0..8 {
-        let corner = c + h * Vec3::new([-1.0, 1.0][i & 1], [-1.0, 1.0][(i >> 1) & 1], [-1.0, 1.0][i >> 2]);
-        let p = transform.transform_point(corner);
-        lo = lo.min(p);
-        hi = hi.max(p);
-    }
-    (lo, hi)
 }

@@ -1,0 +1,616 @@
+// Hierarchical caustic maps (Wyman 2008) in compute: the GPU twin of
+// `caustics_core::hierarchical`, entry point by entry point.
+//
+// - `trace_photons`: one photon per photon buffer texel, through the generator in
+//   image space and onto the receivers (`photons::trace_photon`);
+// - `build_pyramid`: one pyramid level from the one below (`Node::parent`);
+// - `write_args`: the indirect dispatch of the next step from a list's length, which
+//   it records as the nodes processed at that level;
+// - `traverse`: one level of the breadth-first traversal (§3.1), clustering where
+//   photons converge (§3.2) (`hierarchy::gather`);
+// - `gather_photons`: the photon buffer level: every valid photon of a list;
+// - `splat`: every gathered photon or cluster into its caustic map level (§3.3,
+//   `CausticMap::splat`), in 64-bit fixed point with integer atomics;
+// - `resolve`: the levels summed into the full-resolution map (eq. 3).
+
+#import bevy_caustics::caustic_maps::{
+    LightView, NO_SURFACE, EMPTY, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
+    SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
+    map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, texel_of, reflect_about,
+    refract_through, fresnel_transmittance, oct_decode,
+}
+
+// One step of the traversal (`GpuStep` in `render.rs`).
+struct Step {
+    level: u32,
+    // The list a step reads: 0 or 1 (the traversal's two), 2 (the gathered list), or 3
+    // (every node of `level`, `fixed_count` of them).
+    source: u32,
+    // The list `traverse` appends children to.
+    target: u32,
+    // Which three words of `args` `write_args` fills.
+    args_slot: u32,
+    fixed_count: u32,
+    // This view's first counter.
+    counter_base: u32,
+}
+
+// Counters, from `Step::counter_base`: the lengths of lists 0, 1 and 2, the clusters
+// gathered, then the nodes processed at each level.
+const COUNT_CLUSTERS: u32 = 3u;
+const COUNT_PROCESSED: u32 = 4u;
+const ALL_NODES: u32 = 3u;
+const WORKGROUP: u32 = 64u;
+
+@group(0) @binding(0) var<uniform> view: LightView;
+@group(0) @binding(1) var<uniform> step: Step;
+@group(0) @binding(2) var front_map: texture_2d<f32>;
+@group(0) @binding(3) var back_map: texture_2d<f32>;
+@group(0) @binding(4) var receiver_map: texture_2d<f32>;
+@group(0) @binding(5) var<storage, read> materials: array<f32>;   // index of refraction, 0 for a mirror
+@group(0) @binding(6) var<storage, read_write> photons: array<vec4<f32>>; // uv, flux, solid angle
+@group(0) @binding(7) var<storage, read_write> pyramid: array<vec4<u32>>; // flux, Σ flux·uv (f32 bits), texel word
+@group(0) @binding(8) var<storage, read_write> lists: array<u32>;          // three lists of photon-count capacity
+@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
+@group(0) @binding(10) var<storage, read_write> args: array<u32>;
+@group(0) @binding(11) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
+@group(0) @binding(12) var<storage, read_write> resolved: array<f32>;
+
+fn photon_count() -> u32 {
+    return view.photon_resolution * view.photon_resolution;
+}
+
+// ---------------------------------------------------------------- photon buffer
+
+struct Sample {
+    depth: f32,
+    normal: vec3<f32>,
+    material: u32,
+}
+
+fn front_at(x: u32, y: u32) -> Sample {
+    let t = textureLoad(front_map, vec2<i32>(i32(x), i32(y)), 0);
+    return Sample(t.x, oct_decode(t.yz), u32(t.w));
+}
+
+fn back_at(x: u32, y: u32) -> Sample {
+    let t = textureLoad(back_map, vec2<i32>(i32(x), i32(y)), 0);
+    return Sample(t.x, oct_decode(t.yz), 0u);
+}
+
+fn receiver_at(x: u32, y: u32) -> f32 {
+    return textureLoad(receiver_map, vec2<i32>(i32(x), i32(y)), 0).x;
+}
+
+// `photons::exit_distance`: xyz the far side's normal, w the distance along `t`.
+fn exit_distance(p1: vec3<f32>, z1: f32, t: vec3<f32>, back: Sample) -> vec4<f32> {
+    let dz = dot(t, view.forward.xyz);
+    if dz < 1.0e-3 {
+        return vec4(back.normal, max(back.depth - z1, 0.0));
+    }
+    var normal = back.normal;
+    var d = (back.depth - z1) / dz;
+    for (var i = 0u; i < view.exit_iterations; i++) {
+        let uv = map_uv(view, p1 + t * d);
+        if uv.z == 0.0 {
+            break;
+        }
+        let texel = texel_of(uv.xy, view.photon_resolution);
+        if texel.z == 0u {
+            break;
+        }
+        let next = back_at(texel.x, texel.y);
+        if next.depth >= NO_SURFACE || next.depth <= z1 {
+            break;
+        }
+        normal = next.normal;
+        d = (next.depth - z1) / dz;
+    }
+    return vec4(normal, d);
+}
+
+// `photons::crossing`.
+fn crossing(o: vec3<f32>, v: vec3<f32>, axis: u32, boundary: f32) -> f32 {
+    let h = half_extent(view);
+    var c = (1.0 - 2.0 * boundary) * h.y;
+    var oc = o.y;
+    var vc = v.y;
+    if axis == 0u {
+        c = (2.0 * boundary - 1.0) * h.x;
+        oc = o.x;
+        vc = v.x;
+    }
+    var num = c - oc;
+    var den = vc;
+    if is_perspective(view) {
+        num = c * o.z - oc;
+        den = vc - c * v.z;
+    }
+    if abs(den) < 1.0e-20 {
+        return 3.4028235e38;
+    }
+    return num / den;
+}
+
+fn direction_step(s: f32) -> i32 {
+    if s > 0.0 {
+        return 1;
+    }
+    if s < 0.0 {
+        return -1;
+    }
+    return 0;
+}
+
+fn boundary(i: u32, s: i32, m: f32) -> f32 {
+    if s > 0 {
+        return f32(i + 1u) / m;
+    }
+    return f32(i) / m;
+}
+
+// `photons::march_receivers`: xyz where the ray lands, w 1 if it does.
+fn march_receivers(origin: vec3<f32>, dir: vec3<f32>) -> vec4<f32> {
+    let m = view.map_resolution;
+    let mf = f32(m);
+    let o = to_view(view, origin);
+    let v = vec3(dot(dir, view.right.xyz), dot(dir, view.up.xyz), dot(dir, view.forward.xyz));
+    let start = map_uv(view, origin);
+    if start.z == 0.0 {
+        return vec4(0.0);
+    }
+    let first = texel_of(start.xy, m);
+    if first.z == 0u {
+        return vec4(0.0);
+    }
+    var ix = first.x;
+    var iy = first.y;
+    var su = v.x;
+    var sv = -v.y;
+    if is_perspective(view) {
+        su = v.x * o.z - o.x * v.z;
+        sv = -(v.y * o.z - o.y * v.z);
+    }
+    let step_u = direction_step(su);
+    let step_v = direction_step(sv);
+    let infinity = 3.4028235e38;
+    var d_enter = 0.0;
+    for (var i = 0u; i < 2u * m + 4u; i++) {
+        var du = infinity;
+        if step_u != 0 {
+            du = max(crossing(o, v, 0u, boundary(ix, step_u, mf)), d_enter);
+        }
+        var dv = infinity;
+        if step_v != 0 {
+            dv = max(crossing(o, v, 1u, boundary(iy, step_v, mf)), d_enter);
+        }
+        let d_exit = min(du, dv);
+        let z_receiver = receiver_at(ix, iy);
+        if z_receiver < NO_SURFACE {
+            if o.z + d_enter * v.z >= z_receiver {
+                return vec4(origin + dir * d_enter, 1.0);
+            }
+            if v.z > 0.0 {
+                let d_hit = (z_receiver - o.z) / v.z;
+                if d_hit <= d_exit {
+                    return vec4(origin + dir * d_hit, 1.0);
+                }
+            }
+        }
+        if d_exit >= infinity {
+            return vec4(0.0);
+        }
+        let z_exit = o.z + d_exit * v.z;
+        if z_exit > view.far || (is_perspective(view) && z_exit <= 0.0) {
+            return vec4(0.0);
+        }
+        var nx = i32(ix);
+        var ny = i32(iy);
+        if du <= dv {
+            nx += step_u;
+        } else {
+            ny += step_v;
+        }
+        if nx < 0 || ny < 0 || nx >= i32(m) || ny >= i32(m) {
+            return vec4(0.0);
+        }
+        ix = u32(nx);
+        iy = u32(ny);
+        d_enter = d_exit;
+    }
+    return vec4(0.0);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = view.photon_resolution;
+    if id.x >= n || id.y >= n {
+        return;
+    }
+    let index = id.y * n + id.x;
+    photons[index] = vec4(0.0);
+    let front = front_at(id.x, id.y);
+    if front.depth >= NO_SURFACE || front.material >= arrayLength(&materials) {
+        return;
+    }
+    let uv0 = texel_center(id.x, id.y, n);
+    let ray = light_ray(view, uv0);
+    let beam = relative_beam(view, uv0);
+    let weight = beam * cone_attenuation(view, ray.direction);
+    if weight <= 0.0 {
+        return;
+    }
+    let forward = view.forward.xyz;
+    let dir = ray.direction;
+    let p1 = ray.origin + dir * ((front.depth - dot(ray.origin - view.origin.xyz, forward)) / dot(dir, forward));
+    var n1 = front.normal;
+    if dot(n1, dir) > 0.0 {
+        n1 = -n1;
+    }
+    let ior = materials[front.material];
+    var origin = p1;
+    var out = reflect_about(dir, n1);
+    var flux = weight;
+    if ior > 0.0 {
+        let t1 = refract_through(dir, n1, 1.0 / ior);
+        if t1.w == 0.0 {
+            return;
+        }
+        flux = weight * fresnel_transmittance(dot(dir, n1), 1.0 / ior);
+        out = t1.xyz;
+        let back = back_at(id.x, id.y);
+        if back.depth < NO_SURFACE && back.depth > front.depth {
+            let exit = exit_distance(p1, front.depth, t1.xyz, back);
+            let t2 = refract_through(t1.xyz, exit.xyz, ior);
+            if t2.w == 0.0 {
+                return;
+            }
+            flux *= fresnel_transmittance(dot(t1.xyz, exit.xyz), ior);
+            origin = p1 + t1.xyz * exit.w;
+            out = t2.xyz;
+        }
+    }
+    let hit = march_receivers(origin, out);
+    if hit.w == 0.0 {
+        return;
+    }
+    let uv = map_uv(view, hit.xyz);
+    if uv.z == 0.0 || uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0 {
+        return;
+    }
+    photons[index] = vec4(min(uv.xy, vec2(ONE_BELOW)), flux, beam * texel_measure(view, n));
+}
+
+// ---------------------------------------------------------------- pyramid
+
+struct Node {
+    texel: u32,   // with `MANY`
+    flux: f32,
+    moment: vec2<f32>,
+}
+
+// `Node::of_photon`.
+fn photon_node(index: u32) -> Node {
+    let p = photons[index];
+    if p.z <= 0.0 {
+        return Node(EMPTY, 0.0, vec2(0.0));
+    }
+    let m = view.map_resolution;
+    let t = min(vec2<u32>(p.xy * f32(m)), vec2(m - 1u));
+    return Node(t.y * m + t.x, p.z, p.xy * p.z);
+}
+
+fn pyramid_node(level: u32, index: u32) -> Node {
+    if level == 0u {
+        return photon_node(index);
+    }
+    let w = pyramid[pyramid_offset(view, level) + index];
+    return Node(w.w, bitcast<f32>(w.x), vec2(bitcast<f32>(w.y), bitcast<f32>(w.z)));
+}
+
+fn texel_part(word: u32) -> u32 {
+    if word >= EMPTY {
+        return word;
+    }
+    return word & ~MANY;
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn build_pyramid(@builtin(global_invocation_id) id: vec3<u32>) {
+    let width = view.photon_resolution >> step.level;
+    if id.x >= width || id.y >= width {
+        return;
+    }
+    let below = 2u * width;
+    let x = 2u * id.x;
+    let y = 2u * id.y;
+    var children = array<u32, 4>(y * below + x, y * below + x + 1u, (y + 1u) * below + x, (y + 1u) * below + x + 1u);
+    var texel = EMPTY;
+    var occupied = 0u;
+    var many = false;
+    var flux = 0.0;
+    var moment = vec2(0.0);
+    for (var i = 0u; i < 4u; i++) {
+        let c = pyramid_node(step.level - 1u, children[i]);
+        flux = flux + c.flux;
+        moment = moment + c.moment;
+        let t = texel_part(c.texel);
+        if t == EMPTY {
+            continue;
+        }
+        occupied += 1u;
+        many = many || (c.texel < EMPTY && (c.texel & MANY) != 0u);
+        if texel == EMPTY {
+            texel = t;
+        } else if texel != t {
+            texel = DIVERSE;
+        }
+    }
+    var word = texel;
+    if texel < EMPTY && (many || occupied >= 2u) {
+        word = texel | MANY;
+    }
+    pyramid[pyramid_offset(view, step.level) + id.y * width + id.x] =
+        vec4(bitcast<u32>(flux), bitcast<u32>(moment.x), bitcast<u32>(moment.y), word);
+}
+
+// ---------------------------------------------------------------- traversal
+
+fn list_length(source: u32) -> u32 {
+    if source == ALL_NODES {
+        return step.fixed_count;
+    }
+    return atomicLoad(&counters[step.counter_base + source]);
+}
+
+@compute @workgroup_size(1, 1, 1)
+fn write_args() {
+    let n = list_length(step.source);
+    let groups = (n + WORKGROUP - 1u) / WORKGROUP;
+    let x = min(groups, 65535u);
+    let slot = 3u * step.args_slot;
+    args[slot] = x;
+    args[slot + 1u] = select(1u, (groups + 65534u) / 65535u, groups > 0u);
+    args[slot + 2u] = 1u;
+    if step.source != 2u {
+        atomicStore(&counters[step.counter_base + COUNT_PROCESSED + step.level], n);
+    }
+    if step.target < 2u {
+        atomicStore(&counters[step.counter_base + step.target], 0u);
+    }
+}
+
+fn thread_index(workgroup: vec3<u32>, groups: vec3<u32>, local: u32) -> u32 {
+    return (workgroup.y * groups.x + workgroup.x) * WORKGROUP + local;
+}
+
+fn gather(entry: u32) {
+    let i = atomicAdd(&counters[step.counter_base + 2u], 1u);
+    lists[2u * photon_count() + i] = entry;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn traverse(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let t = thread_index(workgroup, groups, local);
+    if t >= list_length(step.source) {
+        return;
+    }
+    var index = t;
+    if step.source != ALL_NODES {
+        index = lists[step.source * photon_count() + t];
+    }
+    let node = pyramid_node(step.level, index);
+    if node.texel == EMPTY {
+        return;
+    }
+    let clusters_here = view.clustering == 2u || (view.clustering == 1u && step.level == 1u);
+    if clusters_here && node.texel < EMPTY && (node.texel & MANY) != 0u {
+        gather((step.level << 24u) | index);
+        atomicAdd(&counters[step.counter_base + COUNT_CLUSTERS], 1u);
+        return;
+    }
+    let width = view.photon_resolution >> step.level;
+    let x = 2u * (index % width);
+    let y = 2u * (index / width);
+    let below = 2u * width;
+    let first = atomicAdd(&counters[step.counter_base + step.target], 4u);
+    let base = step.target * photon_count() + first;
+    lists[base] = y * below + x;
+    lists[base + 1u] = y * below + x + 1u;
+    lists[base + 2u] = (y + 1u) * below + x;
+    lists[base + 3u] = (y + 1u) * below + x + 1u;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn gather_photons(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let t = thread_index(workgroup, groups, local);
+    if t >= list_length(step.source) {
+        return;
+    }
+    var index = t;
+    if step.source != ALL_NODES {
+        index = lists[step.source * photon_count() + t];
+    }
+    if photons[index].z > 0.0 {
+        gather(index);
+    }
+}
+
+// ---------------------------------------------------------------- splats
+
+// `caustic_map::divergence_diameter`.
+fn divergence_diameter(index: u32) -> f32 {
+    let n = view.photon_resolution;
+    let x = index % n;
+    let y = index / n;
+    let here = photons[index].xy;
+    var largest = -1.0;
+    let m = f32(view.map_resolution);
+    var neighbours = array<vec2<i32>, 4>(vec2(-1, 0), vec2(1, 0), vec2(0, -1), vec2(0, 1));
+    for (var k = 0u; k < 4u; k++) {
+        let q = vec2<i32>(i32(x), i32(y)) + neighbours[k];
+        if q.x < 0 || q.y < 0 || q.x >= i32(n) || q.y >= i32(n) {
+            continue;
+        }
+        let p = photons[u32(q.y) * n + u32(q.x)];
+        if p.z > 0.0 {
+            largest = max(largest, length((p.xy - here) * m));
+        }
+    }
+    var spacing = largest;
+    if largest < 0.0 {
+        spacing = m / f32(n);
+    }
+    return max(2.0 * spacing, MIN_SPLAT_DIAMETER);
+}
+
+// `caustic_map::splat_level`.
+fn splat_level(diameter: f32) -> u32 {
+    var level = 0u;
+    while level < 31u && diameter >= SPLAT_LEVEL_THRESHOLD * f32(2u << level) {
+        level += 1u;
+    }
+    return level;
+}
+
+fn tent(t: f32, r: f32) -> f32 {
+    return max(1.0 - abs(t) / r, 0.0);
+}
+
+// `caustic_map::fixed_point`, added to a texel's two words with the carry.
+fn add_fixed_point(texel: u32, value: f32) {
+    let x = value + 0.5;
+    let high = floor(x * (1.0 / 4294967296.0));
+    let low = u32(x - high * 4294967296.0);
+    let old = atomicAdd(&levels[2u * texel], low);
+    let carry = select(0u, 1u, low > 0xffffffffu - old);
+    let up = u32(high) + carry;
+    if up > 0u {
+        atomicAdd(&levels[2u * texel + 1u], up);
+    }
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn splat(
+    @builtin(workgroup_id) workgroup: vec3<u32>,
+    @builtin(num_workgroups) groups: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let t = thread_index(workgroup, groups, local);
+    if t >= list_length(2u) {
+        return;
+    }
+    let entry = lists[2u * photon_count() + t];
+    let entry_level = entry >> 24u;
+    let index = entry & 0x00ffffffu;
+    var uv: vec2<f32>;
+    var flux: f32;
+    var diameter = max(view.fixed_diameter, MIN_SPLAT_DIAMETER);
+    if entry_level == 0u {
+        let p = photons[index];
+        uv = p.xy;
+        flux = p.z;
+        if view.variable_splats != 0u {
+            diameter = divergence_diameter(index);
+        }
+    } else {
+        let node = pyramid_node(entry_level, index);
+        uv = node.moment / node.flux;
+        flux = node.flux;
+        if view.variable_splats != 0u {
+            diameter = MIN_SPLAT_DIAMETER;
+        }
+    }
+    var level = 0u;
+    if view.variable_splats != 0u {
+        level = splat_level(diameter);
+        if level > view.top_level {
+            if view.discard_above_top != 0u {
+                return;
+            }
+            level = view.top_level;
+        }
+    }
+    let width = max(view.map_resolution >> level, 1u);
+    let radius = clamp(0.5 * diameter / f32(1u << level), 1.0, MAX_SPLAT_RADIUS);
+    let p = uv * f32(width) - 0.5;
+    let x0 = i32(floor(p.x - radius));
+    let x1 = i32(ceil(p.x + radius));
+    let y0 = i32(floor(p.y - radius));
+    let y1 = i32(ceil(p.y + radius));
+    var sx = 0.0;
+    for (var i = x0; i <= x1; i++) {
+        sx = sx + tent(f32(i) - p.x, radius);
+    }
+    var sy = 0.0;
+    for (var i = y0; i <= y1; i++) {
+        sy = sy + tent(f32(i) - p.y, radius);
+    }
+    let scale = flux * FLUX_UNITS / (sx * sy);
+    let offset = level_offset(view, level);
+    for (var y = max(y0, 0); y <= min(y1, i32(width) - 1); y++) {
+        let wy = tent(f32(y) - p.y, radius);
+        for (var x = max(x0, 0); x <= min(x1, i32(width) - 1); x++) {
+            let w = wy * tent(f32(x) - p.x, radius);
+            if w > 0.0 {
+                add_fixed_point(offset + u32(y) * width + u32(x), scale * w);
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------- resolve
+
+// `caustic_map::from_fixed_point`.
+fn level_value(texel: u32) -> f32 {
+    let low = atomicLoad(&levels[2u * texel]);
+    let high = atomicLoad(&levels[2u * texel + 1u]);
+    return (f32(high) * 4294967296.0 + f32(low)) / FLUX_UNITS;
+}
+
+fn level_texel(level: u32, width: u32, x: u32, y: u32) -> f32 {
+    return level_value(level_offset(view, level) + y * width + x);
+}
+
+// `caustic_map::bilinear` of one level.
+fn level_bilinear(level: u32, q_in: vec2<f32>) -> f32 {
+    let width = max(view.map_resolution >> level, 1u);
+    let last = f32(width - 1u);
+    let q = clamp(q_in, vec2(0.0), vec2(last));
+    let base = floor(q);
+    let f = q - base;
+    let x0 = u32(base.x);
+    let y0 = u32(base.y);
+    let x1 = min(x0 + 1u, width - 1u);
+    let y1 = min(y0 + 1u, width - 1u);
+    let a = level_texel(level, width, x0, y0);
+    let b = level_texel(level, width, x1, y0);
+    let c = level_texel(level, width, x0, y1);
+    let d = level_texel(level, width, x1, y1);
+    let top = a + (b - a) * f.x;
+    let bottom = c + (d - c) * f.x;
+    return top + (bottom - top) * f.y;
+}
+
+// `CausticMap::resolve`: C = Σᵢ Cᵢ / 4ⁱ (eq. 3).
+@compute @workgroup_size(8, 8, 1)
+fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
+    let m = view.map_resolution;
+    if id.x >= m || id.y >= m {
+        return;
+    }
+    var c = 0.0;
+    for (var level = 0u; level <= view.top_level; level++) {
+        let q = (vec2(f32(id.x), f32(id.y)) + 0.5) / f32(1u << level) - 0.5;
+        c = c + level_bilinear(level, q) / f32(1u << (2u * level));
+    }
+    resolved[id.y * m + id.x] = c;
+}

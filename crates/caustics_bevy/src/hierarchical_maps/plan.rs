@@ -1,0 +1,153 @@
+//! Main world: what the caustic maps are made of this frame — the light views, the
+//! generator and occluder instances — and a generation that changes only when any of it
+//! does, so that an unchanged scene keeps its maps.
+
+use super::HierarchicalMapsSettings;
+use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
+use crate::irradiance::ActiveCausticTechniques;
+use crate::reference::{core_light, to_core, world_aabb};
+use bevy::camera::primitives::Aabb;
+use bevy::camera::visibility::VisibilitySystems;
+use bevy::light::NotShadowCaster;
+use bevy::platform::collections::HashSet;
+use bevy::prelude::*;
+use bevy::transform::TransformSystems;
+use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
+use caustics_core::params::SpecularInteraction;
+
+/// One light view to make a caustic map for, with the light it belongs to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlannedLightView {
+    pub view: LightView,
+    /// Linear RGB colour times the light's intensity (irradiance across a parallel beam,
+    /// intensity per steradian for point and spot lights).
+    pub color: Vec3,
+    /// The spot's cone `(axis, cos θₒ, 1 / (cos θᵢ − cos θₒ))`, `None` for other lights.
+    pub cone: Option<(Vec3, f32, f32)>,
+}
+
+/// One mesh drawn into the light maps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CausticMapInstance {
+    pub mesh: AssetId<Mesh>,
+    pub world_from_local: Mat4,
+    /// A generator's index of refraction (the green channel's for a dispersive one),
+    /// 0 for a mirror; unused for occluders.
+    pub ior: f32,
+}
+
+/// What the caustic maps are made of. A new `generation` means new contents.
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct CausticMapPlan {
+    pub views: Vec<PlannedLightView>,
+    pub generators: Vec<CausticMapInstance>,
+    pub occluders: Vec<CausticMapInstance>,
+    pub settings: Option<CausticMapSettings>,
+    pub generation: u64,
+}
+
+pub(super) fn build(app: &mut App) {
+    app.init_resource::<CausticMapPlan>().add_systems(
+        PostUpdate,
+        plan_caustic_maps
+            .after(TransformSystems::Propagate)
+            .after(VisibilitySystems::CalculateBounds)
+            .after(VisibilitySystems::VisibilityPropagate)
+            .after(crate::components::validate_caustic_params),
+    );
+}
+
+type LightComponents = (
+    Option<&'static DirectionalLight>,
+    Option<&'static PointLight>,
+    Option<&'static SpotLight>,
+    &'static GlobalTransform,
+    &'static InheritedVisibility,
+);
+type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
+type MeshComponents = (&'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static Aabb>);
+
+/// Main world: plans the caustic maps (light views, instances) and bumps the
+/// generation when the plan, or a mesh it draws, changed.
+#[allow(clippy::too_many_arguments)]
+fn plan_caustic_maps(
+    generators: Query<(Entity, &CausticGenerator, MeshComponents), Without<InvalidCausticParams>>,
+    occluders: Query<(MeshComponents, Has<CausticReceiver>, Has<NotShadowCaster>), Without<CausticGenerator>>,
+    lights: Query<LightComponents, AnyLight>,
+    settings: Res<HierarchicalMapsSettings>,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    mut plan: ResMut<CausticMapPlan>,
+    mut active: ResMut<ActiveCausticTechniques>,
+    mut warned: Local<bool>,
+) {
+    let core_settings = settings.core();
+    let valid = match core_settings.validate() {
+        Ok(()) => {
+            *warned = false;
+            true
+        }
+        Err(e) => {
+            if !*warned {
+                warn!("bevy_caustics: the caustic maps are skipped: {e}");
+                *warned = true;
+            }
+            false
+        }
+    };
+    let mut next = CausticMapPlan { settings: Some(core_settings), generation: plan.generation, ..default() };
+    let mut generator_bounds: Option<(Vec3, Vec3)> = None;
+    for (_, generator, (mesh, transform, visible, aabb)) in &generators {
+        if generator.technique != CausticTechnique::HierarchicalMaps || !visible.get() || !valid {
+            continue;
+        }
+        let Some(aabb) = aabb else { continue };
+        let bounds = world_aabb(transform, aabb);
+        generator_bounds = Some(generator_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
+        let ior = match generator.specular_interaction() {
+            SpecularInteraction::Reflect => 0.0,
+            interaction => caustics_core::hierarchical::photons::photon_ior(&interaction).unwrap_or(1.0),
+        };
+        next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior });
+    }
+    let mut receiver_bounds: Option<(Vec3, Vec3)> = None;
+    if generator_bounds.is_some() {
+        for ((mesh, transform, visible, aabb), receiver, no_shadows) in &occluders {
+            if !visible.get() || !(receiver || !no_shadows) {
+                continue;
+            }
+            if receiver && let Some(aabb) = aabb {
+                let bounds = world_aabb(transform, aabb);
+                receiver_bounds = Some(receiver_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
+            }
+            next.occluders.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior: 0.0 });
+        }
+    }
+    if let (Some(generators), Some(receivers)) = (generator_bounds, receiver_bounds) {
+        let core_bounds = |(lo, hi): (Vec3, Vec3)| (to_core(lo), to_core(hi));
+        for (d, p, s, t, visible) in &lights {
+            let Some(light) = core_light(d, p, s, t).filter(|l| visible.get() && l.validate().is_ok()) else { continue };
+            let color = Vec3::from_array(light.color.to_array()) * light_intensity(&light);
+            let cone = s.map(|s| {
+                let (cos_outer, cos_inner) = (s.outer_angle.cos(), s.inner_angle.min(s.outer_angle).cos());
+                (t.forward().as_vec3(), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
+            });
+            for view in LightView::for_light(&light, core_bounds(generators), core_bounds(receivers)) {
+                next.views.push(PlannedLightView { view, color, cone });
+            }
+        }
+    }
+    if next.views.is_empty() {
+        next.generators.clear();
+        next.occluders.clear();
+    }
+    let used: HashSet<AssetId<Mesh>> = next.generators.iter().chain(&next.occluders).map(|i| i.mesh).collect();
+    let mesh_changed = mesh_events.read().any(|e| match e {
+        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
+        _ => false,
+    });
+    if mesh_changed || next != *plan {
+        next.generation = plan.generation + 1;
+        *plan = next;
+    }
+    active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
+}

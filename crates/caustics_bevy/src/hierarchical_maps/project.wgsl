@@ -1,0 +1,71 @@
+// Caustic maps onto the view (Wyman 2008, Fig. 2's third pass): every pixel's receiver
+// point, rebuilt from the depth prepass, looks its light view's caustic map up like a
+// shadow map — only where the receiver map shows it is the surface the light sees —
+// and adds the irradiance to the view's caustic irradiance buffer
+// (`caustic_map::irradiance_at`).
+
+#import bevy_render::view::View
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_caustics::receiver::world_at
+#import bevy_caustics::caustic_maps::{
+    LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian,
+}
+
+@group(0) @binding(0) var<uniform> view: View;
+#ifdef MULTISAMPLED
+@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
+@group(0) @binding(2) var normal_prepass: texture_multisampled_2d<f32>;
+#else
+@group(0) @binding(1) var depth_prepass: texture_depth_2d;
+@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
+#endif
+@group(0) @binding(3) var<uniform> light: LightView;
+@group(0) @binding(4) var receiver_map: texture_2d<f32>;
+@group(0) @binding(5) var<storage, read> resolved: array<f32>;
+
+fn resolved_at(x: u32, y: u32) -> f32 {
+    return resolved[y * light.map_resolution + x];
+}
+
+@fragment
+fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+    let pixel = vec2<i32>(in.position.xy);
+    let depth = textureLoad(depth_prepass, pixel, 0);
+    if depth <= 0.0 {
+        discard;
+    }
+    let p = world_at(view, in.position.xy, depth);
+    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
+    let m = light.map_resolution;
+    let uv = map_uv(light, p);
+    if uv.z == 0.0 {
+        discard;
+    }
+    let texel = texel_of(uv.xy, m);
+    if texel.z == 0u {
+        discard;
+    }
+    // `caustic_map::visible_from_light`.
+    let surface = textureLoad(receiver_map, vec2<i32>(texel.xy), 0).x;
+    let z = depth_of(light, p);
+    let cos = max(abs(dot(n, light_ray(light, uv.xy).direction)), 0.1);
+    let tan = sqrt(1.0 - cos * cos) / cos;
+    if surface >= NO_SURFACE || z > surface + texel_size(light, z, m) * (1.0 + tan) + 1.0e-5 * abs(z) {
+        discard;
+    }
+    // `caustic_map::bilinear` of the resolved map.
+    let last = f32(m - 1u);
+    let q = clamp(uv.xy * f32(m) - 0.5, vec2(0.0), vec2(last));
+    let base = floor(q);
+    let f = q - base;
+    let x0 = u32(base.x);
+    let y0 = u32(base.y);
+    let x1 = min(x0 + 1u, m - 1u);
+    let y1 = min(y0 + 1u, m - 1u);
+    let top = resolved_at(x0, y0) + (resolved_at(x1, y0) - resolved_at(x0, y0)) * f.x;
+    let bottom = resolved_at(x0, y1) + (resolved_at(x1, y1) - resolved_at(x0, y1)) * f.x;
+    let c = top + (bottom - top) * f.y;
+    let ratio = f32(m) / f32(light.photon_resolution);
+    let e = c * ratio * ratio * receiver_jacobian(light, p, n);
+    return vec4(light.color.rgb * (e * view.exposure), 0.0);
+}

@@ -1,0 +1,973 @@
+//! Render world: extraction of the plan, the GPU buffers and pipelines, the passes that
+//! make each light view's caustic map, and its projection into every view.
+
+use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
+use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
+use crate::report::PassRecorder;
+use bevy::core_pipeline::prepass::ViewPrepassTextures;
+use bevy::core_pipeline::schedule::{Core3d, camera_driver};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
+use bevy::material::specialize::SpecializedMeshPipelineError;
+use bevy::mesh::{MeshVertexBufferLayoutRef, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy::render::{
+    Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    mesh::{RenderMesh, RenderMeshBufferInfo, allocator::MeshAllocator},
+    render_asset::RenderAssets,
+    render_resource::{
+        binding_types::{
+            storage_buffer, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
+            texture_depth_2d_multisampled, uniform_buffer,
+        },
+        *,
+    },
+    renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue, ViewQuery},
+    view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
+};
+use caustics_core::hierarchical::hierarchy::start_level;
+use caustics_core::hierarchical::light_maps::NO_SURFACE;
+use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Projection, Splats};
+
+/// `LightView` in `types.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuLightView {
+    clip_from_world: Mat4,
+    origin: Vec4,
+    right: Vec4,
+    up: Vec4,
+    forward: Vec4,
+    spot: Vec4,
+    color: Vec4,
+    far: f32,
+    spot_scale: f32,
+    photon_resolution: u32,
+    map_resolution: u32,
+    photon_levels: u32,
+    start_level: u32,
+    clustering: u32,
+    variable_splats: u32,
+    fixed_diameter: f32,
+    top_level: u32,
+    discard_above_top: u32,
+    exit_iterations: u32,
+    pyramid_offsets: [UVec4; 3],
+    level_offsets: [UVec4; 3],
+}
+
+/// `Step` in `caustic_map.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+struct GpuStep {
+    level: u32,
+    source: u32,
+    target: u32,
+    args_slot: u32,
+    fixed_count: u32,
+    counter_base: u32,
+}
+
+/// `Instance` in `maps.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+struct GpuInstance {
+    world_from_local: Mat4,
+    normal_from_local: Mat4,
+    material: UVec4,
+}
+
+/// The lists a step reads (`Step::source`): the traversal's two, the gathered one, all nodes.
+const LIST_GATHERED: u32 = 2;
+const ALL_NODES: u32 = 3;
+/// No list to clear (`Step::target`).
+const NO_TARGET: u32 = 9;
+/// Counters per light view: three list lengths, clusters, nodes processed at 13 levels,
+/// padding.
+pub const COUNTERS_PER_VIEW: u32 = 20;
+/// Index of the first "nodes processed" counter.
+pub const PROCESSED_COUNTER: u32 = 4;
+
+fn to_vec3(v: caustics_core::glam::Vec3) -> Vec3 {
+    Vec3::from_array(v.to_array())
+}
+
+/// Word offsets of `count` levels of sizes `size(level)` from `first`, packed four to a `UVec4`.
+fn packed_offsets(first: u32, count: u32, size: impl Fn(u32) -> u32) -> ([UVec4; 3], u32) {
+    let mut offsets = [0u32; 12];
+    let mut total = 0;
+    for (i, level) in (first..first + count).enumerate() {
+        offsets[i.min(11)] = total;
+        total += size(level);
+    }
+    let packed = std::array::from_fn(|i| UVec4::from_slice(&offsets[4 * i..4 * i + 4]));
+    (packed, total)
+}
+
+/// The map's top level for `settings` (0 for fixed splats).
+fn top_level(settings: &CausticMapSettings) -> u32 {
+    match settings.splats {
+        Splats::Fixed { .. } => 0,
+        Splats::Variable { max_level, .. } => max_level.min(settings.map_resolution.ilog2()),
+    }
+}
+
+impl GpuLightView {
+    fn new(planned: &PlannedLightView, settings: &CausticMapSettings) -> (Self, u32, u32) {
+        let v = &planned.view;
+        let half = v.half_extent();
+        let p = settings.photon_resolution;
+        let m = settings.map_resolution;
+        let levels = p.ilog2();
+        let (pyramid_offsets, pyramid_nodes) = packed_offsets(1, levels, |k| (p >> k) * (p >> k));
+        let top = top_level(settings);
+        let (level_offsets, map_texels) = packed_offsets(0, top + 1, |l| (m >> l).max(1).pow(2));
+        let (clustering, start) = match settings.gather {
+            Gather::Flat => (0, 0),
+            Gather::Hierarchical { clustering } => (
+                match clustering {
+                    Clustering::Off => 0,
+                    Clustering::LastLevel => 1,
+                    Clustering::AllLevels => 2,
+                },
+                start_level(p, caustics_core::hierarchical::START_RESOLUTION),
+            ),
+        };
+        let (variable, fixed_diameter, discard) = match settings.splats {
+            Splats::Fixed { diameter } => (0, diameter, 0),
+            Splats::Variable { overflow, .. } => (1, 0.0, (overflow == LevelOverflow::Discard) as u32),
+        };
+        let (spot, spot_scale) = match planned.cone {
+            Some((axis, cos_outer, scale)) => (axis.extend(cos_outer), scale),
+            None => (Vec4::ZERO, 0.0),
+        };
+        let perspective = matches!(v.projection, Projection::Perspective { .. }) as u32 as f32;
+        let gpu = Self {
+            clip_from_world: Mat4::from_cols_array(&v.clip_from_world().to_cols_array()),
+            origin: to_vec3(v.origin).extend(perspective),
+            right: to_vec3(v.right).extend(half.x),
+            up: to_vec3(v.up).extend(half.y),
+            forward: to_vec3(v.forward).extend(v.near),
+            spot,
+            color: planned.color.extend(1.0),
+            far: v.far,
+            spot_scale,
+            photon_resolution: p,
+            map_resolution: m,
+            photon_levels: levels,
+            start_level: start,
+            clustering,
+            variable_splats: variable,
+            fixed_diameter,
+            top_level: top,
+            discard_above_top: discard,
+            exit_iterations: settings.exit_iterations,
+            pyramid_offsets,
+            level_offsets,
+        };
+        (gpu, pyramid_nodes, map_texels)
+    }
+}
+
+/// Render world: the plan of this frame.
+#[derive(Resource, Default)]
+struct ExtractedPlan(CausticMapPlan);
+
+/// Which light map a mesh is drawn into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(super) enum LightMapPass {
+    Front,
+    Back,
+    Receivers,
+}
+
+/// The light maps' mesh pipeline: Bevy's own meshes, positions (and normals) only.
+#[derive(Resource)]
+pub(super) struct LightMapPipeline {
+    layout: BindGroupLayoutDescriptor,
+    shader: Handle<Shader>,
+}
+
+impl SpecializedMeshPipeline for LightMapPipeline {
+    type Key = (LightMapPass, PrimitiveTopology);
+
+    fn specialize(
+        &self,
+        (pass, topology): Self::Key,
+        layout: &MeshVertexBufferLayoutRef,
+    ) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
+        let receivers = pass == LightMapPass::Receivers;
+        let mut attributes = vec![Mesh::ATTRIBUTE_POSITION.at_shader_location(0)];
+        if !receivers {
+            attributes.push(Mesh::ATTRIBUTE_NORMAL.at_shader_location(1));
+        }
+        let buffer = layout.0.get_layout(&attributes)?;
+        let (cull_mode, depth_compare) = match pass {
+            LightMapPass::Front => (Some(Face::Back), CompareFunction::Less),
+            LightMapPass::Back => (Some(Face::Front), CompareFunction::Greater),
+            LightMapPass::Receivers => (None, CompareFunction::Less),
+        };
+        let (vertex, fragment, format) = if receivers {
+            ("receiver_vertex", "receiver_fragment", TextureFormat::R32Float)
+        } else {
+            ("generator_vertex", "surface_fragment", TextureFormat::Rgba32Float)
+        };
+        Ok(RenderPipelineDescriptor {
+            label: Some(format!("caustic_light_map_{pass:?}").into()),
+            layout: vec![self.layout.clone()],
+            vertex: VertexState { shader: self.shader.clone(), entry_point: Some(vertex.into()), buffers: vec![buffer], ..default() },
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                entry_point: Some(fragment.into()),
+                targets: vec![Some(ColorTargetState { format, blend: None, write_mask: ColorWrites::ALL })],
+                ..default()
+            }),
+            primitive: PrimitiveState { topology, cull_mode, front_face: FrontFace::Ccw, ..default() },
+            depth_stencil: Some(DepthStencilState {
+                format: TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(depth_compare),
+                stencil: default(),
+                bias: default(),
+            }),
+            ..default()
+        })
+    }
+}
+
+/// The compute pipelines, in `caustic_map.wgsl`'s order, and the projection's.
+#[derive(Resource)]
+pub(super) struct CausticMapPipelines {
+    compute_layout: BindGroupLayoutDescriptor,
+    compute: [CachedComputePipelineId; 7],
+    project_layouts: [BindGroupLayoutDescriptor; 2],
+    project_shader: Handle<Shader>,
+    fullscreen: FullscreenShader,
+}
+
+/// The compute entry points, indices into [`CausticMapPipelines::compute`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kernel {
+    TracePhotons,
+    BuildPyramid,
+    WriteArgs,
+    Traverse,
+    GatherPhotons,
+    Splat,
+    Resolve,
+}
+
+const KERNELS: [(Kernel, &str); 7] = [
+    (Kernel::TracePhotons, "trace_photons"),
+    (Kernel::BuildPyramid, "build_pyramid"),
+    (Kernel::WriteArgs, "write_args"),
+    (Kernel::Traverse, "traverse"),
+    (Kernel::GatherPhotons, "gather_photons"),
+    (Kernel::Splat, "splat"),
+    (Kernel::Resolve, "resolve"),
+];
+
+/// How many workgroups a dispatch runs.
+#[derive(Clone, Copy, Debug)]
+enum Groups {
+    Direct(u32, u32),
+    /// Three words of the args buffer, written by the `write_args` before it.
+    Indirect(u32),
+}
+
+/// One dispatch of a light view's compute passes.
+#[derive(Clone, Copy, Debug)]
+struct Dispatch {
+    kernel: Kernel,
+    step: usize,
+    groups: Groups,
+}
+
+/// The dispatches of one light view and the steps they read, in order: the photon
+/// buffer, the pyramid levels, the gather (flat, or the traversal level by level), the
+/// splats and the resolve.
+fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dispatch>, Vec<GpuStep>) {
+    let p = settings.photon_resolution;
+    let m = settings.map_resolution;
+    let mut steps = vec![GpuStep { counter_base, ..default() }];
+    let mut dispatches = vec![Dispatch { kernel: Kernel::TracePhotons, step: 0, groups: Groups::Direct(p.div_ceil(8), p.div_ceil(8)) }];
+    let mut push = |kernel: Kernel, step: GpuStep, groups: Groups, steps: &mut Vec<GpuStep>| {
+        steps.push(GpuStep { counter_base, ..step });
+        dispatches.push(Dispatch { kernel, step: steps.len() - 1, groups });
+    };
+    for level in 1..=p.ilog2() {
+        let w = (p >> level).div_ceil(8);
+        push(Kernel::BuildPyramid, GpuStep { level, ..default() }, Groups::Direct(w, w), &mut steps);
+    }
+    let start = match settings.gather {
+        Gather::Flat => 0,
+        Gather::Hierarchical { .. } => start_level(p, caustics_core::hierarchical::START_RESOLUTION),
+    };
+    let mut slot = 0;
+    let mut source = ALL_NODES;
+    let fixed_count = (p >> start) * (p >> start);
+    for level in (0..=start).rev() {
+        let (kernel, target) = if level == 0 { (Kernel::GatherPhotons, NO_TARGET) } else { (Kernel::Traverse, (start - level) % 2) };
+        let step = GpuStep { level, source, target, args_slot: slot, fixed_count, ..default() };
+        push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
+        push(kernel, step, Groups::Indirect(slot), &mut steps);
+        (slot, source) = (slot + 1, target);
+    }
+    let step = GpuStep { source: LIST_GATHERED, target: NO_TARGET, args_slot: slot, ..default() };
+    push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
+    push(Kernel::Splat, step, Groups::Indirect(slot), &mut steps);
+    push(Kernel::Resolve, GpuStep::default(), Groups::Direct(m.div_ceil(8), m.div_ceil(8)), &mut steps);
+    (dispatches, steps)
+}
+
+/// The buffers and textures every light view uses in turn, sized for the settings.
+pub(super) struct Scratch {
+    settings: CausticMapSettings,
+    views: usize,
+    front: (Texture, TextureView),
+    back: (Texture, TextureView),
+    photon_depth: TextureView,
+    map_depth: TextureView,
+    photons: Buffer,
+    pyramid: Buffer,
+    lists: Buffer,
+    counters: Buffer,
+    args: Buffer,
+    levels: Buffer,
+    bytes: u64,
+}
+
+/// One light view's own GPU data: its uniform, receiver map, resolved caustic map and
+/// bind groups, and the passes that make them.
+pub(super) struct ViewMaps {
+    uniform: UniformBuffer<GpuLightView>,
+    receivers: (Texture, TextureView),
+    resolved: Buffer,
+    generator_bind_group: BindGroup,
+    occluder_bind_group: BindGroup,
+    compute_bind_group: BindGroup,
+    dispatches: Vec<Dispatch>,
+    step_offsets: Vec<u32>,
+}
+
+/// A mesh instance to draw into the light maps, with its pipelines.
+struct MeshDraw {
+    instance: u32,
+    mesh: AssetId<Mesh>,
+    /// Front and back (generators) or receivers (occluders).
+    pipelines: [CachedRenderPipelineId; 2],
+}
+
+/// Render world: the caustic maps on the GPU.
+#[derive(Resource, Default)]
+pub struct CausticMapsGpu {
+    /// The plan generation the maps were made for.
+    generation: Option<u64>,
+    /// The maps must be (re)made this frame.
+    dirty: bool,
+    scratch: Option<Scratch>,
+    views: Vec<ViewMaps>,
+    generators: StorageBuffer<Vec<GpuInstance>>,
+    occluders: StorageBuffer<Vec<GpuInstance>>,
+    materials: StorageBuffer<Vec<f32>>,
+    steps: DynamicUniformBuffer<GpuStep>,
+    generator_draws: Vec<MeshDraw>,
+    occluder_draws: Vec<MeshDraw>,
+    warned: bool,
+}
+
+impl CausticMapsGpu {
+    /// The photon buffer of the last light view made (`vec4<f32>` a texel: uv, flux,
+    /// solid angle), copyable.
+    pub fn photons(&self) -> Option<&Buffer> {
+        self.scratch.as_ref().map(|s| &s.photons)
+    }
+
+    /// The gathered list of the last light view made (`u32` entries, level in the top
+    /// eight bits), after the traversal lists, at word `2 · photons`; copyable.
+    pub fn lists(&self) -> Option<&Buffer> {
+        self.scratch.as_ref().map(|s| &s.lists)
+    }
+
+    /// Every light view's counters ([`COUNTERS_PER_VIEW`] `u32` each: list lengths, the
+    /// gathered count at 2, clusters at 3, nodes processed per level from
+    /// [`PROCESSED_COUNTER`]), copyable.
+    pub fn counters(&self) -> Option<&Buffer> {
+        self.scratch.as_ref().map(|s| &s.counters)
+    }
+
+    /// Light view `index`'s resolved caustic map (`f32` a texel, photon units), copyable.
+    pub fn resolved(&self, index: usize) -> Option<&Buffer> {
+        self.views.get(index).map(|v| &v.resolved)
+    }
+
+    /// Light view `index`'s receiver map (an `R32Float` texture of view depths).
+    pub fn receiver_map(&self, index: usize) -> Option<&Texture> {
+        self.views.get(index).map(|v| &v.receivers.0)
+    }
+
+    /// The last light view's front and back maps (`Rgba32Float`: depth, octahedral normal, generator).
+    pub fn front_back_maps(&self) -> Option<(&Texture, &Texture)> {
+        self.scratch.as_ref().map(|s| (&s.front.0, &s.back.0))
+    }
+
+    /// Bytes of GPU memory the caustic maps hold.
+    pub fn bytes(&self) -> u64 {
+        self.scratch.as_ref().map_or(0, |s| s.bytes)
+            + self.views.iter().map(|v| v.resolved.size() + 8 * v.receivers.0.width() as u64 * v.receivers.0.height() as u64).sum::<u64>()
+    }
+
+    /// How many light views have maps.
+    pub fn view_count(&self) -> usize {
+        self.views.len()
+    }
+}
+
+/// Render world: a view's projection pipeline (single-sampled or multisampled prepass).
+#[derive(Component)]
+pub(super) struct ViewCausticMapPipeline {
+    pipeline: CachedRenderPipelineId,
+    multisampled: bool,
+}
+
+pub(super) fn build(app: &mut App) {
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<ExtractedPlan>()
+        .init_resource::<CausticMapsGpu>()
+        .init_resource::<SpecializedMeshPipelines<LightMapPipeline>>()
+        .init_resource::<SpecializedRenderPipelines<CausticMapPipelines>>()
+        .add_systems(RenderStartup, init_pipelines)
+        .add_systems(ExtractSchedule, extract_plan)
+        .add_systems(
+            Render,
+            (
+                prepare_maps.in_set(RenderSystems::PrepareResources),
+                prepare_view_pipelines.in_set(RenderSystems::Prepare),
+            ),
+        )
+        .add_systems(RenderGraph, make_caustic_maps.before(camera_driver))
+        .add_systems(
+            Core3d,
+            project_caustic_maps
+                .after(crate::irradiance::inject_irradiance)
+                .after(Core3dSystems::Prepass)
+                .before(Core3dSystems::MainPass),
+        );
+}
+
+fn extract_plan(mut extracted: ResMut<ExtractedPlan>, plan: Extract<Res<CausticMapPlan>>) {
+    if extracted.0.generation != plan.generation || extracted.0.views.len() != plan.views.len() {
+        extracted.0 = plan.clone();
+    }
+}
+
+fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache: Res<PipelineCache>, fullscreen: Res<FullscreenShader>) {
+    let map_layout = BindGroupLayoutDescriptor::new(
+        "caustic_light_map_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::VERTEX_FRAGMENT,
+            (uniform_buffer::<GpuLightView>(false), storage_buffer_read_only::<GpuInstance>(false)),
+        ),
+    );
+    commands.insert_resource(LightMapPipeline {
+        layout: map_layout,
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "maps.wgsl"),
+    });
+    let float = TextureSampleType::Float { filterable: false };
+    let compute_layout = BindGroupLayoutDescriptor::new(
+        "caustic_map_compute_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                uniform_buffer::<GpuLightView>(false),
+                uniform_buffer::<GpuStep>(true),
+                texture_2d(float),
+                texture_2d(float),
+                texture_2d(float),
+                storage_buffer_read_only::<f32>(false),
+                storage_buffer::<Vec4>(false),
+                storage_buffer::<UVec4>(false),
+                storage_buffer::<u32>(false),
+                storage_buffer::<u32>(false),
+                storage_buffer::<u32>(false),
+                storage_buffer::<u32>(false),
+                storage_buffer::<f32>(false),
+            ),
+        ),
+    );
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "caustic_map.wgsl");
+    let compute = KERNELS.map(|(_, entry)| {
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("caustic_map_{entry}").into()),
+            layout: vec![compute_layout.clone()],
+            shader: shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    });
+    let project_layout = |multisampled: bool| {
+        BindGroupLayoutDescriptor::new(
+            if multisampled { "caustic_map_project_layout_msaa" } else { "caustic_map_project_layout" },
+            &BindGroupLayoutEntries::sequential(
+                ShaderStages::FRAGMENT,
+                (
+                    uniform_buffer::<ViewUniform>(true),
+                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                    if multisampled { texture_2d_multisampled(float) } else { texture_2d(float) },
+                    uniform_buffer::<GpuLightView>(false),
+                    texture_2d(float),
+                    storage_buffer_read_only::<f32>(false),
+                ),
+            ),
+        )
+    };
+    commands.insert_resource(CausticMapPipelines {
+        compute_layout,
+        compute,
+        project_layouts: [project_layout(false), project_layout(true)],
+        project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
+        fullscreen: fullscreen.clone(),
+    });
+}
+
+impl SpecializedRenderPipeline for CausticMapPipelines {
+    /// Whether the prepass is multisampled.
+    type Key = bool;
+
+    fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
+        let shader_defs = if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
+        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        RenderPipelineDescriptor {
+            label: Some("caustic_map_project_pipeline".into()),
+            layout: vec![self.project_layouts[multisampled as usize].clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.project_shader.clone(),
+                shader_defs,
+                entry_point: Some("project".into()),
+                targets: vec![Some(ColorTargetState {
+                    format: crate::CAUSTIC_IRRADIANCE_FORMAT,
+                    blend: Some(BlendState { color: additive, alpha: additive }),
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            ..default()
+        }
+    }
+}
+
+fn target_texture(device: &RenderDevice, label: &'static str, size: u32, format: TextureFormat) -> (Texture, TextureView) {
+    let texture = device.create_texture(&TextureDescriptor {
+        label: Some(label),
+        size: Extent3d { width: size, height: size, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: TextureDimension::D2,
+        format,
+        usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&TextureViewDescriptor::default());
+    (texture, view)
+}
+
+fn storage(device: &RenderDevice, label: &'static str, bytes: u64, extra: BufferUsages) -> Buffer {
+    device.create_buffer(&BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16),
+        usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC | BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    })
+}
+
+impl Scratch {
+    fn new(device: &RenderDevice, settings: CausticMapSettings, views: usize, pyramid_nodes: u32, map_texels: u32, slots: usize) -> Self {
+        let (p, m) = (settings.photon_resolution, settings.map_resolution);
+        let photons = p as u64 * p as u64;
+        let depth = |label, size| target_texture(device, label, size, TextureFormat::Depth32Float).1;
+        let sizes = [
+            photons * 16,
+            pyramid_nodes as u64 * 16,
+            3 * photons * 4,
+            views as u64 * COUNTERS_PER_VIEW as u64 * 4,
+            slots as u64 * 12,
+            map_texels as u64 * 8,
+        ];
+        let bytes = sizes.iter().sum::<u64>() + photons * (16 + 16 + 4) + m as u64 * m as u64 * 4;
+        Self {
+            settings,
+            views,
+            front: target_texture(device, "caustic_front_map", p, TextureFormat::Rgba32Float),
+            back: target_texture(device, "caustic_back_map", p, TextureFormat::Rgba32Float),
+            photon_depth: depth("caustic_photon_depth", p),
+            map_depth: depth("caustic_receiver_depth", m),
+            photons: storage(device, "caustic_photons", sizes[0], BufferUsages::empty()),
+            pyramid: storage(device, "caustic_photon_pyramid", sizes[1], BufferUsages::empty()),
+            lists: storage(device, "caustic_gather_lists", sizes[2], BufferUsages::empty()),
+            counters: storage(device, "caustic_gather_counters", sizes[3], BufferUsages::empty()),
+            args: storage(device, "caustic_gather_args", sizes[4], BufferUsages::INDIRECT),
+            levels: storage(device, "caustic_map_levels", sizes[5], BufferUsages::empty()),
+            bytes,
+        }
+    }
+}
+
+/// The photon resolution the device's limits allow for `settings` (the photon buffer
+/// and the three lists are the largest bindings), at most the asked one.
+fn fitting_photon_resolution(device: &RenderDevice, settings: &CausticMapSettings) -> u32 {
+    let limits = device.limits();
+    let largest = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+    let mut p = settings.photon_resolution;
+    while p > 16 && (p as u64 * p as u64 * 16 > largest || 3 * p as u64 * p as u64 * 4 > largest || p > limits.max_texture_dimension_2d) {
+        p /= 2;
+    }
+    p
+}
+
+#[allow(clippy::too_many_arguments)]
+fn prepare_maps(
+    extracted: Res<ExtractedPlan>,
+    mut gpu: ResMut<CausticMapsGpu>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    pipelines: Res<CausticMapPipelines>,
+    map_pipeline: Res<LightMapPipeline>,
+    mut specialized: ResMut<SpecializedMeshPipelines<LightMapPipeline>>,
+    cache: Res<PipelineCache>,
+    meshes: Res<RenderAssets<RenderMesh>>,
+) {
+    let plan = &extracted.0;
+    let Some(mut settings) = plan.settings.filter(|_| !plan.views.is_empty()) else {
+        if gpu.generation.is_some() {
+            *gpu = CausticMapsGpu::default();
+        }
+        return;
+    };
+    if gpu.generation == Some(plan.generation) && !gpu.dirty {
+        return;
+    }
+    let gpu = gpu.as_mut();
+    gpu.generation = Some(plan.generation);
+    gpu.dirty = true;
+    let fitting = fitting_photon_resolution(&device, &settings);
+    if fitting < settings.photon_resolution {
+        if !gpu.warned {
+            warn!(
+                "bevy_caustics: {0}² photons do not fit this GPU's buffers; the caustic maps use {fitting}²",
+                settings.photon_resolution
+            );
+            gpu.warned = true;
+        }
+        settings.photon_resolution = fitting;
+    }
+
+    // Instances and their pipelines: a mesh not on the GPU yet makes the maps wait a frame.
+    let instance = |i: &CausticMapInstance, material: u32| {
+        let normal = Mat3::from_mat4(i.world_from_local).inverse().transpose();
+        GpuInstance { world_from_local: i.world_from_local, normal_from_local: Mat4::from_mat3(normal), material: UVec4::new(material, 0, 0, 0) }
+    };
+    let mut draws = |list: &[CausticMapInstance], passes: [LightMapPass; 2], ready: &mut bool| -> Vec<MeshDraw> {
+        let mut out = Vec::new();
+        for (index, i) in list.iter().enumerate() {
+            let Some(mesh) = meshes.get(i.mesh) else {
+                *ready = false;
+                continue;
+            };
+            let topology = mesh.primitive_topology();
+            if !matches!(topology, PrimitiveTopology::TriangleList | PrimitiveTopology::TriangleStrip) {
+                continue;
+            }
+            let ids = passes.map(|pass| specialized.specialize(&cache, &map_pipeline, (pass, topology), &mesh.layout));
+            if let [Ok(a), Ok(b)] = ids {
+                out.push(MeshDraw { instance: index as u32, mesh: i.mesh, pipelines: [a, b] });
+            }
+        }
+        out
+    };
+    let mut ready = true;
+    gpu.generator_draws = draws(&plan.generators, [LightMapPass::Front, LightMapPass::Back], &mut ready);
+    gpu.occluder_draws = draws(&plan.occluders, [LightMapPass::Receivers; 2], &mut ready);
+    if !ready {
+        gpu.generation = None;
+    }
+    let mut generators: Vec<GpuInstance> = plan.generators.iter().enumerate().map(|(k, i)| instance(i, k as u32)).collect();
+    let mut occluders: Vec<GpuInstance> = plan.occluders.iter().map(|i| instance(i, 0)).collect();
+    let mut materials: Vec<f32> = plan.generators.iter().map(|i| i.ior).collect();
+    // A binding may not be empty.
+    for list in [&mut generators, &mut occluders] {
+        if list.is_empty() {
+            list.push(GpuInstance::default());
+        }
+    }
+    if materials.is_empty() {
+        materials.push(0.0);
+    }
+    gpu.generators.set(generators);
+    gpu.generators.write_buffer(&device, &queue);
+    gpu.occluders.set(occluders);
+    gpu.occluders.write_buffer(&device, &queue);
+    gpu.materials.set(materials);
+    gpu.materials.write_buffer(&device, &queue);
+
+    // Per light view: its uniform and dispatches; scratch sized for all.
+    let mut uniforms = Vec::new();
+    gpu.steps.clear();
+    let mut plans = Vec::new();
+    let (mut pyramid_nodes, mut map_texels) = (0, 0);
+    for (k, planned) in plan.views.iter().enumerate() {
+        let (uniform, nodes, texels) = GpuLightView::new(planned, &settings);
+        (pyramid_nodes, map_texels) = (nodes, texels);
+        uniforms.push(uniform);
+        let (dispatches, steps) = plan_dispatches(&settings, k as u32 * COUNTERS_PER_VIEW);
+        let offsets: Vec<u32> = steps.into_iter().map(|s| gpu.steps.push(&s)).collect();
+        plans.push((dispatches, offsets));
+    }
+    gpu.steps.write_buffer(&device, &queue);
+    let slots = plans.iter().map(|(d, _)| d.iter().filter(|d| matches!(d.groups, Groups::Indirect(_))).count()).max().unwrap_or(0);
+    let fits = gpu.scratch.as_ref().is_some_and(|s| s.settings == settings && s.views == plan.views.len());
+    if !fits {
+        let scratch = Scratch::new(&device, settings, plan.views.len(), pyramid_nodes, map_texels, slots);
+        info!("bevy_caustics: caustic maps hold {:.1} MB of GPU memory", scratch.bytes as f64 / 1e6);
+        gpu.scratch = Some(scratch);
+        gpu.views.clear();
+    }
+    let (Some(generators), Some(occluders), Some(materials), Some(steps)) =
+        (gpu.generators.binding(), gpu.occluders.binding(), gpu.materials.binding(), gpu.steps.binding())
+    else {
+        return;
+    };
+    let Some(scratch) = gpu.scratch.as_ref() else { return };
+    let map_layout = cache.get_bind_group_layout(&map_pipeline.layout);
+    let compute_layout = cache.get_bind_group_layout(&pipelines.compute_layout);
+    let m = settings.map_resolution;
+    let mut views = std::mem::take(&mut gpu.views);
+    views.truncate(plan.views.len());
+    for (k, (uniform_value, (dispatches, step_offsets))) in uniforms.into_iter().zip(plans).enumerate() {
+        let (mut uniform, receivers, resolved) = match views.get_mut(k) {
+            Some(existing) => (
+                std::mem::take(&mut existing.uniform),
+                (existing.receivers.0.clone(), existing.receivers.1.clone()),
+                existing.resolved.clone(),
+            ),
+            None => (
+                UniformBuffer::default(),
+                target_texture(&device, "caustic_receiver_map", m, TextureFormat::R32Float),
+                storage(&device, "caustic_map_resolved", m as u64 * m as u64 * 4, BufferUsages::empty()),
+            ),
+        };
+        uniform.set(uniform_value);
+        uniform.write_buffer(&device, &queue);
+        let Some(view_binding) = uniform.binding() else { continue };
+        let map_group = |instances: BindingResource| {
+            device.create_bind_group("caustic_light_map_bind_group", &map_layout, &BindGroupEntries::sequential((view_binding.clone(), instances)))
+        };
+        let compute_bind_group = device.create_bind_group(
+            "caustic_map_compute_bind_group",
+            &compute_layout,
+            &BindGroupEntries::sequential((
+                view_binding.clone(),
+                steps.clone(),
+                &scratch.front.1,
+                &scratch.back.1,
+                &receivers.1,
+                materials.clone(),
+                scratch.photons.as_entire_binding(),
+                scratch.pyramid.as_entire_binding(),
+                scratch.lists.as_entire_binding(),
+                scratch.counters.as_entire_binding(),
+                scratch.args.as_entire_binding(),
+                scratch.levels.as_entire_binding(),
+                resolved.as_entire_binding(),
+            )),
+        );
+        let view_maps = ViewMaps {
+            generator_bind_group: map_group(generators.clone()),
+            occluder_bind_group: map_group(occluders.clone()),
+            uniform,
+            receivers,
+            resolved,
+            compute_bind_group,
+            dispatches,
+            step_offsets,
+        };
+        if k < views.len() {
+            views[k] = view_maps;
+        } else {
+            views.push(view_maps);
+        }
+    }
+    gpu.views = views;
+}
+
+fn prepare_view_pipelines(
+    mut commands: Commands,
+    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
+    pipelines: Res<CausticMapPipelines>,
+    mut specialized: ResMut<SpecializedRenderPipelines<CausticMapPipelines>>,
+    cache: Res<PipelineCache>,
+    gpu: Res<CausticMapsGpu>,
+) {
+    if gpu.views.is_empty() {
+        return;
+    }
+    for (entity, msaa) in &views {
+        let multisampled = msaa.samples() > 1;
+        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
+        commands.entity(entity).insert(ViewCausticMapPipeline { pipeline, multisampled });
+    }
+}
+
+/// Draws `draws` (pipeline `which` of each) with the light map bind group.
+fn draw_meshes(
+    pass: &mut wgpu::RenderPass,
+    draws: &[MeshDraw],
+    which: usize,
+    bind_group: &BindGroup,
+    cache: &PipelineCache,
+    meshes: &RenderAssets<RenderMesh>,
+    allocator: &MeshAllocator,
+) -> bool {
+    pass.set_bind_group(0, bind_group, &[]);
+    for draw in draws {
+        let (Some(pipeline), Some(mesh), Some(vertices)) =
+            (cache.get_render_pipeline(draw.pipelines[which]), meshes.get(draw.mesh), allocator.mesh_vertex_slice(&draw.mesh))
+        else {
+            return false;
+        };
+        pass.set_pipeline(pipeline);
+        pass.set_vertex_buffer(0, *vertices.buffer.slice(..));
+        let instances = draw.instance..draw.instance + 1;
+        match &mesh.buffer_info {
+            RenderMeshBufferInfo::Indexed { index_format, count } => {
+                let Some(indices) = allocator.mesh_index_slice(&draw.mesh) else { return false };
+                pass.set_index_buffer(*indices.buffer.slice(..), *index_format);
+                pass.draw_indexed(indices.range.start..indices.range.start + count, vertices.range.start as i32, instances);
+            }
+            RenderMeshBufferInfo::NonIndexed => pass.draw(vertices.range.clone(), instances),
+        }
+    }
+    true
+}
+
+/// A light map's render pass: the target cleared to "no surface", depth to `depth_clear`.
+fn light_map_pass<'a>(
+    encoder: &'a mut CommandEncoder,
+    label: &'static str,
+    target: &TextureView,
+    depth: &TextureView,
+    depth_clear: f32,
+) -> wgpu::RenderPass<'a> {
+    let clear = LoadOp::Clear(wgpu::Color { r: NO_SURFACE as f64, g: 0.0, b: 0.0, a: 0.0 });
+    encoder.begin_render_pass(&RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(RenderPassColorAttachment { view: target, depth_slice: None, resolve_target: None, ops: Operations { load: clear, store: StoreOp::Store } })],
+        depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
+            view: depth,
+            depth_ops: Some(Operations { load: LoadOp::Clear(depth_clear), store: StoreOp::Discard }),
+            stencil_ops: None,
+        }),
+        ..default()
+    })
+}
+
+/// Once per frame in which the plan changed: every light view's light maps, photon
+/// buffer, gather, splats and resolved map.
+fn make_caustic_maps(
+    mut ctx: RenderContext,
+    mut gpu: ResMut<CausticMapsGpu>,
+    pipelines: Res<CausticMapPipelines>,
+    cache: Res<PipelineCache>,
+    meshes: Res<RenderAssets<RenderMesh>>,
+    allocator: Res<MeshAllocator>,
+    recorder: Res<PassRecorder>,
+) {
+    if !gpu.dirty || gpu.views.is_empty() {
+        return;
+    }
+    let compute: Option<Vec<&ComputePipeline>> = pipelines.compute.iter().map(|&id| cache.get_compute_pipeline(id)).collect();
+    let (Some(compute), Some(scratch)) = (compute, gpu.scratch.as_ref()) else { return };
+    let counters_size = COUNTERS_PER_VIEW as u64 * 4;
+    let mut complete = true;
+    for (k, view) in gpu.views.iter().enumerate() {
+        let encoder = ctx.command_encoder();
+        {
+            let mut pass = light_map_pass(encoder, "caustic_front_map", &scratch.front.1, &scratch.photon_depth, 1.0);
+            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 0, &view.generator_bind_group, &cache, &meshes, &allocator);
+        }
+        {
+            let mut pass = light_map_pass(encoder, "caustic_back_map", &scratch.back.1, &scratch.photon_depth, 0.0);
+            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 1, &view.generator_bind_group, &cache, &meshes, &allocator);
+        }
+        {
+            let mut pass = light_map_pass(encoder, "caustic_receiver_map", &view.receivers.1, &scratch.map_depth, 1.0);
+            complete &= draw_meshes(&mut pass, &gpu.occluder_draws, 0, &view.occluder_bind_group, &cache, &meshes, &allocator);
+        }
+        encoder.clear_buffer(&scratch.counters, k as u64 * counters_size, Some(counters_size));
+        encoder.clear_buffer(&scratch.levels, 0, None);
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_map"), ..default() });
+        for dispatch in &view.dispatches {
+            let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
+            pass.set_pipeline(compute[kernel]);
+            pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[dispatch.step]]);
+            match dispatch.groups {
+                Groups::Direct(x, y) => pass.dispatch_workgroups(x, y, 1),
+                Groups::Indirect(slot) => pass.dispatch_workgroups_indirect(&scratch.args, slot as u64 * 12),
+            }
+        }
+        drop(pass);
+        recorder.record("caustic map");
+    }
+    // A pipeline still compiling or a mesh not yet uploaded: make them again next frame.
+    gpu.dirty = !complete;
+}
+
+/// Adds every light view's caustic irradiance where the view sees its receivers.
+fn project_caustic_maps(
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewCausticMapPipeline)>,
+    gpu: Res<CausticMapsGpu>,
+    pipelines: Res<CausticMapPipelines>,
+    cache: Res<PipelineCache>,
+    view_uniforms: Res<ViewUniforms>,
+    recorder: Res<PassRecorder>,
+    mut ctx: RenderContext,
+) {
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    if gpu.generation.is_none() || gpu.views.is_empty() {
+        return;
+    }
+    let (Some(render_pipeline), Some(depth), Some(normal), Some(view_binding)) = (
+        cache.get_render_pipeline(pipeline.pipeline),
+        prepass.depth_view(),
+        prepass.normal_view(),
+        view_uniforms.uniforms.binding(),
+    ) else {
+        return;
+    };
+    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let bind_groups: Vec<BindGroup> = gpu
+        .views
+        .iter()
+        .filter_map(|v| {
+            Some(ctx.render_device().create_bind_group(
+                "caustic_map_project_bind_group",
+                &layout,
+                &BindGroupEntries::sequential((view_binding.clone(), depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
+            ))
+        })
+        .collect();
+    let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+        label: Some("caustic_map_projection"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: &buffer.texture.default_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+        })],
+        ..default()
+    });
+    pass.set_pipeline(render_pipeline);
+    for bind_group in &bind_groups {
+        pass.set_bind_group(0, bind_group, &[offset.offset]);
+        pass.draw(0..3, 0..1);
+    }
+    recorder.record("caustic map projection");
+}

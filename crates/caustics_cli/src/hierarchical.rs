@@ -1,0 +1,230 @@
+//! The bench of hierarchical caustic maps (Wyman 2008): every gather of the paper's
+//! Table 3 at 256² to 4096² photons on each built-in scene, with the photons each stage
+//! processed (a count, the same on any hardware), each stage's time on the CPU twin and
+//! the caustic irradiance's error against the reference tracer.
+//!
+//! The light maps and the photon buffer are made once per photon count and shared by
+//! the gathers; each gather's run time is those stages' plus its own pyramid, traversal,
+//! splats and resolve.
+
+use crate::bench::{Errors, Measurement, cell_means, cell_sample_points};
+use crate::plot::{Axes, Series, plot_log_log};
+use caustics_core::hierarchical::caustic_map::{self, CausticMap};
+use caustics_core::hierarchical::hierarchy::{self, PhotonPyramid};
+use caustics_core::hierarchical::{
+    Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, Splats, light_intensity,
+};
+use caustics_core::scenes::BenchScene;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+/// One gather of the bench: a name, the traversal and the splats.
+pub struct Variant {
+    pub name: &'static str,
+    pub gather: Gather,
+    pub splats: Splats,
+}
+
+/// The paper's constant splats: 3 texels across (Fig. 4's 3² splats).
+const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
+
+/// Flat (every photon), hierarchical (§3.1), clustering at the last and at every level
+/// (§3.2), and the full method — clustering at the last level with variable splats into
+/// levels 0–3 (§3.3), splats past level 3 clamped into it (`maps-full`) or dropped as the
+/// paper does (`maps-full-cap`).
+pub const VARIANTS: [Variant; 6] = [
+    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED },
+    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED },
+    Variant { name: "maps-combine-last", gather: Gather::Hierarchical { clustering: Clustering::LastLevel }, splats: FIXED },
+    Variant { name: "maps-combine-all", gather: Gather::Hierarchical { clustering: Clustering::AllLevels }, splats: FIXED },
+    Variant {
+        name: "maps-full",
+        gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
+        splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
+    },
+    Variant {
+        name: "maps-full-cap",
+        gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
+        splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Discard },
+    },
+];
+
+/// Caustic map side: one map for every photon count, so that the photon counts' effect
+/// on noise shows.
+pub const MAP_RESOLUTION: u32 = 1024;
+
+/// Photon buffer sides, cheapest first.
+pub fn photon_resolutions(quick: bool) -> Vec<u32> {
+    if quick { vec![256, 512] } else { vec![256, 512, 1024, 2048, 4096] }
+}
+
+/// What one gather at one photon count processed and cost, summed over the light views.
+struct StageRow {
+    photons: u32,
+    variant: &'static str,
+    /// Photon buffer texels, and those that carry a caustic photon.
+    texels: u64,
+    valid: u64,
+    processed: u64,
+    splats: u64,
+    clustered: u64,
+    maps: f64,
+    tracing: f64,
+    gather: f64,
+    splat: f64,
+    /// Flux the paper's level cap drops, as a fraction of the flux splatted.
+    capped: f64,
+    errors: Errors,
+}
+
+/// One light view's stages that every gather shares.
+struct Traced {
+    view: LightView,
+    intensity: f32,
+    maps: LightMaps,
+    photons: PhotonBuffer,
+}
+
+/// Runs every variant at every photon count on `scene`, adding its rows to `rows`;
+/// returns the Markdown table of stages and writes `bench-<name>-maps.png` (photons
+/// processed against photon count) into `out`.
+pub fn bench_scene(
+    name: &str,
+    scene: &BenchScene,
+    truth: &[f32],
+    quick: bool,
+    out: &Path,
+    rows: &mut Vec<Measurement>,
+) -> Result<String, String> {
+    let generators = scene.scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
+    let receivers = scene
+        .scene
+        .receivers
+        .iter()
+        .map(|r| r.mesh.bounds())
+        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+        .ok_or("caustic maps: the scene has no receivers")?;
+    let materials: Vec<_> = scene.scene.generators.iter().map(|g| g.interaction).collect();
+    let points = cell_sample_points(&scene.region);
+    let up = if scene.region.normal().y < 0.0 { -scene.region.normal() } else { scene.region.normal() };
+    let mut stages = Vec::new();
+    for p in photon_resolutions(quick) {
+        let clock = Instant::now();
+        let mut traced = Vec::new();
+        for light in &scene.scene.lights {
+            for view in LightView::for_light(light, generators, receivers) {
+                let maps = LightMaps::ray_cast(&scene.scene, &view, p, MAP_RESOLUTION);
+                let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
+                traced.push((view, light, intensity, maps));
+            }
+        }
+        let maps_seconds = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let traced: Vec<Traced> = traced
+            .into_iter()
+            .map(|(view, light, intensity, maps)| {
+                let photons = PhotonBuffer::trace(&maps, &view, &materials, light, 4);
+                Traced { view, intensity, maps, photons }
+            })
+            .collect();
+        let tracing_seconds = clock.elapsed().as_secs_f64();
+        for variant in &VARIANTS {
+            let mut row = StageRow {
+                photons: p,
+                variant: variant.name,
+                texels: 0,
+                valid: 0,
+                processed: 0,
+                splats: 0,
+                clustered: 0,
+                maps: maps_seconds,
+                tracing: tracing_seconds,
+                gather: 0.0,
+                splat: 0.0,
+                capped: 0.0,
+                errors: Errors { l2: 0.0, l1: 0.0 },
+            };
+            let mut irradiance = vec![0.0f32; points.len()];
+            let (mut flux_in, mut flux_capped) = (0.0, 0.0);
+            for t in &traced {
+                let clock = Instant::now();
+                let pyramid = PhotonPyramid::new(&t.photons, MAP_RESOLUTION);
+                let (entries, stats) = hierarchy::gather(&pyramid, variant.gather);
+                row.gather += clock.elapsed().as_secs_f64();
+                let clock = Instant::now();
+                let (map, splat_stats) = CausticMap::splat_all(&t.photons, &pyramid, &entries, variant.splats, MAP_RESOLUTION);
+                let resolved = map.resolve();
+                row.splat += clock.elapsed().as_secs_f64();
+                row.texels += t.photons.photons.len() as u64;
+                row.valid += t.photons.stats.caustic;
+                row.processed += stats.total_processed();
+                row.splats += stats.splats();
+                row.clustered += stats.clustered_photons;
+                flux_in += splat_stats.flux_in;
+                flux_capped += splat_stats.flux_dropped_by_cap;
+                for (e, &q) in irradiance.iter_mut().zip(&points) {
+                    *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, p, t.intensity, q, up);
+                }
+            }
+            row.capped = if flux_in > 0.0 { flux_capped / flux_in } else { 0.0 };
+            let image = cell_means(&irradiance);
+            row.errors = Errors::between(&image, truth);
+            let seconds = row.maps + row.tracing + row.gather + row.splat;
+            eprintln!(
+                "{name:>8} {:>18} {p:>5}²: {seconds:8.3} s, {} of {} photons processed, relative L2 {:.4}",
+                variant.name, row.processed, row.texels, row.errors.l2
+            );
+            rows.push(Measurement {
+                scene: name.into(),
+                method: variant.name.into(),
+                quality: format!("{p}²"),
+                work: row.processed,
+                seconds,
+                error: row.errors,
+                error_vs_limit: None,
+            });
+            stages.push(row);
+        }
+    }
+    plot_processed(&out.join(format!("bench-{name}-maps.png")), name, &stages)?;
+    Ok(stage_table(name, &stages))
+}
+
+/// Photons processed against photons in the buffer, one line per gather.
+fn plot_processed(path: &Path, scene: &str, stages: &[StageRow]) -> Result<(), String> {
+    let series: Vec<Series> = VARIANTS[..4]
+        .iter()
+        .map(|v| Series {
+            label: format!("{scene} / {}", v.name),
+            points: stages.iter().filter(|r| r.variant == v.name).map(|r| (r.texels as f64, r.processed as f64)).collect(),
+        })
+        .chain(std::iter::once(Series {
+            label: format!("{scene} / caustic photons"),
+            points: stages.iter().filter(|r| r.variant == VARIANTS[0].name).map(|r| (r.texels as f64, r.valid.max(1) as f64)).collect(),
+        }))
+        .collect();
+    const AXES: Axes = Axes { caption: "Caustic maps: photons processed by the gather", x: "photons in the buffer", y: "photons processed" };
+    plot_log_log(&crate::prepare_output(path)?, &AXES, &series.iter().collect::<Vec<_>>())
+}
+
+fn stage_table(scene: &str, stages: &[StageRow]) -> String {
+    let mut md = format!(
+        "\nHierarchical caustic maps on the {scene} ({MAP_RESOLUTION}² caustic map), per photon count and gather: \
+         photons in the buffer (all light views) and those carrying a caustic, nodes the gather processed \
+         (every level), splats it handed on and photons inside clusters; seconds on the CPU twin for the light \
+         maps (ray cast: a GPU rasterises them), tracing the photon buffer, pyramid + gather, splats + resolve; \
+         the share of splatted flux the paper's level cap drops; relative L2 and L1 against the reference.\n\n\
+         | photons | gather | caustic photons | processed | splats | clustered | light maps (s) | trace (s) | gather (s) | splat (s) | capped | L2 | L1 |\n\
+         |---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+    );
+    for r in stages {
+        writeln!(
+            md,
+            "| {}² | {} | {} | {} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+            r.photons, r.variant, r.valid, r.processed, r.splats, r.clustered, r.maps, r.tracing, r.gather, r.splat, r.capped, r.errors.l2, r.errors.l1
+        )
+        .unwrap();
+    }
+    md
+}
