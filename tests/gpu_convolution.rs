@@ -85,21 +85,9 @@ fn cpu_twin(renderer: &mut HeadlessRenderer, pool_entity: Entity) -> Vec<f32> {
 
 /// The heights the GPU computed in the last frame, copied back from its buffer.
 fn gpu_heights(renderer: &mut HeadlessRenderer, pool: Entity) -> Vec<f32> {
-    use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
-    use bevy::render::renderer::{RenderDevice, RenderQueue};
     let world = renderer.app.sub_app_mut(bevy::render::RenderApp).world_mut();
-    let (device, queue) = (world.resource::<RenderDevice>().clone(), world.resource::<RenderQueue>().clone());
     let heights = world.resource::<PoolGpu>().heights(pool).expect("the pool's heights are on the GPU").clone();
-    let usage = BufferUsages::COPY_DST | BufferUsages::MAP_READ;
-    let staging = device.create_buffer(&BufferDescriptor { label: Some("heights_readback"), size: heights.size(), usage, mapped_at_creation: false });
-    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
-    encoder.copy_buffer_to_buffer(&heights, 0, &staging, 0, heights.size());
-    queue.submit([encoder.finish()]);
-    let slice = staging.slice(..);
-    slice.map_async(MapMode::Read, |mapped| mapped.expect("the readback buffer maps"));
-    device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
-    let bytes = slice.get_mapped_range();
-    bytes.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
+    support::read_buffer(renderer, &heights).chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect()
 }
 
 fn set_technique(renderer: &mut HeadlessRenderer, pool: Entity, technique: CausticTechnique) {

@@ -35,6 +35,23 @@ pub fn caustic_irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<
     with.pixels.iter().zip(&without.pixels).map(|(a, b)| (a.x - b.x) * PI / exposure()).collect()
 }
 
+/// The bytes of a GPU buffer of the render world (`COPY_SRC`), copied back.
+pub fn read_buffer(renderer: &mut HeadlessRenderer, buffer: &bevy::render::render_resource::Buffer) -> Vec<u8> {
+    use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
+    use bevy::render::renderer::{RenderDevice, RenderQueue};
+    let world = renderer.app.sub_app_mut(bevy::render::RenderApp).world_mut();
+    let (device, queue) = (world.resource::<RenderDevice>().clone(), world.resource::<RenderQueue>().clone());
+    let usage = BufferUsages::COPY_DST | BufferUsages::MAP_READ;
+    let staging = device.create_buffer(&BufferDescriptor { label: Some("test_readback"), size: buffer.size(), usage, mapped_at_creation: false });
+    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, buffer.size());
+    queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    slice.map_async(MapMode::Read, |mapped| mapped.expect("the readback buffer maps"));
+    device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
+    slice.get_mapped_range().to_vec()
+}
+
 /// Renders `frames` frames, panicking with the renderer's error.
 pub fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
     renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))

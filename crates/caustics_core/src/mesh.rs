@@ -192,6 +192,24 @@ impl TriMesh {
         Self { positions, normals: vec![n; 4], triangles: vec![[0, 1, 2], [0, 2, 3]] }
     }
 
+    /// A closed axis-aligned box between the corners `lo` and `hi`, each face wound
+    /// counter-clockwise seen from outside, with its own flat normals.
+    pub fn cuboid(lo: Vec3, hi: Vec3) -> Self {
+        let c = 0.5 * (lo + hi);
+        let h = 0.5 * (hi - lo);
+        let mut mesh = Self::quad(c + Vec3::Y * h.y, Vec3::Z * h.z, Vec3::X * h.x);
+        for (n, u, v) in [
+            (Vec3::NEG_Y, Vec3::X * h.x, Vec3::Z * h.z),
+            (Vec3::X, Vec3::Y * h.y, Vec3::Z * h.z),
+            (Vec3::NEG_X, Vec3::Z * h.z, Vec3::Y * h.y),
+            (Vec3::Z, Vec3::X * h.x, Vec3::Y * h.y),
+            (Vec3::NEG_Z, Vec3::Y * h.y, Vec3::X * h.x),
+        ] {
+            mesh.append(&Self::quad(c + n * n.abs().dot(h), u, v));
+        }
+        mesh
+    }
+
     /// A UV sphere with `rings` latitude bands and `segments` longitude slices and
     /// exact outward normals.
     pub fn uv_sphere(center: Vec3, radius: f32, rings: usize, segments: usize) -> Self {

@@ -43,23 +43,6 @@ fn glass(mesh: TriMesh, ior: f32) -> Generator {
     Generator { mesh, interaction: SpecularInteraction::Refract { ior, dispersion: None } }
 }
 
-/// A closed axis-aligned box, faces wound counter-clockwise from outside.
-fn cuboid(lo: Vec3, hi: Vec3) -> TriMesh {
-    let c = 0.5 * (lo + hi);
-    let h = 0.5 * (hi - lo);
-    let mut mesh = TriMesh::quad(c + Vec3::Y * h.y, Vec3::Z * h.z, Vec3::X * h.x);
-    for (n, u, v) in [
-        (Vec3::NEG_Y, Vec3::X * h.x, Vec3::Z * h.z),
-        (Vec3::X, Vec3::Y * h.y, Vec3::Z * h.z),
-        (Vec3::NEG_X, Vec3::Z * h.z, Vec3::Y * h.y),
-        (Vec3::Z, Vec3::X * h.x, Vec3::Y * h.y),
-        (Vec3::NEG_Z, Vec3::Y * h.y, Vec3::X * h.x),
-    ] {
-        mesh.append(&TriMesh::quad(c + n * (n.abs().dot(h)), u, v));
-    }
-    mesh
-}
-
 /// The only view of the scene's only light.
 fn only_view(scene: &Scene, settings: &CausticMapSettings) -> ViewCaustics {
     let mut views = scene_caustics(scene, settings);
@@ -161,7 +144,7 @@ fn flat_water_transmits_exactly_the_fresnel_fraction() {
 #[test]
 fn a_glass_slab_transmits_the_fresnel_fractions_of_both_faces() {
     let l = Vec3::new(0.25, -1.0, 0.1).normalize();
-    let slab = cuboid(Vec3::new(-2.5, 0.5, -2.5), Vec3::new(2.5, 0.9, 2.5));
+    let slab = TriMesh::cuboid(Vec3::new(-2.5, 0.5, -2.5), Vec3::new(2.5, 0.9, 2.5));
     let scene = Scene { lights: vec![sun(l)], generators: vec![glass(slab, 1.5)], receivers: vec![floor(6.0, 0.0)] };
     let inside = refract(l, Vec3::Y, 1.0 / 1.5).direction().unwrap();
     let expected = 2.0 * l.y.abs() * fresnel_transmittance(l.y, 1.0 / 1.5) * fresnel_transmittance(inside.y, 1.5);
@@ -352,11 +335,45 @@ fn the_paper_level_cap_drops_energy_clamping_keeps_it() {
 }
 
 #[test]
+fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
+    // A ball under a spot focuses onto the floor; an opaque box (a receiver that does
+    // not show caustics) stands in part of the light. Photons land on its top, which the
+    // light sees; the floor in its shadow gets none of them, though it projects to the
+    // same caustic-map texels.
+    let spot = Light::white(LightKind::Spot {
+        position: Vec3::new(-1.5, 4.0, 0.0),
+        direction: Vec3::new(1.5, -3.0, 0.0).normalize(),
+        intensity: 10.0,
+        inner_angle: 0.2,
+        outer_angle: 0.3,
+    });
+    let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 32, 64);
+    let block = Receiver { mesh: TriMesh::cuboid(Vec3::new(0.2, 0.0, -0.5), Vec3::new(0.5, 0.4, 0.5)), albedo: Vec3::ONE };
+    let scene = Scene { lights: vec![spot], generators: vec![glass(ball, 1.5)], receivers: vec![floor(6.0, 0.0), block] };
+    let view = only_view(&scene, &settings(256, 256, CLUSTERED, VARIABLE));
+    assert_all_finite(&view);
+    let top: f32 = (0..20).map(|i| view.irradiance_at(Vec3::new(0.25 + 0.2 * i as f32 / 20.0, 0.4, 0.0), Vec3::Y)).sum();
+    assert!(top > 0.0, "the box's top is lit");
+    // The floor behind the box, along the light: the box's shadow, seen from above.
+    let mut shadowed = 0;
+    for i in 0..20 {
+        let p = Vec3::new(0.55 + 0.15 * i as f32 / 20.0, 0.0, 0.05 * (i % 5) as f32);
+        let uv = view.view.uv(p).unwrap();
+        let on_map = caustic_map::bilinear(uv * 256.0 - 0.5, 256, |x, y| view.resolved[(y * 256 + x) as usize]);
+        if on_map > 0.0 {
+            assert_eq!(view.irradiance_at(p, Vec3::Y), 0.0, "caustic light at {p} in the box's shadow");
+            shadowed += 1;
+        }
+    }
+    assert!(shadowed > 5, "the map holds light where the shadow projects ({shadowed} points)");
+}
+
+#[test]
 fn total_internal_reflection_inside_the_refractor_is_dropped_and_counted() {
     // A diamond bar with a square cross-section standing on its edge, under an overhead
     // sun: light that enters an upper face near the side corners meets the lower face
     // below at 73°, past the critical angle of 24°.
-    let bar = cuboid(Vec3::new(-0.5, -0.5, -1.0), Vec3::new(0.5, 0.5, 1.0));
+    let bar = TriMesh::cuboid(Vec3::new(-0.5, -0.5, -1.0), Vec3::new(0.5, 0.5, 1.0));
     let on_edge = bar.transformed(&glam::Affine3A::from_rotation_translation(
         glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4),
         Vec3::Y * 1.5,

@@ -27,7 +27,7 @@ struct Step {
     // (every node of `level`, `fixed_count` of them).
     source: u32,
     // The list `traverse` appends children to.
-    target: u32,
+    destination: u32,
     // Which three words of `args` `write_args` fills.
     args_slot: u32,
     fixed_count: u32,
@@ -47,17 +47,51 @@ const WORKGROUP: u32 = 64u;
 @group(0) @binding(2) var front_map: texture_2d<f32>;
 @group(0) @binding(3) var back_map: texture_2d<f32>;
 @group(0) @binding(4) var receiver_map: texture_2d<f32>;
-@group(0) @binding(5) var<storage, read> materials: array<f32>;   // index of refraction, 0 for a mirror
-@group(0) @binding(6) var<storage, read_write> photons: array<vec4<f32>>; // uv, flux, solid angle
+// The photon buffer in two halves (each within a binding's size limit at 4096²): where
+// each photon lands, and its flux and solid angle.
+@group(0) @binding(5) var<storage, read_write> photon_uv: array<vec2<f32>>;
+@group(0) @binding(6) var<storage, read_write> photon_flux: array<vec2<f32>>;
 @group(0) @binding(7) var<storage, read_write> pyramid: array<vec4<u32>>; // flux, Σ flux·uv (f32 bits), texel word
-@group(0) @binding(8) var<storage, read_write> lists: array<u32>;          // three lists of photon-count capacity
-@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
-@group(0) @binding(10) var<storage, read_write> args: array<u32>;
-@group(0) @binding(11) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
-@group(0) @binding(12) var<storage, read_write> resolved: array<f32>;
+// The traversal's two lists and the gathered list, photon-count capacity each.
+@group(0) @binding(8) var<storage, read_write> list0: array<u32>;
+@group(0) @binding(9) var<storage, read_write> list1: array<u32>;
+@group(0) @binding(10) var<storage, read_write> gathered: array<u32>;
+@group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>>;
+@group(0) @binding(12) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
+@group(0) @binding(13) var<storage, read_write> resolved: array<f32>;
+// Only `write_args` binds the indirect arguments: a dispatch may not read the buffer it
+// is dispatched from as storage.
+@group(1) @binding(0) var<storage, read_write> args: array<u32>;
 
-fn photon_count() -> u32 {
-    return view.photon_resolution * view.photon_resolution;
+struct PhotonTexel {
+    uv: vec2<f32>,
+    flux: f32,
+}
+
+fn photon_at(index: u32) -> PhotonTexel {
+    return PhotonTexel(photon_uv[index], photon_flux[index].x);
+}
+
+fn list_entry(source: u32, i: u32) -> u32 {
+    switch source {
+        case 0u: {
+            return list0[i];
+        }
+        case 1u: {
+            return list1[i];
+        }
+        default: {
+            return gathered[i];
+        }
+    }
+}
+
+fn set_list_entry(destination: u32, i: u32, value: u32) {
+    if destination == 0u {
+        list0[i] = value;
+    } else {
+        list1[i] = value;
+    }
 }
 
 // ---------------------------------------------------------------- photon buffer
@@ -228,9 +262,10 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let index = id.y * n + id.x;
-    photons[index] = vec4(0.0);
+    photon_uv[index] = vec2(0.0);
+    photon_flux[index] = vec2(0.0);
     let front = front_at(id.x, id.y);
-    if front.depth >= NO_SURFACE || front.material >= arrayLength(&materials) {
+    if front.depth >= NO_SURFACE || front.material >= view.material_count {
         return;
     }
     let uv0 = texel_center(id.x, id.y, n);
@@ -247,7 +282,7 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     if dot(n1, dir) > 0.0 {
         n1 = -n1;
     }
-    let ior = materials[front.material];
+    let ior = view.materials[front.material / 4u][front.material % 4u];
     var origin = p1;
     var out = reflect_about(dir, n1);
     var flux = weight;
@@ -278,7 +313,8 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     if uv.z == 0.0 || uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0 {
         return;
     }
-    photons[index] = vec4(min(uv.xy, vec2(ONE_BELOW)), flux, beam * texel_measure(view, n));
+    photon_uv[index] = min(uv.xy, vec2(ONE_BELOW));
+    photon_flux[index] = vec2(flux, beam * texel_measure(view, n));
 }
 
 // ---------------------------------------------------------------- pyramid
@@ -291,13 +327,13 @@ struct Node {
 
 // `Node::of_photon`.
 fn photon_node(index: u32) -> Node {
-    let p = photons[index];
-    if p.z <= 0.0 {
+    let p = photon_at(index);
+    if p.flux <= 0.0 {
         return Node(EMPTY, 0.0, vec2(0.0));
     }
     let m = view.map_resolution;
-    let t = min(vec2<u32>(p.xy * f32(m)), vec2(m - 1u));
-    return Node(t.y * m + t.x, p.z, p.xy * p.z);
+    let t = min(vec2<u32>(p.uv * f32(m)), vec2(m - 1u));
+    return Node(t.y * m + t.x, p.flux, p.uv * p.flux);
 }
 
 fn pyramid_node(level: u32, index: u32) -> Node {
@@ -375,8 +411,8 @@ fn write_args() {
     if step.source != 2u {
         atomicStore(&counters[step.counter_base + COUNT_PROCESSED + step.level], n);
     }
-    if step.target < 2u {
-        atomicStore(&counters[step.counter_base + step.target], 0u);
+    if step.destination < 2u {
+        atomicStore(&counters[step.counter_base + step.destination], 0u);
     }
 }
 
@@ -386,7 +422,7 @@ fn thread_index(workgroup: vec3<u32>, groups: vec3<u32>, local: u32) -> u32 {
 
 fn gather(entry: u32) {
     let i = atomicAdd(&counters[step.counter_base + 2u], 1u);
-    lists[2u * photon_count() + i] = entry;
+    gathered[i] = entry;
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -401,7 +437,7 @@ fn traverse(
     }
     var index = t;
     if step.source != ALL_NODES {
-        index = lists[step.source * photon_count() + t];
+        index = list_entry(step.source, t);
     }
     let node = pyramid_node(step.level, index);
     if node.texel == EMPTY {
@@ -417,12 +453,11 @@ fn traverse(
     let x = 2u * (index % width);
     let y = 2u * (index / width);
     let below = 2u * width;
-    let first = atomicAdd(&counters[step.counter_base + step.target], 4u);
-    let base = step.target * photon_count() + first;
-    lists[base] = y * below + x;
-    lists[base + 1u] = y * below + x + 1u;
-    lists[base + 2u] = (y + 1u) * below + x;
-    lists[base + 3u] = (y + 1u) * below + x + 1u;
+    let first = atomicAdd(&counters[step.counter_base + step.destination], 4u);
+    set_list_entry(step.destination, first, y * below + x);
+    set_list_entry(step.destination, first + 1u, y * below + x + 1u);
+    set_list_entry(step.destination, first + 2u, (y + 1u) * below + x);
+    set_list_entry(step.destination, first + 3u, (y + 1u) * below + x + 1u);
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -437,9 +472,9 @@ fn gather_photons(
     }
     var index = t;
     if step.source != ALL_NODES {
-        index = lists[step.source * photon_count() + t];
+        index = list_entry(step.source, t);
     }
-    if photons[index].z > 0.0 {
+    if photon_flux[index].x > 0.0 {
         gather(index);
     }
 }
@@ -451,7 +486,7 @@ fn divergence_diameter(index: u32) -> f32 {
     let n = view.photon_resolution;
     let x = index % n;
     let y = index / n;
-    let here = photons[index].xy;
+    let here = photon_uv[index];
     var largest = -1.0;
     let m = f32(view.map_resolution);
     var neighbours = array<vec2<i32>, 4>(vec2(-1, 0), vec2(1, 0), vec2(0, -1), vec2(0, 1));
@@ -460,9 +495,9 @@ fn divergence_diameter(index: u32) -> f32 {
         if q.x < 0 || q.y < 0 || q.x >= i32(n) || q.y >= i32(n) {
             continue;
         }
-        let p = photons[u32(q.y) * n + u32(q.x)];
-        if p.z > 0.0 {
-            largest = max(largest, length((p.xy - here) * m));
+        let p = photon_at(u32(q.y) * n + u32(q.x));
+        if p.flux > 0.0 {
+            largest = max(largest, length((p.uv - here) * m));
         }
     }
     var spacing = largest;
@@ -508,16 +543,16 @@ fn splat(
     if t >= list_length(2u) {
         return;
     }
-    let entry = lists[2u * photon_count() + t];
+    let entry = gathered[t];
     let entry_level = entry >> 24u;
     let index = entry & 0x00ffffffu;
     var uv: vec2<f32>;
     var flux: f32;
     var diameter = max(view.fixed_diameter, MIN_SPLAT_DIAMETER);
     if entry_level == 0u {
-        let p = photons[index];
-        uv = p.xy;
-        flux = p.z;
+        let p = photon_at(index);
+        uv = p.uv;
+        flux = p.flux;
         if view.variable_splats != 0u {
             diameter = divergence_diameter(index);
         }

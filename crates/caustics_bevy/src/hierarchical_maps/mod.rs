@@ -36,7 +36,7 @@ mod plan;
 mod render;
 
 pub use plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
-pub use render::CausticMapsGpu;
+pub use render::{COUNTERS_PER_VIEW, CausticMapsGpu, MAX_GENERATORS, PROCESSED_COUNTER};
 
 use bevy::prelude::*;
 use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Splats};

@@ -79,6 +79,7 @@ fn plan_caustic_maps(
     mut plan: ResMut<CausticMapPlan>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut warned: Local<bool>,
+    mut warned_generators: Local<HashSet<Entity>>,
 ) {
     let core_settings = settings.core();
     let valid = match core_settings.validate() {
@@ -96,8 +97,14 @@ fn plan_caustic_maps(
     };
     let mut next = CausticMapPlan { settings: Some(core_settings), generation: plan.generation, ..default() };
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
-    for (_, generator, (mesh, transform, visible, aabb)) in &generators {
+    for (entity, generator, (mesh, transform, visible, aabb)) in &generators {
         if generator.technique != CausticTechnique::HierarchicalMaps || !visible.get() || !valid {
+            continue;
+        }
+        if next.generators.len() == super::render::MAX_GENERATORS {
+            if warned_generators.insert(entity) {
+                warn!("bevy_caustics: CausticGenerator {entity} is left out of the caustic maps: they draw at most {} generators", super::render::MAX_GENERATORS);
+            }
             continue;
         }
         let Some(aabb) = aabb else { continue };

@@ -52,14 +52,20 @@ pub(super) struct GpuLightView {
     exit_iterations: u32,
     pyramid_offsets: [UVec4; 3],
     level_offsets: [UVec4; 3],
+    materials: [Vec4; 16],
+    material_count: u32,
 }
+
+/// The most generators the caustic maps draw (their indices of refraction live in the
+/// light view's uniform).
+pub const MAX_GENERATORS: usize = 64;
 
 /// `Step` in `caustic_map.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
 struct GpuStep {
     level: u32,
     source: u32,
-    target: u32,
+    destination: u32,
     args_slot: u32,
     fixed_count: u32,
     counter_base: u32,
@@ -76,7 +82,7 @@ struct GpuInstance {
 /// The lists a step reads (`Step::source`): the traversal's two, the gathered one, all nodes.
 const LIST_GATHERED: u32 = 2;
 const ALL_NODES: u32 = 3;
-/// No list to clear (`Step::target`).
+/// No list to clear (`Step::destination`).
 const NO_TARGET: u32 = 9;
 /// Counters per light view: three list lengths, clusters, nodes processed at 13 levels,
 /// padding.
@@ -109,7 +115,7 @@ fn top_level(settings: &CausticMapSettings) -> u32 {
 }
 
 impl GpuLightView {
-    fn new(planned: &PlannedLightView, settings: &CausticMapSettings) -> (Self, u32, u32) {
+    fn new(planned: &PlannedLightView, settings: &CausticMapSettings, iors: &[f32]) -> (Self, u32, u32) {
         let v = &planned.view;
         let half = v.half_extent();
         let p = settings.photon_resolution;
@@ -160,6 +166,8 @@ impl GpuLightView {
             exit_iterations: settings.exit_iterations,
             pyramid_offsets,
             level_offsets,
+            materials: std::array::from_fn(|i| Vec4::from_array(std::array::from_fn(|c| iors.get(4 * i + c).copied().unwrap_or(0.0)))),
+            material_count: iors.len().min(MAX_GENERATORS) as u32,
         };
         (gpu, pyramid_nodes, map_texels)
     }
@@ -235,6 +243,8 @@ impl SpecializedMeshPipeline for LightMapPipeline {
 #[derive(Resource)]
 pub(super) struct CausticMapPipelines {
     compute_layout: BindGroupLayoutDescriptor,
+    /// The indirect arguments, bound for `write_args` alone.
+    args_layout: BindGroupLayoutDescriptor,
     compute: [CachedComputePipelineId; 7],
     project_layouts: [BindGroupLayoutDescriptor; 2],
     project_shader: Handle<Shader>,
@@ -303,33 +313,45 @@ fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dis
     let mut source = ALL_NODES;
     let fixed_count = (p >> start) * (p >> start);
     for level in (0..=start).rev() {
-        let (kernel, target) = if level == 0 { (Kernel::GatherPhotons, NO_TARGET) } else { (Kernel::Traverse, (start - level) % 2) };
-        let step = GpuStep { level, source, target, args_slot: slot, fixed_count, ..default() };
+        let (kernel, destination) = if level == 0 { (Kernel::GatherPhotons, NO_TARGET) } else { (Kernel::Traverse, (start - level) % 2) };
+        let step = GpuStep { level, source, destination, args_slot: slot, fixed_count, ..default() };
         push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
         push(kernel, step, Groups::Indirect(slot), &mut steps);
-        (slot, source) = (slot + 1, target);
+        (slot, source) = (slot + 1, destination);
     }
-    let step = GpuStep { source: LIST_GATHERED, target: NO_TARGET, args_slot: slot, ..default() };
+    let step = GpuStep { source: LIST_GATHERED, destination: NO_TARGET, args_slot: slot, ..default() };
     push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
     push(Kernel::Splat, step, Groups::Indirect(slot), &mut steps);
     push(Kernel::Resolve, GpuStep::default(), Groups::Direct(m.div_ceil(8), m.div_ceil(8)), &mut steps);
     (dispatches, steps)
 }
 
+/// What the scratch buffers are sized for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct ScratchSize {
+    photon_resolution: u32,
+    map_resolution: u32,
+    pyramid_nodes: u32,
+    map_texels: u32,
+    views: usize,
+    slots: usize,
+}
+
 /// The buffers and textures every light view uses in turn, sized for the settings.
 pub(super) struct Scratch {
-    settings: CausticMapSettings,
-    views: usize,
+    size: ScratchSize,
     front: (Texture, TextureView),
     back: (Texture, TextureView),
     photon_depth: TextureView,
     map_depth: TextureView,
-    photons: Buffer,
+    photon_uv: Buffer,
+    photon_flux: Buffer,
     pyramid: Buffer,
-    lists: Buffer,
+    lists: [Buffer; 3],
     counters: Buffer,
     args: Buffer,
     levels: Buffer,
+    args_bind_group: Option<BindGroup>,
     bytes: u64,
 }
 
@@ -365,7 +387,6 @@ pub struct CausticMapsGpu {
     views: Vec<ViewMaps>,
     generators: StorageBuffer<Vec<GpuInstance>>,
     occluders: StorageBuffer<Vec<GpuInstance>>,
-    materials: StorageBuffer<Vec<f32>>,
     steps: DynamicUniformBuffer<GpuStep>,
     generator_draws: Vec<MeshDraw>,
     occluder_draws: Vec<MeshDraw>,
@@ -373,16 +394,23 @@ pub struct CausticMapsGpu {
 }
 
 impl CausticMapsGpu {
-    /// The photon buffer of the last light view made (`vec4<f32>` a texel: uv, flux,
-    /// solid angle), copyable.
-    pub fn photons(&self) -> Option<&Buffer> {
-        self.scratch.as_ref().map(|s| &s.photons)
+    /// The photon buffer of the last light view made, in two halves: where each photon
+    /// lands (`vec2<f32>` map coordinates) and its flux and solid angle (`vec2<f32>`);
+    /// copyable.
+    pub fn photons(&self) -> Option<(&Buffer, &Buffer)> {
+        self.scratch.as_ref().map(|s| (&s.photon_uv, &s.photon_flux))
     }
 
     /// The gathered list of the last light view made (`u32` entries, level in the top
-    /// eight bits), after the traversal lists, at word `2 · photons`; copyable.
-    pub fn lists(&self) -> Option<&Buffer> {
-        self.scratch.as_ref().map(|s| &s.lists)
+    /// eight bits; its length is counter 2), copyable.
+    pub fn gathered(&self) -> Option<&Buffer> {
+        self.scratch.as_ref().map(|s| &s.lists[2])
+    }
+
+    /// The photon and map resolutions the maps were made at (the settings', or less
+    /// where this GPU's buffers do not hold them).
+    pub fn resolutions(&self) -> Option<(u32, u32)> {
+        self.scratch.as_ref().map(|s| (s.size.photon_resolution, s.size.map_resolution))
     }
 
     /// Every light view's counters ([`COUNTERS_PER_VIEW`] `u32` each: list lengths, the
@@ -483,9 +511,10 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
                 texture_2d(float),
                 texture_2d(float),
                 texture_2d(float),
-                storage_buffer_read_only::<f32>(false),
-                storage_buffer::<Vec4>(false),
+                storage_buffer::<Vec2>(false),
+                storage_buffer::<Vec2>(false),
                 storage_buffer::<UVec4>(false),
+                storage_buffer::<u32>(false),
                 storage_buffer::<u32>(false),
                 storage_buffer::<u32>(false),
                 storage_buffer::<u32>(false),
@@ -494,11 +523,19 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
             ),
         ),
     );
+    let args_layout = BindGroupLayoutDescriptor::new(
+        "caustic_map_args_layout",
+        &BindGroupLayoutEntries::single(ShaderStages::COMPUTE, storage_buffer::<u32>(false)),
+    );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "caustic_map.wgsl");
-    let compute = KERNELS.map(|(_, entry)| {
+    let compute = KERNELS.map(|(kernel, entry)| {
+        let mut layout = vec![compute_layout.clone()];
+        if kernel == Kernel::WriteArgs {
+            layout.push(args_layout.clone());
+        }
         cache.queue_compute_pipeline(ComputePipelineDescriptor {
             label: Some(format!("caustic_map_{entry}").into()),
-            layout: vec![compute_layout.clone()],
+            layout,
             shader: shader.clone(),
             entry_point: Some(entry.into()),
             ..default()
@@ -522,6 +559,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
     };
     commands.insert_resource(CausticMapPipelines {
         compute_layout,
+        args_layout,
         compute,
         project_layouts: [project_layout(false), project_layout(true)],
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
@@ -580,47 +618,56 @@ fn storage(device: &RenderDevice, label: &'static str, bytes: u64, extra: Buffer
 }
 
 impl Scratch {
-    fn new(device: &RenderDevice, settings: CausticMapSettings, views: usize, pyramid_nodes: u32, map_texels: u32, slots: usize) -> Self {
-        let (p, m) = (settings.photon_resolution, settings.map_resolution);
+    fn new(device: &RenderDevice, size: ScratchSize) -> Self {
+        let (p, m) = (size.photon_resolution, size.map_resolution);
         let photons = p as u64 * p as u64;
-        let depth = |label, size| target_texture(device, label, size, TextureFormat::Depth32Float).1;
+        let depth = |label, side| target_texture(device, label, side, TextureFormat::Depth32Float).1;
         let sizes = [
-            photons * 16,
-            pyramid_nodes as u64 * 16,
-            3 * photons * 4,
-            views as u64 * COUNTERS_PER_VIEW as u64 * 4,
-            slots as u64 * 12,
-            map_texels as u64 * 8,
+            photons * 8,
+            size.pyramid_nodes as u64 * 16,
+            photons * 4,
+            size.views as u64 * COUNTERS_PER_VIEW as u64 * 4,
+            size.slots as u64 * 12,
+            size.map_texels as u64 * 8,
         ];
-        let bytes = sizes.iter().sum::<u64>() + photons * (16 + 16 + 4) + m as u64 * m as u64 * 4;
+        // The buffers, the front and back maps with their depth, and the receiver depth.
+        let bytes = 2 * sizes[0] + sizes[1] + 3 * sizes[2] + sizes[3] + sizes[4] + sizes[5] + photons * (16 + 16 + 4) + m as u64 * m as u64 * 4;
         Self {
-            settings,
-            views,
+            size,
             front: target_texture(device, "caustic_front_map", p, TextureFormat::Rgba32Float),
             back: target_texture(device, "caustic_back_map", p, TextureFormat::Rgba32Float),
             photon_depth: depth("caustic_photon_depth", p),
             map_depth: depth("caustic_receiver_depth", m),
-            photons: storage(device, "caustic_photons", sizes[0], BufferUsages::empty()),
+            photon_uv: storage(device, "caustic_photon_uv", sizes[0], BufferUsages::empty()),
+            photon_flux: storage(device, "caustic_photon_flux", sizes[0], BufferUsages::empty()),
             pyramid: storage(device, "caustic_photon_pyramid", sizes[1], BufferUsages::empty()),
-            lists: storage(device, "caustic_gather_lists", sizes[2], BufferUsages::empty()),
+            lists: ["caustic_traversal_list_0", "caustic_traversal_list_1", "caustic_gathered"]
+                .map(|label| storage(device, label, sizes[2], BufferUsages::empty())),
             counters: storage(device, "caustic_gather_counters", sizes[3], BufferUsages::empty()),
             args: storage(device, "caustic_gather_args", sizes[4], BufferUsages::INDIRECT),
             levels: storage(device, "caustic_map_levels", sizes[5], BufferUsages::empty()),
+            args_bind_group: None,
             bytes,
         }
     }
 }
 
-/// The photon resolution the device's limits allow for `settings` (the photon buffer
-/// and the three lists are the largest bindings), at most the asked one.
-fn fitting_photon_resolution(device: &RenderDevice, settings: &CausticMapSettings) -> u32 {
+/// `settings` with the photon and map resolutions the device's limits allow, at most the
+/// asked ones: the photon buffer's halves (8 bytes a photon) and the map levels (8 bytes
+/// a texel) are the largest bindings.
+fn fitting(device: &RenderDevice, settings: &CausticMapSettings) -> CausticMapSettings {
     let limits = device.limits();
     let largest = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
-    let mut p = settings.photon_resolution;
-    while p > 16 && (p as u64 * p as u64 * 16 > largest || 3 * p as u64 * p as u64 * 4 > largest || p > limits.max_texture_dimension_2d) {
-        p /= 2;
+    let mut fitted = *settings;
+    let side = |r: u32| (r as u64).pow(2);
+    while fitted.photon_resolution > 16 && (side(fitted.photon_resolution) * 8 > largest || fitted.photon_resolution > limits.max_texture_dimension_2d) {
+        fitted.photon_resolution /= 2;
     }
-    p
+    let levels = |s: &CausticMapSettings| (0..=top_level(s)).map(|l| side((s.map_resolution >> l).max(1)) * 8).sum::<u64>();
+    while fitted.map_resolution > 16 && (levels(&fitted) > largest || fitted.map_resolution > limits.max_texture_dimension_2d) {
+        fitted.map_resolution /= 2;
+    }
+    fitted
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -648,16 +695,16 @@ fn prepare_maps(
     let gpu = gpu.as_mut();
     gpu.generation = Some(plan.generation);
     gpu.dirty = true;
-    let fitting = fitting_photon_resolution(&device, &settings);
-    if fitting < settings.photon_resolution {
+    let fitted = fitting(&device, &settings);
+    if fitted != settings {
         if !gpu.warned {
             warn!(
-                "bevy_caustics: {0}² photons do not fit this GPU's buffers; the caustic maps use {fitting}²",
-                settings.photon_resolution
+                "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers; the caustic maps use {}² into {}²",
+                settings.photon_resolution, settings.map_resolution, fitted.photon_resolution, fitted.map_resolution
             );
             gpu.warned = true;
         }
-        settings.photon_resolution = fitting;
+        settings = fitted;
     }
 
     // Instances and their pipelines: a mesh not on the GPU yet makes the maps wait a frame.
@@ -691,22 +738,17 @@ fn prepare_maps(
     }
     let mut generators: Vec<GpuInstance> = plan.generators.iter().enumerate().map(|(k, i)| instance(i, k as u32)).collect();
     let mut occluders: Vec<GpuInstance> = plan.occluders.iter().map(|i| instance(i, 0)).collect();
-    let mut materials: Vec<f32> = plan.generators.iter().map(|i| i.ior).collect();
+    let iors: Vec<f32> = plan.generators.iter().map(|i| i.ior).collect();
     // A binding may not be empty.
     for list in [&mut generators, &mut occluders] {
         if list.is_empty() {
             list.push(GpuInstance::default());
         }
     }
-    if materials.is_empty() {
-        materials.push(0.0);
-    }
     gpu.generators.set(generators);
     gpu.generators.write_buffer(&device, &queue);
     gpu.occluders.set(occluders);
     gpu.occluders.write_buffer(&device, &queue);
-    gpu.materials.set(materials);
-    gpu.materials.write_buffer(&device, &queue);
 
     // Per light view: its uniform and dispatches; scratch sized for all.
     let mut uniforms = Vec::new();
@@ -714,7 +756,7 @@ fn prepare_maps(
     let mut plans = Vec::new();
     let (mut pyramid_nodes, mut map_texels) = (0, 0);
     for (k, planned) in plan.views.iter().enumerate() {
-        let (uniform, nodes, texels) = GpuLightView::new(planned, &settings);
+        let (uniform, nodes, texels) = GpuLightView::new(planned, &settings, &iors);
         (pyramid_nodes, map_texels) = (nodes, texels);
         uniforms.push(uniform);
         let (dispatches, steps) = plan_dispatches(&settings, k as u32 * COUNTERS_PER_VIEW);
@@ -723,15 +765,27 @@ fn prepare_maps(
     }
     gpu.steps.write_buffer(&device, &queue);
     let slots = plans.iter().map(|(d, _)| d.iter().filter(|d| matches!(d.groups, Groups::Indirect(_))).count()).max().unwrap_or(0);
-    let fits = gpu.scratch.as_ref().is_some_and(|s| s.settings == settings && s.views == plan.views.len());
-    if !fits {
-        let scratch = Scratch::new(&device, settings, plan.views.len(), pyramid_nodes, map_texels, slots);
+    let size = ScratchSize {
+        photon_resolution: settings.photon_resolution,
+        map_resolution: settings.map_resolution,
+        pyramid_nodes,
+        map_texels,
+        views: plan.views.len(),
+        slots,
+    };
+    if gpu.scratch.as_ref().is_none_or(|s| s.size != size) {
+        let scratch = Scratch::new(&device, size);
         info!("bevy_caustics: caustic maps hold {:.1} MB of GPU memory", scratch.bytes as f64 / 1e6);
+        let mut scratch = scratch;
+        scratch.args_bind_group = Some(device.create_bind_group(
+            "caustic_map_args_bind_group",
+            &cache.get_bind_group_layout(&pipelines.args_layout),
+            &BindGroupEntries::single(scratch.args.as_entire_binding()),
+        ));
         gpu.scratch = Some(scratch);
         gpu.views.clear();
     }
-    let (Some(generators), Some(occluders), Some(materials), Some(steps)) =
-        (gpu.generators.binding(), gpu.occluders.binding(), gpu.materials.binding(), gpu.steps.binding())
+    let (Some(generators), Some(occluders), Some(steps)) = (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding())
     else {
         return;
     };
@@ -769,12 +823,13 @@ fn prepare_maps(
                 &scratch.front.1,
                 &scratch.back.1,
                 &receivers.1,
-                materials.clone(),
-                scratch.photons.as_entire_binding(),
+                scratch.photon_uv.as_entire_binding(),
+                scratch.photon_flux.as_entire_binding(),
                 scratch.pyramid.as_entire_binding(),
-                scratch.lists.as_entire_binding(),
+                scratch.lists[0].as_entire_binding(),
+                scratch.lists[1].as_entire_binding(),
+                scratch.lists[2].as_entire_binding(),
                 scratch.counters.as_entire_binding(),
-                scratch.args.as_entire_binding(),
                 scratch.levels.as_entire_binding(),
                 resolved.as_entire_binding(),
             )),
@@ -885,6 +940,7 @@ fn make_caustic_maps(
     }
     let compute: Option<Vec<&ComputePipeline>> = pipelines.compute.iter().map(|&id| cache.get_compute_pipeline(id)).collect();
     let (Some(compute), Some(scratch)) = (compute, gpu.scratch.as_ref()) else { return };
+    let Some(args_bind_group) = scratch.args_bind_group.as_ref() else { return };
     let counters_size = COUNTERS_PER_VIEW as u64 * 4;
     let mut complete = true;
     for (k, view) in gpu.views.iter().enumerate() {
@@ -908,6 +964,9 @@ fn make_caustic_maps(
             let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
             pass.set_pipeline(compute[kernel]);
             pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[dispatch.step]]);
+            if dispatch.kernel == Kernel::WriteArgs {
+                pass.set_bind_group(1, args_bind_group, &[]);
+            }
             match dispatch.groups {
                 Groups::Direct(x, y) => pass.dispatch_workgroups(x, y, 1),
                 Groups::Indirect(slot) => pass.dispatch_workgroups_indirect(&scratch.args, slot as u64 * 12),

@@ -48,6 +48,9 @@ struct LightView {
     // caustic map's levels 0..=8 in `levels` (two words a texel).
     pyramid_offsets: array<vec4<u32>, 3>,
     level_offsets: array<vec4<u32>, 3>,
+    // Each generator's index of refraction, 0 for a mirror, four to a vector.
+    materials: array<vec4<f32>, 16>,
+    material_count: u32,
 }
 
 fn pyramid_offset(view: LightView, level: u32) -> u32 {

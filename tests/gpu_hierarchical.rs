@@ -1,0 +1,313 @@
+//! Hierarchical caustic maps on a real adapter (lavapipe in CI) against their CPU twin
+//! in `caustics_core::hierarchical`: the photon buffer the GPU traces, the traversal
+//! (the same photons survive, in the same clusters), the splats and their resolved map,
+//! flat and hierarchical gathers making the same map, the caustics on the floor, the
+//! pass report (an unchanged scene keeps its maps; no generators, no work), and the
+//! stiff cases: total internal reflection, photons leaving the map, photons converging
+//! on a few texels, a refractor filling the light's view, a light inside a generator,
+//! 4096² photons and an empty photon buffer.
+//!
+//! One test function: a process holds one Bevy app with a render device at a time.
+
+#![cfg(feature = "hierarchical-maps")]
+
+mod support;
+
+use bevy::camera::visibility::RenderLayers;
+use bevy::light::GlobalAmbientLight;
+use bevy::prelude::*;
+use bevy::render::RenderApp;
+use bevy_caustics::headless::HeadlessRenderer;
+use bevy_caustics::hierarchical_maps::{CausticMapGather, CausticMapPlan, CausticMapsGpu, HierarchicalMapsSettings};
+use bevy_caustics::reference::{bevy_mesh, core_light};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
+use caustics_core::glam::{Vec2 as V2, Vec3 as V3};
+use caustics_core::hierarchical::hierarchy::{self, GatherEntry, PhotonPyramid};
+use caustics_core::hierarchical::{CausticMap, Photon, PhotonBuffer, PhotonStats, ViewCaustics};
+use caustics_core::mesh::TriMesh;
+use caustics_core::metrics::relative_l2;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::{Generator, Receiver, Scene};
+use std::collections::HashSet;
+use support::{caustic_irradiance, read_buffer, render};
+
+const SIZE: u32 = 96;
+/// The view is `VIEW` metres across, centred on the origin, looking down.
+const VIEW: f32 = 2.0;
+const RESOLUTION: u32 = 256;
+
+/// World point seen at the centre of pixel (x, y): screen right = +x, screen up = −z.
+fn world_at(x: u32, y: u32) -> V3 {
+    let s = VIEW / SIZE as f32;
+    V3::new((x as f32 + 0.5 - SIZE as f32 / 2.0) * s, 0.0, (y as f32 + 0.5 - SIZE as f32 / 2.0) * s)
+}
+
+fn ball() -> TriMesh {
+    TriMesh::uv_sphere(V3::new(0.0, 1.0, 0.0), 0.5, 32, 64)
+}
+
+/// An opaque block that stands in part of the focused light.
+fn block() -> TriMesh {
+    TriMesh::cuboid(V3::new(0.25, 0.0, -0.6), V3::new(0.55, 0.3, 0.6))
+}
+
+fn floor() -> TriMesh {
+    TriMesh::quad(V3::ZERO, V3::Z * 2.0, V3::X * 2.0)
+}
+
+fn spot() -> (SpotLight, Transform) {
+    let light = SpotLight {
+        intensity: 4.0 * std::f32::consts::PI * 100.0,
+        range: 50.0,
+        inner_angle: 0.18,
+        outer_angle: 0.26,
+        shadow_maps_enabled: false,
+        ..default()
+    };
+    (light, Transform::from_xyz(-0.3, 4.0, 0.1).looking_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Y))
+}
+
+/// A floor and a block that receive, a glass ball on render layer 1 (the camera sees the
+/// floor through it), a spot light above and a camera looking straight down.
+fn spawn_scene(renderer: &mut HeadlessRenderer) -> (Entity, Entity) {
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    world.insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, ..HierarchicalMapsSettings::FLAT });
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    let spawn_mesh = |world: &mut World, mesh: &TriMesh| world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(mesh));
+    let floor_mesh = spawn_mesh(world, &floor());
+    world.spawn((Mesh3d(floor_mesh), MeshMaterial3d(white.clone()), CausticReceiver));
+    let block_mesh = spawn_mesh(world, &block());
+    // Seen by the light and the camera, but not a receiver: it blocks caustic light.
+    world.spawn((Mesh3d(block_mesh), MeshMaterial3d(white.clone())));
+    let ball_mesh = spawn_mesh(world, &ball());
+    let glass = CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) };
+    let ball = world.spawn((Mesh3d(ball_mesh), MeshMaterial3d(white), glass, RenderLayers::layer(1))).id();
+    let light = world.spawn(spot()).id();
+    world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
+    (ball, light)
+}
+
+/// The CPU twin's scene: the same meshes, the same light.
+fn cpu_scene(interaction: SpecularInteraction) -> Scene {
+    let (light, transform) = spot();
+    let light = core_light(None, None, Some(&light), &GlobalTransform::from(transform)).unwrap();
+    Scene {
+        lights: vec![light],
+        generators: vec![Generator { mesh: ball(), interaction }],
+        receivers: vec![Receiver { mesh: floor(), albedo: V3::ONE }, Receiver { mesh: block(), albedo: V3::ONE }],
+    }
+}
+
+fn gpu<'a>(renderer: &'a mut HeadlessRenderer) -> &'a CausticMapsGpu {
+    renderer.app.sub_app_mut(RenderApp).world().resource::<CausticMapsGpu>()
+}
+
+fn read_floats(renderer: &mut HeadlessRenderer, buffer: impl Fn(&CausticMapsGpu) -> Option<&bevy::render::render_resource::Buffer>) -> Vec<f32> {
+    let buffer = buffer(gpu(renderer)).expect("the caustic maps are on the GPU").clone();
+    read_buffer(renderer, &buffer).chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect()
+}
+
+fn read_words(renderer: &mut HeadlessRenderer, buffer: impl Fn(&CausticMapsGpu) -> Option<&bevy::render::render_resource::Buffer>) -> Vec<u32> {
+    let buffer = buffer(gpu(renderer)).expect("the caustic maps are on the GPU").clone();
+    read_buffer(renderer, &buffer).chunks_exact(4).map(|b| u32::from_le_bytes(b.try_into().unwrap())).collect()
+}
+
+/// The GPU's photon buffer as the core's.
+fn gpu_photons(renderer: &mut HeadlessRenderer) -> PhotonBuffer {
+    let uv = read_floats(renderer, |g| g.photons().map(|p| p.0));
+    let flux = read_floats(renderer, |g| g.photons().map(|p| p.1));
+    let photons = uv
+        .chunks_exact(2)
+        .zip(flux.chunks_exact(2))
+        .map(|(uv, flux)| Photon { uv: V2::new(uv[0], uv[1]), flux: flux[0], solid_angle: flux[1] })
+        .collect();
+    PhotonBuffer { resolution: RESOLUTION, photons, stats: PhotonStats::default() }
+}
+
+/// The GPU's gathered entries and the nodes it processed per level (view 0).
+fn gpu_gather(renderer: &mut HeadlessRenderer) -> (HashSet<GatherEntry>, Vec<u64>) {
+    let counters = read_words(renderer, CausticMapsGpu::counters);
+    let gathered = read_words(renderer, CausticMapsGpu::gathered);
+    let entries = gathered[..counters[2] as usize].iter().map(|&e| GatherEntry::unpacked(e)).collect();
+    let first = bevy_caustics::hierarchical_maps::PROCESSED_COUNTER as usize;
+    let levels = RESOLUTION.ilog2() as usize + 1;
+    (entries, counters[first..first + levels].iter().map(|&c| c as u64).collect())
+}
+
+fn set_settings(renderer: &mut HeadlessRenderer, settings: HierarchicalMapsSettings) {
+    renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, ..settings });
+}
+
+fn settings(renderer: &mut HeadlessRenderer) -> HierarchicalMapsSettings {
+    *renderer.world_mut().resource::<HierarchicalMapsSettings>()
+}
+
+/// Renders (a GPU validation error stops the renderer, and the frame never comes back)
+/// and checks that every pixel and every caustic map texel is finite.
+fn finite(renderer: &mut HeadlessRenderer, case: &str) {
+    let image = render(renderer, 3);
+    assert!(image.pixels.iter().all(|p| p.is_finite()), "{case}: a pixel is not finite");
+    for view in 0..gpu(renderer).view_count() {
+        let resolved = read_floats(renderer, |g| g.resolved(view));
+        assert!(resolved.iter().all(|c| c.is_finite() && *c >= 0.0), "{case}: caustic map {view} is not finite");
+    }
+}
+
+#[test]
+fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    let (ball, light) = spawn_scene(&mut renderer);
+
+    // A technique no pass draws: no caustic maps, the baseline image.
+    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::IlluminationTextures;
+    let without = render(&mut renderer, 3);
+    let report = renderer.pass_report();
+    assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 0), "{report:?}");
+    assert_eq!(gpu(&mut renderer).view_count(), 0);
+
+    // The maps are made once, then only projected while nothing changes.
+    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::HierarchicalMaps;
+    let made: u32 = (0..4)
+        .map(|_| {
+            renderer.app.update();
+            renderer.pass_report().views("caustic map")
+        })
+        .sum();
+    assert_eq!(made, 1, "the maps are made in one frame");
+    let flat_image = render(&mut renderer, 3);
+    let report = renderer.pass_report();
+    assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 1), "{report:?}");
+    let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
+    assert_eq!(plan.views.len(), 1, "a narrow spot: one light view");
+
+    // The photon buffer against the CPU twin's, traced from ray-cast maps of the same scene.
+    let scene = cpu_scene(SpecularInteraction::Refract { ior: 1.5, dispersion: None });
+    let core = settings(&mut renderer).core();
+    let twin = ViewCaustics::compute(&scene, &scene.lights[0], &plan.views[0].view, &core);
+    let photons = gpu_photons(&mut renderer);
+    let (mut both, mut differ, mut near) = (0, 0, 0);
+    for (g, c) in photons.photons.iter().zip(&twin.photons.photons) {
+        match (g.is_valid(), c.is_valid()) {
+            (true, true) => {
+                both += 1;
+                let texels = (g.uv - c.uv).length() * RESOLUTION as f32;
+                near += (texels < 0.5 && (g.flux / c.flux - 1.0).abs() < 1e-3) as u32;
+            }
+            (false, false) => {}
+            _ => differ += 1,
+        }
+    }
+    eprintln!("photon buffer: {both} photons on both, {differ} on one side only, {near} within half a texel and 0.1 % flux");
+    assert!(both > 5000, "{both} caustic photons");
+    // Rasterisation and ray casting disagree only on texels the ball's outline cuts.
+    assert!(differ < both / 50, "{differ} of {both} photons valid on one side only");
+    assert!(near as f64 > 0.97 * both as f64, "{near} of {both} photons land within half a texel");
+
+    // The same photons make the same gather: the CPU traversal of the GPU's photon
+    // buffer keeps the photons and clusters the GPU kept, after processing the same nodes.
+    let mut maps = Vec::new();
+    for gather in [CausticMapGather::Flat, CausticMapGather::Hierarchical, CausticMapGather::ClusterLastLevel, CausticMapGather::ClusterAllLevels] {
+        for variable_splats in [false, true] {
+            set_settings(&mut renderer, HierarchicalMapsSettings { gather, variable_splats, ..HierarchicalMapsSettings::FLAT });
+            render(&mut renderer, 2);
+            let core = settings(&mut renderer).core();
+            let photons = gpu_photons(&mut renderer);
+            let pyramid = PhotonPyramid::new(&photons, RESOLUTION);
+            let (entries, stats) = hierarchy::gather(&pyramid, core.gather);
+            let (gpu_entries, processed) = gpu_gather(&mut renderer);
+            let cpu_entries: HashSet<GatherEntry> = entries.iter().copied().collect();
+            assert_eq!(gpu_entries.len(), entries.len(), "{gather:?}: {} gathered on the GPU, {} on the CPU", gpu_entries.len(), entries.len());
+            assert_eq!(gpu_entries, cpu_entries, "{gather:?}: the same photons and clusters");
+            assert_eq!(processed, stats.processed, "{gather:?}: nodes processed per level");
+            // The splats of those entries: the CPU's fixed-point map of the GPU's photons.
+            let (map, _) = CausticMap::splat_all(&photons, &pyramid, &entries, core.splats, RESOLUTION);
+            let cpu_map = map.resolve();
+            let gpu_map = read_floats(&mut renderer, |g| g.resolved(0));
+            let error = relative_l2(&gpu_map, &cpu_map);
+            eprintln!("{gather:?}, variable splats {variable_splats}: {} entries ({} clusters), {} nodes processed of {}, map vs CPU relative L2 {error:.1e}",
+                entries.len(), stats.clusters, stats.total_processed(), RESOLUTION * RESOLUTION);
+            assert!(error < 1e-5, "{gather:?}: the GPU's map against the CPU's splats of its photons: {error}");
+            if gather != CausticMapGather::Flat {
+                assert!(stats.total_processed() < (RESOLUTION * RESOLUTION / 2) as u64);
+            }
+            maps.push((gather, variable_splats, gpu_map));
+        }
+    }
+    // Flat and hierarchical gathers hand on the same photons; integer sums do not depend
+    // on the order they arrive in: the same map, bit for bit.
+    let map_of = |g: CausticMapGather, v: bool| &maps.iter().find(|(a, b, _)| *a == g && *b == v).unwrap().2;
+    assert_eq!(map_of(CausticMapGather::Flat, false), map_of(CausticMapGather::Hierarchical, false));
+    assert_eq!(map_of(CausticMapGather::Flat, true), map_of(CausticMapGather::Hierarchical, true));
+
+    // The caustics on the floor against the CPU twin's lookups at each pixel's floor point.
+    set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
+    let image = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let twin = ViewCaustics::compute(&scene, &scene.lights[0], &plan.views[0].view, &settings(&mut renderer).core());
+    let cpu: Vec<f32> = (0..SIZE * SIZE).map(|i| twin.irradiance_at(world_at(i % SIZE, i / SIZE), V3::Y)).collect();
+    // Pixels that see the block's top show no caustics (it is no receiver); the twin's
+    // floor points under it are hidden from the light.
+    let block_top = |i: u32| {
+        let p = world_at(i % SIZE, i / SIZE);
+        (0.25..=0.55).contains(&p.x) && (-0.6..=0.6).contains(&p.z)
+    };
+    let (gpu_floor, cpu_floor): (Vec<f32>, Vec<f32>) = (0..SIZE * SIZE).filter(|&i| !block_top(i)).map(|i| (image[i as usize], cpu[i as usize])).unzip();
+    let error = relative_l2(&gpu_floor, &cpu_floor);
+    let peak = cpu_floor.iter().copied().fold(0.0, f32::max);
+    eprintln!("floor caustics vs CPU twin: relative L2 {error:.2e} (peak {peak:.1} lux)");
+    assert!(peak > 10.0, "the ball focuses the spot: peak {peak}");
+    assert!(error < 0.05, "floor caustics against the CPU twin: relative L2 {error}");
+    let flat = caustic_irradiance(&flat_image, &without);
+    assert!(flat.iter().all(|e| e.is_finite()));
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_hierarchical_ball.png");
+    render(&mut renderer, 1).save_png(&path, 0.2).unwrap();
+
+    // Stiff cases.
+    set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
+    // Total internal reflection inside a diamond standing on its edge.
+    let diamond = TriMesh::cuboid(V3::new(-0.4, -0.4, -0.8), V3::new(0.4, 0.4, 0.8))
+        .transformed(&caustics_core::glam::Affine3A::from_rotation_translation(caustics_core::glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4), V3::Y));
+    let diamond = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&diamond));
+    let ball_mesh = renderer.world_mut().get::<Mesh3d>(ball).unwrap().0.clone();
+    renderer.world_mut().entity_mut(ball).insert((Mesh3d(diamond), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(2.42) }));
+    finite(&mut renderer, "total internal reflection");
+    // Photons thrown away from every receiver by a mirror: they leave the map.
+    let mirror = TriMesh::quad(V3::Y, V3::X * 0.5, V3::new(0.0, 0.6, -1.0).normalize() * 0.5);
+    let mirror = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&mirror));
+    renderer.world_mut().entity_mut(ball).insert((Mesh3d(mirror), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::mirror() }));
+    finite(&mut renderer, "photons leaving the map");
+    // Not one lands: an empty photon buffer, gathered and splatted to nothing.
+    assert!(gpu_photons(&mut renderer).photons.iter().all(|p| !p.is_valid()), "every photon left the map");
+    assert_eq!(gpu_gather(&mut renderer).0.len(), 0);
+    // The ball again, into a 16² caustic map: thousands of photons per texel, clustered at every level.
+    renderer.world_mut().entity_mut(ball).insert((Mesh3d(ball_mesh.clone()), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) }));
+    renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: 16, gather: CausticMapGather::ClusterAllLevels, ..HierarchicalMapsSettings::FULL });
+    finite(&mut renderer, "photons converging on few texels");
+    set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
+    // A refractor filling the whole light view: a wide slab of water under a narrow spot.
+    let slab = TriMesh::cuboid(V3::new(-3.0, 0.8, -3.0), V3::new(3.0, 1.2, 3.0));
+    let slab = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&slab));
+    renderer.world_mut().entity_mut(ball).insert(Mesh3d(slab));
+    finite(&mut renderer, "a refractor filling the view");
+    // The light inside the ball: six cube faces of a point light.
+    renderer.world_mut().entity_mut(ball).insert(Mesh3d(ball_mesh.clone()));
+    renderer.world_mut().entity_mut(light).remove::<SpotLight>().insert((PointLight { intensity: 1000.0, shadow_maps_enabled: false, ..default() }, Transform::from_xyz(0.0, 1.0, 0.0)));
+    finite(&mut renderer, "a light inside the generator");
+    assert_eq!(gpu(&mut renderer).view_count(), 6);
+    // 4096² photons: memory bounded and reported.
+    renderer.world_mut().entity_mut(light).remove::<PointLight>().insert(spot());
+    renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: 4096, map_resolution: 1024, ..HierarchicalMapsSettings::FULL });
+    finite(&mut renderer, "4096² photons");
+    assert_eq!(gpu(&mut renderer).resolutions(), Some((4096, 1024)), "this adapter holds 4096² photons");
+    let bytes = gpu(&mut renderer).bytes();
+    eprintln!("4096² photons into a 1024² map: {:.0} MB of GPU memory", bytes as f64 / 1e6);
+    assert!(bytes < 1_500_000_000, "{bytes} bytes");
+
+    // No generators, no work.
+    renderer.world_mut().entity_mut(ball).remove::<CausticGenerator>();
+    render(&mut renderer, 3);
+    let report = renderer.pass_report();
+    assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 0), "{report:?}");
+}
