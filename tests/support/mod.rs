@@ -1,5 +1,7 @@
 //! What the GPU tests share: a camera looking straight down at a known exposure, and
-//! the caustic irradiance read back from two of its images.
+//! the caustic irradiance read back from two of its images, GPU buffers read back. Each
+//! test uses a part of it.
+#![allow(dead_code)]
 
 use bevy::camera::{Exposure, Hdr, RenderTarget};
 use bevy::core_pipeline::tonemapping::Tonemapping;

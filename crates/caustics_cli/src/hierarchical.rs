@@ -120,6 +120,7 @@ pub fn bench_scene(
             }
         }
         let maps_seconds = clock.elapsed().as_secs_f64();
+        eprintln!("{name:>8} caustic maps {p:>5}²: {} light views ray cast in {maps_seconds:.3} s", traced.len());
         let clock = Instant::now();
         let traced: Vec<Traced> = traced
             .into_iter()
@@ -129,6 +130,7 @@ pub fn bench_scene(
             })
             .collect();
         let tracing_seconds = clock.elapsed().as_secs_f64();
+        eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced in {tracing_seconds:.3} s");
         for variant in &VARIANTS {
             let mut row = StageRow {
                 photons: p,

@@ -22,6 +22,9 @@ pub enum MeshError {
     /// A normal is NaN, infinite or zero.
     #[error("vertex {0} has a normal that is NaN, infinite or zero")]
     BadNormal(usize),
+    /// A line of a Wavefront OBJ text that does not parse.
+    #[error("OBJ line {line}: {reason}")]
+    Obj { line: usize, reason: String },
 }
 
 /// A triangle mesh in one coordinate frame, with unit vertex normals that are
@@ -190,6 +193,47 @@ impl TriMesh {
             center - half_u + half_v,
         ];
         Self { positions, normals: vec![n; 4], triangles: vec![[0, 1, 2], [0, 2, 3]] }
+    }
+
+    /// A mesh from Wavefront OBJ text: its `v` positions and `f` faces (1-based or
+    /// negative indices, `v/vt/vn` forms read for the position; polygons fanned into
+    /// triangles), with smooth normals. Other statements are ignored; a line that does
+    /// not parse is an error naming it.
+    pub fn from_obj(text: &str) -> Result<Self, MeshError> {
+        let mut positions = Vec::new();
+        let mut triangles = Vec::new();
+        let mut face_lines = Vec::new();
+        for (number, line) in text.lines().enumerate() {
+            let err = |reason: String| MeshError::Obj { line: number + 1, reason };
+            let mut words = line.split_whitespace();
+            match words.next() {
+                Some("v") => {
+                    let xyz: Vec<f32> = words.take(3).map(|w| w.parse::<f32>().map_err(|e| err(format!("{w:?}: {e}")))).collect::<Result<_, _>>()?;
+                    let [x, y, z] = xyz[..] else { return Err(err("a vertex needs three coordinates".into())) };
+                    positions.push(Vec3::new(x, y, z));
+                }
+                Some("f") => {
+                    let corners = words
+                        .map(|w| {
+                            let index = w.split('/').next().unwrap_or("");
+                            let i: i64 = index.parse().map_err(|e| err(format!("{w:?}: {e}")))?;
+                            let resolved = if i < 0 { positions.len() as i64 + i } else { i - 1 };
+                            u32::try_from(resolved).map_err(|_| err(format!("vertex index {i} is out of range")))
+                        })
+                        .collect::<Result<Vec<u32>, _>>()?;
+                    if corners.len() < 3 {
+                        return Err(err("a face needs three vertices".into()));
+                    }
+                    triangles.extend((1..corners.len() - 1).map(|k| [corners[0], corners[k], corners[k + 1]]));
+                    face_lines.resize(triangles.len(), number + 1);
+                }
+                _ => {}
+            }
+        }
+        if let Some((t, &i)) = triangles.iter().enumerate().find_map(|(t, tri)| tri.iter().find(|&&i| i as usize >= positions.len()).map(|i| (t, i))) {
+            return Err(MeshError::Obj { line: face_lines[t], reason: format!("vertex {} does not exist ({} vertices)", i + 1, positions.len()) });
+        }
+        Self::with_smooth_normals(positions, triangles)
     }
 
     /// A closed axis-aligned box between the corners `lo` and `hi`, each face wound

@@ -3,7 +3,7 @@
 //! normals: a mesh whose winding disagrees with its normals shows its far side, lit
 //! as if it faced the other way.
 
-use caustics_core::mesh::TriMesh;
+use caustics_core::mesh::{MeshError, TriMesh};
 use glam::Vec3;
 
 /// Every triangle's geometric normal (by winding) points the way of its vertex normals.
@@ -28,6 +28,7 @@ fn built_in_meshes_are_wound_like_their_normals() {
     assert_wound_like_normals("heightfield", &TriMesh::heightfield(9, 2.0, wavy, slope).unwrap());
     assert_wound_like_normals("quad", &TriMesh::quad(Vec3::ONE, Vec3::X, Vec3::Z));
     assert_wound_like_normals("uv_sphere", &TriMesh::uv_sphere(Vec3::ZERO, 0.5, 6, 12));
+    assert_wound_like_normals("cuboid", &TriMesh::cuboid(Vec3::new(-1.0, 0.0, -0.5), Vec3::new(0.5, 2.0, 1.5)));
     for segments in [3, 8, 64] {
         assert_wound_like_normals("ring", &TriMesh::ring(Vec3::ZERO, 1.0, 0.3, segments));
         assert_wound_like_normals("solid_ring", &TriMesh::solid_ring(Vec3::Y, 1.0, 1.05, 0.3, segments));
@@ -62,4 +63,36 @@ fn the_solid_ring_is_closed_with_walls_facing_in_and_out() {
             assert!(n.distance(expected) < 1e-5, "wall normal {n} at {p}");
         }
     }
+}
+
+#[test]
+fn obj_text_reads_into_a_mesh_and_bad_lines_are_named() {
+    let square = "# a unit square\nv 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nvn 0 1 0\nf 1//1 4//1 3//1 2//1\n";
+    let mesh = TriMesh::from_obj(square).unwrap();
+    assert_eq!((mesh.positions().len(), mesh.triangles().len()), (4, 2));
+    assert!(mesh.normals().iter().all(|n| (*n - Vec3::Y).length() < 1e-6), "wound counter-clockwise seen from +y");
+    assert_eq!(TriMesh::from_obj("v 0 0 0\nv 1 0 0\nv 0 0 1\nf -3 -1 -2\n").unwrap().triangles(), &[[0, 2, 1]]);
+    for (bad, line) in [("v 0 0\n", 1), ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", 4), ("v 0 0 0\nf 1 x 2\n", 2), ("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", 0)] {
+        match TriMesh::from_obj(bad) {
+            Err(MeshError::Obj { line: l, .. }) => assert_eq!(l, line, "{bad:?}"),
+            Err(other) => assert_eq!(line, 0, "{bad:?}: {other}"),
+            Ok(_) => panic!("{bad:?} parsed"),
+        }
+    }
+}
+
+#[test]
+fn the_bunny_asset_is_closed_and_wound_outwards() {
+    let bunny = TriMesh::from_obj(include_str!("../../../assets/models/bunny.obj")).unwrap();
+    assert_eq!((bunny.positions().len(), bunny.triangles().len()), (1839, 3674));
+    // Every edge once each way: closed, consistently wound; positive volume: outwards.
+    let mut edges = std::collections::HashMap::new();
+    for t in bunny.triangles() {
+        for k in 0..3 {
+            *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    assert!(edges.iter().all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1)));
+    let volume: f32 = (0..bunny.triangles().len()).map(|t| { let [a, b, c] = bunny.corners(t); a.dot(b.cross(c)) / 6.0 }).sum();
+    assert!(volume > 0.0);
 }

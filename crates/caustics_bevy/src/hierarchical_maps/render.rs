@@ -12,6 +12,7 @@ use bevy::mesh::{MeshVertexBufferLayoutRef, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    diagnostic::RecordDiagnostics,
     mesh::{RenderMesh, RenderMeshBufferInfo, allocator::MeshAllocator},
     render_asset::RenderAssets,
     render_resource::{
@@ -272,6 +273,20 @@ const KERNELS: [(Kernel, &str); 7] = [
     (Kernel::Splat, "splat"),
     (Kernel::Resolve, "resolve"),
 ];
+
+impl Kernel {
+    /// The stage of the paper's Table 3 the kernel belongs to: the name its GPU time
+    /// span is recorded under (Bevy's `RenderDiagnosticsPlugin`).
+    fn stage(self) -> &'static str {
+        match self {
+            Kernel::TracePhotons => "caustic_maps/photon_buffer",
+            Kernel::BuildPyramid => "caustic_maps/pyramid",
+            Kernel::WriteArgs | Kernel::Traverse | Kernel::GatherPhotons => "caustic_maps/gather",
+            Kernel::Splat => "caustic_maps/splat",
+            Kernel::Resolve => "caustic_maps/resolve",
+        }
+    }
+}
 
 /// How many workgroups a dispatch runs.
 #[derive(Clone, Copy, Debug)]
@@ -943,8 +958,11 @@ fn make_caustic_maps(
     let Some(args_bind_group) = scratch.args_bind_group.as_ref() else { return };
     let counters_size = COUNTERS_PER_VIEW as u64 * 4;
     let mut complete = true;
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     for (k, view) in gpu.views.iter().enumerate() {
         let encoder = ctx.command_encoder();
+        let span = diagnostics.time_span(encoder, "caustic_maps/light_maps");
         {
             let mut pass = light_map_pass(encoder, "caustic_front_map", &scratch.front.1, &scratch.photon_depth, 1.0);
             complete &= draw_meshes(&mut pass, &gpu.generator_draws, 0, &view.generator_bind_group, &cache, &meshes, &allocator);
@@ -957,22 +975,27 @@ fn make_caustic_maps(
             let mut pass = light_map_pass(encoder, "caustic_receiver_map", &view.receivers.1, &scratch.map_depth, 1.0);
             complete &= draw_meshes(&mut pass, &gpu.occluder_draws, 0, &view.occluder_bind_group, &cache, &meshes, &allocator);
         }
+        span.end(encoder);
         encoder.clear_buffer(&scratch.counters, k as u64 * counters_size, Some(counters_size));
         encoder.clear_buffer(&scratch.levels, 0, None);
-        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_map"), ..default() });
-        for dispatch in &view.dispatches {
-            let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
-            pass.set_pipeline(compute[kernel]);
-            pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[dispatch.step]]);
-            if dispatch.kernel == Kernel::WriteArgs {
-                pass.set_bind_group(1, args_bind_group, &[]);
+        // One compute pass per stage, each timed.
+        for stage in view.dispatches.chunk_by(|a, b| a.kernel.stage() == b.kernel.stage()) {
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(stage[0].kernel.stage()), ..default() });
+            let span = diagnostics.pass_span(&mut pass, stage[0].kernel.stage());
+            for dispatch in stage {
+                let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
+                pass.set_pipeline(compute[kernel]);
+                pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[dispatch.step]]);
+                if dispatch.kernel == Kernel::WriteArgs {
+                    pass.set_bind_group(1, args_bind_group, &[]);
+                }
+                match dispatch.groups {
+                    Groups::Direct(x, y) => pass.dispatch_workgroups(x, y, 1),
+                    Groups::Indirect(slot) => pass.dispatch_workgroups_indirect(&scratch.args, slot as u64 * 12),
+                }
             }
-            match dispatch.groups {
-                Groups::Direct(x, y) => pass.dispatch_workgroups(x, y, 1),
-                Groups::Indirect(slot) => pass.dispatch_workgroups_indirect(&scratch.args, slot as u64 * 12),
-            }
+            span.end(&mut pass);
         }
-        drop(pass);
         recorder.record("caustic map");
     }
     // A pipeline still compiling or a mesh not yet uploaded: make them again next frame.
