@@ -267,12 +267,21 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     // Stiff cases.
     set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
     // Total internal reflection inside a diamond standing on its edge.
-    let diamond = TriMesh::cuboid(V3::new(-0.4, -0.4, -0.8), V3::new(0.4, 0.4, 0.8))
+    let diamond_mesh = TriMesh::cuboid(V3::new(-0.4, -0.4, -0.8), V3::new(0.4, 0.4, 0.8))
         .transformed(&caustics_core::glam::Affine3A::from_rotation_translation(caustics_core::glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4), V3::Y));
-    let diamond = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&diamond));
+    let diamond = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&diamond_mesh));
     let ball_mesh = renderer.world_mut().get::<Mesh3d>(ball).unwrap().0.clone();
     renderer.world_mut().entity_mut(ball).insert((Mesh3d(diamond), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(2.42) }));
     finite(&mut renderer, "total internal reflection");
+    // The twin sees total internal reflection there, and the GPU drops the same photons.
+    let mut scene = cpu_scene(SpecularInteraction::Refract { ior: 2.42, dispersion: None });
+    scene.generators[0].mesh = diamond_mesh;
+    let view = renderer.world_mut().resource::<CausticMapPlan>().views[0].view;
+    let twin = ViewCaustics::compute(&scene, &scene.lights[0], &view, &settings(&mut renderer).core());
+    let gpu_caustic = gpu_photons(&mut renderer).photons.iter().filter(|p| p.is_valid()).count() as f64;
+    eprintln!("diamond: {} photons totally internally reflected on the CPU, {} caustic there, {gpu_caustic} on the GPU", twin.photons.stats.total_internal_reflection, twin.photons.stats.caustic);
+    assert!(twin.photons.stats.total_internal_reflection > 100, "{:?}", twin.photons.stats);
+    assert!((gpu_caustic / twin.photons.stats.caustic as f64 - 1.0).abs() < 0.02);
     // Photons thrown away from every receiver by a mirror: they leave the map.
     let mirror = TriMesh::quad(V3::Y, V3::X * 0.5, V3::new(0.0, 0.6, -1.0).normalize() * 0.5);
     let mirror = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&mirror));

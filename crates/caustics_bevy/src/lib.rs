@@ -38,6 +38,14 @@ pub use report::CausticPassReport;
 
 use bevy::prelude::*;
 
+/// Where the plugin's main-world systems run.
+#[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum CausticsSystems {
+    /// In `PostUpdate`: systems that read the placed scene — after transforms are
+    /// propagated, bounds computed, visibility inherited and parameters validated.
+    ReadScene,
+}
+
 /// Adds caustics to every 3D camera's view. Passes run only for views and scenes that
 /// need them: a scene without generators (and without injected irradiance) does no
 /// caustics work at all — see [`CausticPassReport`].
@@ -51,7 +59,15 @@ impl Plugin for CausticsPlugin {
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
             .add_systems(Update, gltf_tagging::tag_from_materials)
-            .add_systems(PostUpdate, components::validate_caustic_params);
+            .add_systems(PostUpdate, components::validate_caustic_params)
+            .configure_sets(
+                PostUpdate,
+                CausticsSystems::ReadScene
+                    .after(bevy::transform::TransformSystems::Propagate)
+                    .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
+                    .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate)
+                    .after(components::validate_caustic_params),
+            );
         report::build(app);
         irradiance::build(app);
         #[cfg(feature = "warped-volumes")]

@@ -29,6 +29,18 @@ pub fn to_core(v: Vec3) -> glam::Vec3 {
     glam::Vec3::from_array(v.to_array())
 }
 
+/// What the techniques read of a light: its kind, placement and visibility.
+pub type LightComponents = (
+    Option<&'static DirectionalLight>,
+    Option<&'static PointLight>,
+    Option<&'static SpotLight>,
+    &'static GlobalTransform,
+    &'static InheritedVisibility,
+);
+
+/// Any of Bevy's lights.
+pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
+
 /// A Bevy light placed by `transform` as the core crate's light. Bevy's point and spot
 /// intensities are luminous power (lm); the core wants intensity per steradian, Φ/4π
 /// (Bevy's own convention, spots included).

@@ -374,24 +374,7 @@ impl SpecializedRenderPipeline for ConvolutionPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        let shader_defs = if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
-        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
-        RenderPipelineDescriptor {
-            label: Some("pool_project_pipeline".into()),
-            layout: vec![self.project_layouts[multisampled as usize].clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.project_shader.clone(),
-                shader_defs,
-                entry_point: Some("project".into()),
-                targets: vec![Some(ColorTargetState {
-                    format: crate::CAUSTIC_IRRADIANCE_FORMAT,
-                    blend: Some(BlendState { color: additive, alpha: additive }),
-                    write_mask: ColorWrites::ALL,
-                })],
-            }),
-            ..default()
-        }
+        crate::irradiance::projection_pipeline("pool_project_pipeline", &self.project_layouts, &self.project_shader, &self.fullscreen, multisampled)
     }
 }
 
@@ -469,16 +452,7 @@ fn project_floor_irradiance(
     if bind_groups.is_empty() {
         return;
     }
-    let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
-        label: Some("pool_floor"),
-        color_attachments: &[Some(RenderPassColorAttachment {
-            view: &buffer.texture.default_view,
-            depth_slice: None,
-            resolve_target: None,
-            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
-        })],
-        ..default()
-    });
+    let mut pass = buffer.accumulate(ctx.command_encoder(), "pool_floor");
     pass.set_pipeline(render_pipeline);
     for bind_group in &bind_groups {
         pass.set_bind_group(0, bind_group, &[offset.offset]);

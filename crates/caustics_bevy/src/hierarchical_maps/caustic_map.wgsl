@@ -17,7 +17,7 @@
     LightView, NO_SURFACE, EMPTY, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
     SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
     map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, texel_of, reflect_about,
-    refract_through, fresnel_transmittance, oct_decode,
+    refract_through, fresnel_transmittance, oct_decode, bilinear_taps, bilinear_mix,
 }
 
 // One step of the traversal (`GpuStep` in `render.rs`).
@@ -420,6 +420,20 @@ fn thread_index(workgroup: vec3<u32>, groups: vec3<u32>, local: u32) -> u32 {
     return (workgroup.y * groups.x + workgroup.x) * WORKGROUP + local;
 }
 
+const NO_NODE: u32 = 0xffffffffu;
+
+// The node thread `t` of a step handles: entry `t` of the step's list, or node `t`
+// itself; `NO_NODE` past the list's end.
+fn source_node(t: u32) -> u32 {
+    if t >= list_length(step.source) {
+        return NO_NODE;
+    }
+    if step.source == ALL_NODES {
+        return t;
+    }
+    return list_entry(step.source, t);
+}
+
 fn gather(entry: u32) {
     let i = atomicAdd(&counters[step.counter_base + 2u], 1u);
     gathered[i] = entry;
@@ -431,13 +445,9 @@ fn traverse(
     @builtin(num_workgroups) groups: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
-    let t = thread_index(workgroup, groups, local);
-    if t >= list_length(step.source) {
+    let index = source_node(thread_index(workgroup, groups, local));
+    if index == NO_NODE {
         return;
-    }
-    var index = t;
-    if step.source != ALL_NODES {
-        index = list_entry(step.source, t);
     }
     let node = pyramid_node(step.level, index);
     if node.texel == EMPTY {
@@ -466,13 +476,9 @@ fn gather_photons(
     @builtin(num_workgroups) groups: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
-    let t = thread_index(workgroup, groups, local);
-    if t >= list_length(step.source) {
+    let index = source_node(thread_index(workgroup, groups, local));
+    if index == NO_NODE {
         return;
-    }
-    var index = t;
-    if step.source != ALL_NODES {
-        index = list_entry(step.source, t);
     }
     if photon_flux[index].x > 0.0 {
         gather(index);
@@ -616,23 +622,14 @@ fn level_texel(level: u32, width: u32, x: u32, y: u32) -> f32 {
 }
 
 // `caustic_map::bilinear` of one level.
-fn level_bilinear(level: u32, q_in: vec2<f32>) -> f32 {
+fn level_bilinear(level: u32, q: vec2<f32>) -> f32 {
     let width = max(view.map_resolution >> level, 1u);
-    let last = f32(width - 1u);
-    let q = clamp(q_in, vec2(0.0), vec2(last));
-    let base = floor(q);
-    let f = q - base;
-    let x0 = u32(base.x);
-    let y0 = u32(base.y);
-    let x1 = min(x0 + 1u, width - 1u);
-    let y1 = min(y0 + 1u, width - 1u);
-    let a = level_texel(level, width, x0, y0);
-    let b = level_texel(level, width, x1, y0);
-    let c = level_texel(level, width, x0, y1);
-    let d = level_texel(level, width, x1, y1);
-    let top = a + (b - a) * f.x;
-    let bottom = c + (d - c) * f.x;
-    return top + (bottom - top) * f.y;
+    let b = bilinear_taps(q, width);
+    let a = level_texel(level, width, b.low.x, b.low.y);
+    let c = level_texel(level, width, b.high.x, b.low.y);
+    let d = level_texel(level, width, b.low.x, b.high.y);
+    let e = level_texel(level, width, b.high.x, b.high.y);
+    return bilinear_mix(b, a, c, d, e);
 }
 
 // `CausticMap::resolve`: C = Σᵢ Cᵢ / 4ⁱ (eq. 3).

@@ -32,6 +32,7 @@
 //! refractors one behind the other from a light are not followed in turn; photons that
 //! are totally internally reflected are dropped and counted.
 
+mod pass;
 mod plan;
 mod render;
 

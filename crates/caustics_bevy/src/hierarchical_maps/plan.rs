@@ -5,13 +5,11 @@
 use super::HierarchicalMapsSettings;
 use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{core_light, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, core_light, to_core, world_aabb};
 use bevy::camera::primitives::Aabb;
-use bevy::camera::visibility::VisibilitySystems;
 use bevy::light::NotShadowCaster;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
-use bevy::transform::TransformSystems;
 use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
 use caustics_core::params::SpecularInteraction;
 
@@ -47,24 +45,9 @@ pub struct CausticMapPlan {
 }
 
 pub(super) fn build(app: &mut App) {
-    app.init_resource::<CausticMapPlan>().add_systems(
-        PostUpdate,
-        plan_caustic_maps
-            .after(TransformSystems::Propagate)
-            .after(VisibilitySystems::CalculateBounds)
-            .after(VisibilitySystems::VisibilityPropagate)
-            .after(crate::components::validate_caustic_params),
-    );
+    app.init_resource::<CausticMapPlan>().add_systems(PostUpdate, plan_caustic_maps.in_set(crate::CausticsSystems::ReadScene));
 }
 
-type LightComponents = (
-    Option<&'static DirectionalLight>,
-    Option<&'static PointLight>,
-    Option<&'static SpotLight>,
-    &'static GlobalTransform,
-    &'static InheritedVisibility,
-);
-type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 type MeshComponents = (&'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static Aabb>);
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the

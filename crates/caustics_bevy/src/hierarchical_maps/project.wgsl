@@ -8,7 +8,8 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::receiver::world_at
 #import bevy_caustics::caustic_maps::{
-    LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian,
+    LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, bilinear_taps,
+    bilinear_mix,
 }
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -54,17 +55,8 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     // `caustic_map::bilinear` of the resolved map.
-    let last = f32(m - 1u);
-    let q = clamp(uv.xy * f32(m) - 0.5, vec2(0.0), vec2(last));
-    let base = floor(q);
-    let f = q - base;
-    let x0 = u32(base.x);
-    let y0 = u32(base.y);
-    let x1 = min(x0 + 1u, m - 1u);
-    let y1 = min(y0 + 1u, m - 1u);
-    let top = resolved_at(x0, y0) + (resolved_at(x1, y0) - resolved_at(x0, y0)) * f.x;
-    let bottom = resolved_at(x0, y1) + (resolved_at(x1, y1) - resolved_at(x0, y1)) * f.x;
-    let c = top + (bottom - top) * f.y;
+    let b = bilinear_taps(uv.xy * f32(m) - 0.5, m);
+    let c = bilinear_mix(b, resolved_at(b.low.x, b.low.y), resolved_at(b.high.x, b.low.y), resolved_at(b.low.x, b.high.y), resolved_at(b.high.x, b.high.y));
     let ratio = f32(m) / f32(light.photon_resolution);
     let e = c * ratio * ratio * receiver_jacobian(light, p, n);
     return vec4(light.color.rgb * (e * view.exposure), 0.0);

@@ -1,10 +1,8 @@
-//! Render world: extraction of the plan, the GPU buffers and pipelines, the passes that
-//! make each light view's caustic map, and its projection into every view.
+//! Render world: extraction of the plan, and the GPU buffers, pipelines and bind groups
+//! the passes (`pass.rs`) draw with.
 
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
-use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
-use crate::report::PassRecorder;
-use bevy::core_pipeline::prepass::ViewPrepassTextures;
+use crate::irradiance::ViewCausticWork;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::material::specialize::SpecializedMeshPipelineError;
@@ -12,8 +10,7 @@ use bevy::mesh::{MeshVertexBufferLayoutRef, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
-    diagnostic::RecordDiagnostics,
-    mesh::{RenderMesh, RenderMeshBufferInfo, allocator::MeshAllocator},
+    mesh::RenderMesh,
     render_asset::RenderAssets,
     render_resource::{
         binding_types::{
@@ -22,11 +19,10 @@ use bevy::render::{
         },
         *,
     },
-    renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue, ViewQuery},
-    view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
+    renderer::{RenderDevice, RenderGraph, RenderQueue},
+    view::{Msaa, ViewUniform},
 };
 use caustics_core::hierarchical::hierarchy::start_level;
-use caustics_core::hierarchical::light_maps::NO_SURFACE;
 use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Projection, Splats};
 
 /// `LightView` in `types.wgsl`.
@@ -243,18 +239,18 @@ impl SpecializedMeshPipeline for LightMapPipeline {
 /// The compute pipelines, in `caustic_map.wgsl`'s order, and the projection's.
 #[derive(Resource)]
 pub(super) struct CausticMapPipelines {
-    compute_layout: BindGroupLayoutDescriptor,
+    pub(super) compute_layout: BindGroupLayoutDescriptor,
     /// The indirect arguments, bound for `write_args` alone.
-    args_layout: BindGroupLayoutDescriptor,
-    compute: [CachedComputePipelineId; 7],
-    project_layouts: [BindGroupLayoutDescriptor; 2],
-    project_shader: Handle<Shader>,
-    fullscreen: FullscreenShader,
+    pub(super) args_layout: BindGroupLayoutDescriptor,
+    pub(super) compute: [CachedComputePipelineId; 7],
+    pub(super) project_layouts: [BindGroupLayoutDescriptor; 2],
+    pub(super) project_shader: Handle<Shader>,
+    pub(super) fullscreen: FullscreenShader,
 }
 
 /// The compute entry points, indices into [`CausticMapPipelines::compute`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Kernel {
+pub(super) enum Kernel {
     TracePhotons,
     BuildPyramid,
     WriteArgs,
@@ -264,7 +260,7 @@ enum Kernel {
     Resolve,
 }
 
-const KERNELS: [(Kernel, &str); 7] = [
+pub(super) const KERNELS: [(Kernel, &str); 7] = [
     (Kernel::TracePhotons, "trace_photons"),
     (Kernel::BuildPyramid, "build_pyramid"),
     (Kernel::WriteArgs, "write_args"),
@@ -277,7 +273,7 @@ const KERNELS: [(Kernel, &str); 7] = [
 impl Kernel {
     /// The stage of the paper's Table 3 the kernel belongs to: the name its GPU time
     /// span is recorded under (Bevy's `RenderDiagnosticsPlugin`).
-    fn stage(self) -> &'static str {
+    pub(super) fn stage(self) -> &'static str {
         match self {
             Kernel::TracePhotons => "caustic_maps/photon_buffer",
             Kernel::BuildPyramid => "caustic_maps/pyramid",
@@ -290,7 +286,7 @@ impl Kernel {
 
 /// How many workgroups a dispatch runs.
 #[derive(Clone, Copy, Debug)]
-enum Groups {
+pub(super) enum Groups {
     Direct(u32, u32),
     /// Three words of the args buffer, written by the `write_args` before it.
     Indirect(u32),
@@ -298,10 +294,10 @@ enum Groups {
 
 /// One dispatch of a light view's compute passes.
 #[derive(Clone, Copy, Debug)]
-struct Dispatch {
-    kernel: Kernel,
-    step: usize,
-    groups: Groups,
+pub(super) struct Dispatch {
+    pub(super) kernel: Kernel,
+    pub(super) step: usize,
+    pub(super) groups: Groups,
 }
 
 /// The dispatches of one light view and the steps they read, in order: the photon
@@ -343,68 +339,68 @@ fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dis
 
 /// What the scratch buffers are sized for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct ScratchSize {
-    photon_resolution: u32,
-    map_resolution: u32,
-    pyramid_nodes: u32,
-    map_texels: u32,
-    views: usize,
-    slots: usize,
+pub(super) struct ScratchSize {
+    pub(super) photon_resolution: u32,
+    pub(super) map_resolution: u32,
+    pub(super) pyramid_nodes: u32,
+    pub(super) map_texels: u32,
+    pub(super) views: usize,
+    pub(super) slots: usize,
 }
 
 /// The buffers and textures every light view uses in turn, sized for the settings.
 pub(super) struct Scratch {
-    size: ScratchSize,
-    front: (Texture, TextureView),
-    back: (Texture, TextureView),
-    photon_depth: TextureView,
-    map_depth: TextureView,
-    photon_uv: Buffer,
-    photon_flux: Buffer,
-    pyramid: Buffer,
-    lists: [Buffer; 3],
-    counters: Buffer,
-    args: Buffer,
-    levels: Buffer,
-    args_bind_group: Option<BindGroup>,
-    bytes: u64,
+    pub(super) size: ScratchSize,
+    pub(super) front: (Texture, TextureView),
+    pub(super) back: (Texture, TextureView),
+    pub(super) photon_depth: TextureView,
+    pub(super) map_depth: TextureView,
+    pub(super) photon_uv: Buffer,
+    pub(super) photon_flux: Buffer,
+    pub(super) pyramid: Buffer,
+    pub(super) lists: [Buffer; 3],
+    pub(super) counters: Buffer,
+    pub(super) args: Buffer,
+    pub(super) levels: Buffer,
+    pub(super) args_bind_group: Option<BindGroup>,
+    pub(super) bytes: u64,
 }
 
 /// One light view's own GPU data: its uniform, receiver map, resolved caustic map and
 /// bind groups, and the passes that make them.
 pub(super) struct ViewMaps {
-    uniform: UniformBuffer<GpuLightView>,
-    receivers: (Texture, TextureView),
-    resolved: Buffer,
-    generator_bind_group: BindGroup,
-    occluder_bind_group: BindGroup,
-    compute_bind_group: BindGroup,
-    dispatches: Vec<Dispatch>,
-    step_offsets: Vec<u32>,
+    pub(super) uniform: UniformBuffer<GpuLightView>,
+    pub(super) receivers: (Texture, TextureView),
+    pub(super) resolved: Buffer,
+    pub(super) generator_bind_group: BindGroup,
+    pub(super) occluder_bind_group: BindGroup,
+    pub(super) compute_bind_group: BindGroup,
+    pub(super) dispatches: Vec<Dispatch>,
+    pub(super) step_offsets: Vec<u32>,
 }
 
 /// A mesh instance to draw into the light maps, with its pipelines.
-struct MeshDraw {
-    instance: u32,
-    mesh: AssetId<Mesh>,
+pub(super) struct MeshDraw {
+    pub(super) instance: u32,
+    pub(super) mesh: AssetId<Mesh>,
     /// Front and back (generators) or receivers (occluders).
-    pipelines: [CachedRenderPipelineId; 2],
+    pub(super) pipelines: [CachedRenderPipelineId; 2],
 }
 
 /// Render world: the caustic maps on the GPU.
 #[derive(Resource, Default)]
 pub struct CausticMapsGpu {
     /// The plan generation the maps were made for.
-    generation: Option<u64>,
+    pub(super) generation: Option<u64>,
     /// The maps must be (re)made this frame.
-    dirty: bool,
-    scratch: Option<Scratch>,
-    views: Vec<ViewMaps>,
+    pub(super) dirty: bool,
+    pub(super) scratch: Option<Scratch>,
+    pub(super) views: Vec<ViewMaps>,
     generators: StorageBuffer<Vec<GpuInstance>>,
     occluders: StorageBuffer<Vec<GpuInstance>>,
     steps: DynamicUniformBuffer<GpuStep>,
-    generator_draws: Vec<MeshDraw>,
-    occluder_draws: Vec<MeshDraw>,
+    pub(super) generator_draws: Vec<MeshDraw>,
+    pub(super) occluder_draws: Vec<MeshDraw>,
     warned: bool,
 }
 
@@ -465,8 +461,8 @@ impl CausticMapsGpu {
 /// Render world: a view's projection pipeline (single-sampled or multisampled prepass).
 #[derive(Component)]
 pub(super) struct ViewCausticMapPipeline {
-    pipeline: CachedRenderPipelineId,
-    multisampled: bool,
+    pub(super) pipeline: CachedRenderPipelineId,
+    pub(super) multisampled: bool,
 }
 
 pub(super) fn build(app: &mut App) {
@@ -487,10 +483,10 @@ pub(super) fn build(app: &mut App) {
                 prepare_view_pipelines.in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, make_caustic_maps.before(camera_driver))
+        .add_systems(RenderGraph, super::pass::make_caustic_maps.before(camera_driver))
         .add_systems(
             Core3d,
-            project_caustic_maps
+            super::pass::project_caustic_maps
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),
@@ -587,24 +583,7 @@ impl SpecializedRenderPipeline for CausticMapPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        let shader_defs = if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
-        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
-        RenderPipelineDescriptor {
-            label: Some("caustic_map_project_pipeline".into()),
-            layout: vec![self.project_layouts[multisampled as usize].clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.project_shader.clone(),
-                shader_defs,
-                entry_point: Some("project".into()),
-                targets: vec![Some(ColorTargetState {
-                    format: crate::CAUSTIC_IRRADIANCE_FORMAT,
-                    blend: Some(BlendState { color: additive, alpha: additive }),
-                    write_mask: ColorWrites::ALL,
-                })],
-            }),
-            ..default()
-        }
+        crate::irradiance::projection_pipeline("caustic_map_project_pipeline", &self.project_layouts, &self.project_shader, &self.fullscreen, multisampled)
     }
 }
 
@@ -884,172 +863,4 @@ fn prepare_view_pipelines(
         let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
         commands.entity(entity).insert(ViewCausticMapPipeline { pipeline, multisampled });
     }
-}
-
-/// Draws `draws` (pipeline `which` of each) with the light map bind group.
-fn draw_meshes(
-    pass: &mut wgpu::RenderPass,
-    draws: &[MeshDraw],
-    which: usize,
-    bind_group: &BindGroup,
-    cache: &PipelineCache,
-    meshes: &RenderAssets<RenderMesh>,
-    allocator: &MeshAllocator,
-) -> bool {
-    pass.set_bind_group(0, bind_group, &[]);
-    for draw in draws {
-        let (Some(pipeline), Some(mesh), Some(vertices)) =
-            (cache.get_render_pipeline(draw.pipelines[which]), meshes.get(draw.mesh), allocator.mesh_vertex_slice(&draw.mesh))
-        else {
-            return false;
-        };
-        pass.set_pipeline(pipeline);
-        pass.set_vertex_buffer(0, *vertices.buffer.slice(..));
-        let instances = draw.instance..draw.instance + 1;
-        match &mesh.buffer_info {
-            RenderMeshBufferInfo::Indexed { index_format, count } => {
-                let Some(indices) = allocator.mesh_index_slice(&draw.mesh) else { return false };
-                pass.set_index_buffer(*indices.buffer.slice(..), *index_format);
-                pass.draw_indexed(indices.range.start..indices.range.start + count, vertices.range.start as i32, instances);
-            }
-            RenderMeshBufferInfo::NonIndexed => pass.draw(vertices.range.clone(), instances),
-        }
-    }
-    true
-}
-
-/// A light map's render pass: the target cleared to "no surface", depth to `depth_clear`.
-fn light_map_pass<'a>(
-    encoder: &'a mut CommandEncoder,
-    label: &'static str,
-    target: &TextureView,
-    depth: &TextureView,
-    depth_clear: f32,
-) -> wgpu::RenderPass<'a> {
-    let clear = LoadOp::Clear(wgpu::Color { r: NO_SURFACE as f64, g: 0.0, b: 0.0, a: 0.0 });
-    encoder.begin_render_pass(&RenderPassDescriptor {
-        label: Some(label),
-        color_attachments: &[Some(RenderPassColorAttachment { view: target, depth_slice: None, resolve_target: None, ops: Operations { load: clear, store: StoreOp::Store } })],
-        depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
-            view: depth,
-            depth_ops: Some(Operations { load: LoadOp::Clear(depth_clear), store: StoreOp::Discard }),
-            stencil_ops: None,
-        }),
-        ..default()
-    })
-}
-
-/// Once per frame in which the plan changed: every light view's light maps, photon
-/// buffer, gather, splats and resolved map.
-fn make_caustic_maps(
-    mut ctx: RenderContext,
-    mut gpu: ResMut<CausticMapsGpu>,
-    pipelines: Res<CausticMapPipelines>,
-    cache: Res<PipelineCache>,
-    meshes: Res<RenderAssets<RenderMesh>>,
-    allocator: Res<MeshAllocator>,
-    recorder: Res<PassRecorder>,
-) {
-    if !gpu.dirty || gpu.views.is_empty() {
-        return;
-    }
-    let compute: Option<Vec<&ComputePipeline>> = pipelines.compute.iter().map(|&id| cache.get_compute_pipeline(id)).collect();
-    let (Some(compute), Some(scratch)) = (compute, gpu.scratch.as_ref()) else { return };
-    let Some(args_bind_group) = scratch.args_bind_group.as_ref() else { return };
-    let counters_size = COUNTERS_PER_VIEW as u64 * 4;
-    let mut complete = true;
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    for (k, view) in gpu.views.iter().enumerate() {
-        let encoder = ctx.command_encoder();
-        let span = diagnostics.time_span(encoder, "caustic_maps/light_maps");
-        {
-            let mut pass = light_map_pass(encoder, "caustic_front_map", &scratch.front.1, &scratch.photon_depth, 1.0);
-            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 0, &view.generator_bind_group, &cache, &meshes, &allocator);
-        }
-        {
-            let mut pass = light_map_pass(encoder, "caustic_back_map", &scratch.back.1, &scratch.photon_depth, 0.0);
-            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 1, &view.generator_bind_group, &cache, &meshes, &allocator);
-        }
-        {
-            let mut pass = light_map_pass(encoder, "caustic_receiver_map", &view.receivers.1, &scratch.map_depth, 1.0);
-            complete &= draw_meshes(&mut pass, &gpu.occluder_draws, 0, &view.occluder_bind_group, &cache, &meshes, &allocator);
-        }
-        span.end(encoder);
-        encoder.clear_buffer(&scratch.counters, k as u64 * counters_size, Some(counters_size));
-        encoder.clear_buffer(&scratch.levels, 0, None);
-        // One compute pass per stage, each timed.
-        for stage in view.dispatches.chunk_by(|a, b| a.kernel.stage() == b.kernel.stage()) {
-            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(stage[0].kernel.stage()), ..default() });
-            let span = diagnostics.pass_span(&mut pass, stage[0].kernel.stage());
-            for dispatch in stage {
-                let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
-                pass.set_pipeline(compute[kernel]);
-                pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[dispatch.step]]);
-                if dispatch.kernel == Kernel::WriteArgs {
-                    pass.set_bind_group(1, args_bind_group, &[]);
-                }
-                match dispatch.groups {
-                    Groups::Direct(x, y) => pass.dispatch_workgroups(x, y, 1),
-                    Groups::Indirect(slot) => pass.dispatch_workgroups_indirect(&scratch.args, slot as u64 * 12),
-                }
-            }
-            span.end(&mut pass);
-        }
-        recorder.record("caustic map");
-    }
-    // A pipeline still compiling or a mesh not yet uploaded: make them again next frame.
-    gpu.dirty = !complete;
-}
-
-/// Adds every light view's caustic irradiance where the view sees its receivers.
-fn project_caustic_maps(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewCausticMapPipeline)>,
-    gpu: Res<CausticMapsGpu>,
-    pipelines: Res<CausticMapPipelines>,
-    cache: Res<PipelineCache>,
-    view_uniforms: Res<ViewUniforms>,
-    recorder: Res<PassRecorder>,
-    mut ctx: RenderContext,
-) {
-    let (buffer, prepass, offset, pipeline) = view.into_inner();
-    if gpu.generation.is_none() || gpu.views.is_empty() {
-        return;
-    }
-    let (Some(render_pipeline), Some(depth), Some(normal), Some(view_binding)) = (
-        cache.get_render_pipeline(pipeline.pipeline),
-        prepass.depth_view(),
-        prepass.normal_view(),
-        view_uniforms.uniforms.binding(),
-    ) else {
-        return;
-    };
-    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
-    let bind_groups: Vec<BindGroup> = gpu
-        .views
-        .iter()
-        .filter_map(|v| {
-            Some(ctx.render_device().create_bind_group(
-                "caustic_map_project_bind_group",
-                &layout,
-                &BindGroupEntries::sequential((view_binding.clone(), depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
-            ))
-        })
-        .collect();
-    let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
-        label: Some("caustic_map_projection"),
-        color_attachments: &[Some(RenderPassColorAttachment {
-            view: &buffer.texture.default_view,
-            depth_slice: None,
-            resolve_target: None,
-            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
-        })],
-        ..default()
-    });
-    pass.set_pipeline(render_pipeline);
-    for bind_group in &bind_groups {
-        pass.set_bind_group(0, bind_group, &[offset.offset]);
-        pass.draw(0..3, 0..1);
-    }
-    recorder.record("caustic map projection");
 }

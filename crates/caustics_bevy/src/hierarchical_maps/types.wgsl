@@ -226,6 +226,29 @@ fn fresnel_transmittance(cos_incident: f32, eta: f32) -> f32 {
     return 1.0 - max(r, 0.0);
 }
 
+// The four texels and weights of `caustic_map::bilinear` at continuous texel
+// coordinates `q` (texel centres at integers) in a `width²` grid, clamped to its edges.
+struct Bilinear {
+    low: vec2<u32>,
+    high: vec2<u32>,
+    f: vec2<f32>,
+}
+
+fn bilinear_taps(q_in: vec2<f32>, width: u32) -> Bilinear {
+    let q = clamp(q_in, vec2(0.0), vec2(f32(width - 1u)));
+    let base = floor(q);
+    let low = vec2<u32>(base);
+    return Bilinear(low, min(low + 1u, vec2(width - 1u)), q - base);
+}
+
+// The taps' values (low.x low.y, high.x low.y, low.x high.y, high.x high.y) mixed as
+// `caustic_map::bilinear` does.
+fn bilinear_mix(b: Bilinear, a: f32, c: f32, d: f32, e: f32) -> f32 {
+    let top = a + (c - a) * b.f.x;
+    let bottom = d + (e - d) * b.f.x;
+    return top + (bottom - top) * b.f.y;
+}
+
 // Octahedral unit vectors (Cigolle et al. 2014), how the light maps store normals.
 fn sign_not_zero(v: vec2<f32>) -> vec2<f32> {
     return select(vec2(-1.0), vec2(1.0), v >= vec2(0.0));

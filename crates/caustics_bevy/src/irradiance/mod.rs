@@ -106,6 +106,54 @@ pub struct ViewCausticIrradiance {
     pub bind_group: BindGroup,
 }
 
+impl ViewCausticIrradiance {
+    /// A render pass that adds to the buffer (with a pipeline from
+    /// [`projection_pipeline`]), keeping what the techniques before it wrote.
+    pub fn accumulate<'a>(&self, encoder: &'a mut CommandEncoder, label: &'static str) -> wgpu::RenderPass<'a> {
+        encoder.begin_render_pass(&RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(RenderPassColorAttachment {
+                view: &self.texture.default_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+            })],
+            ..default()
+        })
+    }
+}
+
+/// A technique's fullscreen pass that adds the irradiance it computes at each pixel's
+/// receiver point to the view's buffer: `layouts[multisampled]` for the view's
+/// prepass, the fragment entry point `project` of `shader` (with `MULTISAMPLED`
+/// defined for a multisampled prepass), additive blending.
+pub fn projection_pipeline(
+    label: &'static str,
+    layouts: &[BindGroupLayoutDescriptor; 2],
+    shader: &Handle<Shader>,
+    fullscreen: &FullscreenShader,
+    multisampled: bool,
+) -> RenderPipelineDescriptor {
+    let shader_defs = if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
+    let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+    RenderPipelineDescriptor {
+        label: Some(label.into()),
+        layout: vec![layouts[multisampled as usize].clone()],
+        vertex: fullscreen.to_vertex_state(),
+        fragment: Some(FragmentState {
+            shader: shader.clone(),
+            shader_defs,
+            entry_point: Some("project".into()),
+            targets: vec![Some(ColorTargetState {
+                format: CAUSTIC_IRRADIANCE_FORMAT,
+                blend: Some(BlendState { color: additive, alpha: additive }),
+                write_mask: ColorWrites::ALL,
+            })],
+        }),
+        ..default()
+    }
+}
+
 /// Render world: a receiver's albedo as its `StandardMaterial` defines it.
 #[derive(Clone, Copy, Debug)]
 struct ReceiverAlbedo {

@@ -4,12 +4,10 @@
 use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{core_light, core_mesh, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, core_light, core_mesh, to_core, world_aabb};
 use bevy::camera::primitives::Aabb;
-use bevy::camera::visibility::VisibilitySystems;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
-use bevy::transform::TransformSystems;
 use caustics_core::scene::Light;
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
 use caustics_core::mesh::TriMesh;
@@ -28,24 +26,9 @@ pub struct CausticVolumes {
 }
 
 pub(super) fn build(app: &mut App) {
-    app.init_resource::<CausticVolumes>().add_systems(
-        PostUpdate,
-        build_volumes
-            .after(TransformSystems::Propagate)
-            .after(VisibilitySystems::CalculateBounds)
-            .after(VisibilitySystems::VisibilityPropagate)
-            .after(crate::components::validate_caustic_params),
-    );
+    app.init_resource::<CausticVolumes>().add_systems(PostUpdate, build_volumes.in_set(crate::CausticsSystems::ReadScene));
 }
 
-type LightComponents = (
-    Option<&'static DirectionalLight>,
-    Option<&'static PointLight>,
-    Option<&'static SpotLight>,
-    &'static GlobalTransform,
-    &'static InheritedVisibility,
-);
-type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 type LightChanged = Or<(
     Changed<GlobalTransform>,
     Changed<DirectionalLight>,
