@@ -187,7 +187,9 @@ impl LightView {
 
     /// The views of `light` that can see generators within `generators` and receivers
     /// within `scene` (both `(min, max)` world bounds): one orthographic view of a
-    /// directional light spanning the scene across its beam; one perspective view of a
+    /// directional light across the generators' shadow grown by half its size on each
+    /// side (where the light they bend can land; a large floor does not dilute the
+    /// map), within the scene, as deep as the scene; one perspective view of a
     /// spot up to [`MAX_SPOT_HALF_ANGLE`] along its cone; otherwise the faces of a cube
     /// around the light, only those whose frustum meets the generators (all six when
     /// the light is inside their bounds). Photons that hit no generator make no
@@ -210,15 +212,23 @@ impl LightView {
                     near: 0.0,
                     far: 1.0,
                 };
-                let (mut vlo, mut vhi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-                for &c in &corners {
-                    let v = view.to_view(c);
-                    (vlo, vhi) = (vlo.min(v), vhi.max(v));
-                }
+                let extent = |points: &[Vec3]| {
+                    points.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(a, b), &c| {
+                        let v = view.to_view(c);
+                        (a.min(v), b.max(v))
+                    })
+                };
+                let (vlo, vhi) = extent(&corners);
+                // Across the beam: the generators' shadow grown by half its size on each
+                // side (where the light they bend lands), within the scene.
+                let (glo, ghi) = extent(&box_corners(generators.0, generators.1));
+                let grow = 0.5 * (ghi - glo).truncate();
+                let across_lo = (glo.truncate() - grow).max(vlo.truncate());
+                let across_hi = (ghi.truncate() + grow).min(vhi.truncate());
                 let pad = 1e-3 * size;
-                let mid = 0.5 * (vlo + vhi);
+                let mid = 0.5 * (across_lo + across_hi);
                 view.origin = center + right * mid.x + up * mid.y;
-                let half = (0.5 * (vhi - vlo)).truncate() + pad;
+                let half = 0.5 * (across_hi - across_lo) + pad;
                 view.projection = Projection::Orthographic { half_extent: half.max(Vec2::splat(1e-4)) };
                 (view.near, view.far) = (vlo.z - 2.0 * pad, vhi.z + 2.0 * pad);
                 vec![view]
