@@ -215,7 +215,7 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
             render(&mut renderer, 2);
             let core = settings(&mut renderer).core();
             let photons = gpu_photons(&mut renderer);
-            let pyramid = PhotonPyramid::new(&photons, RESOLUTION);
+            let pyramid = PhotonPyramid::for_gather(&photons, RESOLUTION, core.gather);
             let (entries, stats) = hierarchy::gather(&pyramid, core.gather);
             let (gpu_entries, processed) = gpu_gather(&mut renderer);
             let cpu_entries: HashSet<GatherEntry> = entries.iter().copied().collect();
@@ -261,6 +261,19 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     assert!(error < 0.05, "floor caustics against the CPU twin: relative L2 {error}");
     let flat = caustic_irradiance(&flat_image, &without);
     assert!(flat.iter().all(|e| e.is_finite()));
+    // Several lights add up: a second spot where the first stands doubles every pixel's
+    // caustics (against the two spots' own direct light).
+    let second = renderer.world_mut().spawn(spot()).id();
+    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::IlluminationTextures;
+    let without_both = render(&mut renderer, 3);
+    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::HierarchicalMaps;
+    let doubled = caustic_irradiance(&render(&mut renderer, 3), &without_both);
+    assert_eq!(gpu(&mut renderer).view_count(), 2);
+    let twice: Vec<f32> = image.iter().map(|e| 2.0 * e).collect();
+    let error = relative_l2(&doubled, &twice);
+    eprintln!("two equal spots against twice one: relative L2 {error:.1e}");
+    assert!(error < 2e-3, "two lights: relative L2 {error}");
+    renderer.world_mut().despawn(second);
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_hierarchical_ball.png");
     render(&mut renderer, 1).save_png(&path, 0.2).unwrap();
 

@@ -236,11 +236,15 @@ fn the_hierarchical_gather_keeps_exactly_the_valid_photons_and_the_same_map() {
     assert_eq!(flat_stats.total_processed(), 256 * 256);
     assert!(tree_stats.total_processed() < 256 * 256 / 2, "{tree_stats:?}");
     assert_eq!(tree_stats.processed[hierarchy::start_level(256, 16) as usize], 16 * 16);
-    // Same photons, same splats: the same fixed-point map, bit for bit, both splat kinds.
+    // Same photons, same splats: the same fixed-point map, bit for bit, both splat kinds;
+    // the flat gather needs only the photon buffer's own level of the pyramid.
+    let base = PhotonPyramid::for_gather(&photons, 128, Gather::Flat);
+    assert_eq!(base.top_level(), 0);
     for splats in [FIXED, VARIABLE] {
         let a = CausticMap::splat_all(&photons, &pyramid, &flat, splats, 128).0;
         let b = CausticMap::splat_all(&photons, &pyramid, &tree, splats, 128).0;
         assert_eq!(a, b, "{splats:?}");
+        assert_eq!(a, CausticMap::splat_all(&photons, &base, &hierarchy::gather(&base, Gather::Flat).0, splats, 128).0);
     }
 }
 
@@ -518,4 +522,3 @@ fn settings_outside_their_range_are_refused() {
     }
     assert_eq!(FLUX_UNITS, 1048576.0);
 }
-

@@ -312,14 +312,15 @@ fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dis
         steps.push(GpuStep { counter_base, ..step });
         dispatches.push(Dispatch { kernel, step: steps.len() - 1, groups });
     };
-    for level in 1..=p.ilog2() {
+    // The flat gather reads no pyramid.
+    let (start, pyramid_levels) = match settings.gather {
+        Gather::Flat => (0, 0),
+        Gather::Hierarchical { .. } => (start_level(p, caustics_core::hierarchical::START_RESOLUTION), p.ilog2()),
+    };
+    for level in 1..=pyramid_levels {
         let w = (p >> level).div_ceil(8);
         push(Kernel::BuildPyramid, GpuStep { level, ..default() }, Groups::Direct(w, w), &mut steps);
     }
-    let start = match settings.gather {
-        Gather::Flat => 0,
-        Gather::Hierarchical { .. } => start_level(p, caustics_core::hierarchical::START_RESOLUTION),
-    };
     let mut slot = 0;
     let mut source = ALL_NODES;
     let fixed_count = (p >> start) * (p >> start);

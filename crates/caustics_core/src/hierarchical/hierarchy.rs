@@ -104,9 +104,20 @@ impl PhotonPyramid {
     /// Builds the pyramid of `photons` (a power-of-two square) for a
     /// `map_resolution²` caustic map.
     pub fn new(photons: &PhotonBuffer, map_resolution: u32) -> Self {
+        Self::up_to(photons, map_resolution, u32::MAX)
+    }
+
+    /// What `gather` reads of the pyramid: the photon buffer's own level for the flat
+    /// gather (which needs no hierarchy, on the GPU either), every level otherwise.
+    pub fn for_gather(photons: &PhotonBuffer, map_resolution: u32, gather: Gather) -> Self {
+        let top = if gather == Gather::Flat { 0 } else { u32::MAX };
+        Self::up_to(photons, map_resolution, top)
+    }
+
+    fn up_to(photons: &PhotonBuffer, map_resolution: u32, top: u32) -> Self {
         let mut levels = vec![photons.photons.iter().map(|p| Node::of_photon(p, map_resolution)).collect::<Vec<_>>()];
         let mut width = photons.resolution;
-        while width > 1 {
+        while width > 1 && (levels.len() as u32) <= top {
             let below = levels.last().expect("level 0 exists");
             let half = width / 2;
             let level = (0..half * half)
@@ -194,7 +205,8 @@ impl GatherStats {
 /// The photons and clusters to splat, in traversal order, with what the traversal
 /// processed. Photons are gathered at level 0; clusters at the level they converge.
 pub fn gather(pyramid: &PhotonPyramid, gather: Gather) -> (Vec<GatherEntry>, GatherStats) {
-    let levels = pyramid.top_level() as usize + 1;
+    // One count per level of the photon buffer's mipmap, built or not.
+    let levels = pyramid.resolution.max(1).ilog2() as usize + 1;
     let mut stats = GatherStats { processed: vec![0; levels], ..GatherStats::default() };
     let mut entries = Vec::new();
     let (start, clustering) = match gather {

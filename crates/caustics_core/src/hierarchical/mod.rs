@@ -154,7 +154,9 @@ pub struct StageTimes {
     pub light_maps: f64,
     /// Tracing the photon buffer.
     pub photons: f64,
-    /// Building the pyramid and gathering.
+    /// Building the pyramid (none for the flat gather).
+    pub pyramid: f64,
+    /// Gathering.
     pub gather: f64,
     /// Splatting and resolving the levels.
     pub splat: f64,
@@ -198,7 +200,9 @@ impl ViewCaustics {
     /// Runs the stages after the photon buffer.
     pub fn from_photons(light: &Light, view: &LightView, settings: &CausticMapSettings, maps: LightMaps, photons: PhotonBuffer, mut times: StageTimes) -> Self {
         let clock = Instant::now();
-        let pyramid = PhotonPyramid::new(&photons, settings.map_resolution);
+        let pyramid = PhotonPyramid::for_gather(&photons, settings.map_resolution, settings.gather);
+        times.pyramid = clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
         let (entries, gather_stats) = hierarchy::gather(&pyramid, settings.gather);
         times.gather = clock.elapsed().as_secs_f64();
         let clock = Instant::now();
