@@ -7,8 +7,8 @@
 // - `write_args`: the indirect dispatch of the next step from a list's length, which
 //   it records as the nodes processed at that level;
 // - `traverse`: one level of the breadth-first traversal (§3.1), clustering where
-//   photons converge (§3.2) (`hierarchy::gather`);
-// - `gather_photons`: the photon buffer level: every valid photon of a list;
+//   photons converge (§3.2), and at the photon buffer's own level every valid photon of
+//   its list (`hierarchy::gather`);
 // - `splat`: every gathered photon or cluster into its caustic map level (§3.3,
 //   `CausticMap::splat`), in 64-bit fixed point with integer atomics;
 // - `resolve`: the levels summed into the full-resolution map (eq. 3).
@@ -449,6 +449,13 @@ fn traverse(
     if index == NO_NODE {
         return;
     }
+    // The photon buffer's own level: every valid photon is gathered.
+    if step.level == 0u {
+        if photon_flux[index].x > 0.0 {
+            gather(index);
+        }
+        return;
+    }
     let node = pyramid_node(step.level, index);
     if node.texel == EMPTY {
         return;
@@ -468,21 +475,6 @@ fn traverse(
     set_list_entry(step.destination, first + 1u, y * below + x + 1u);
     set_list_entry(step.destination, first + 2u, (y + 1u) * below + x);
     set_list_entry(step.destination, first + 3u, (y + 1u) * below + x + 1u);
-}
-
-@compute @workgroup_size(64, 1, 1)
-fn gather_photons(
-    @builtin(workgroup_id) workgroup: vec3<u32>,
-    @builtin(num_workgroups) groups: vec3<u32>,
-    @builtin(local_invocation_index) local: u32,
-) {
-    let index = source_node(thread_index(workgroup, groups, local));
-    if index == NO_NODE {
-        return;
-    }
-    if photon_flux[index].x > 0.0 {
-        gather(index);
-    }
 }
 
 // ---------------------------------------------------------------- splats

@@ -242,7 +242,7 @@ pub(super) struct CausticMapPipelines {
     pub(super) compute_layout: BindGroupLayoutDescriptor,
     /// The indirect arguments, bound for `write_args` alone.
     pub(super) args_layout: BindGroupLayoutDescriptor,
-    pub(super) compute: [CachedComputePipelineId; 7],
+    pub(super) compute: [CachedComputePipelineId; 6],
     pub(super) project_layouts: [BindGroupLayoutDescriptor; 2],
     pub(super) project_shader: Handle<Shader>,
     pub(super) fullscreen: FullscreenShader,
@@ -255,17 +255,15 @@ pub(super) enum Kernel {
     BuildPyramid,
     WriteArgs,
     Traverse,
-    GatherPhotons,
     Splat,
     Resolve,
 }
 
-pub(super) const KERNELS: [(Kernel, &str); 7] = [
+pub(super) const KERNELS: [(Kernel, &str); 6] = [
     (Kernel::TracePhotons, "trace_photons"),
     (Kernel::BuildPyramid, "build_pyramid"),
     (Kernel::WriteArgs, "write_args"),
     (Kernel::Traverse, "traverse"),
-    (Kernel::GatherPhotons, "gather_photons"),
     (Kernel::Splat, "splat"),
     (Kernel::Resolve, "resolve"),
 ];
@@ -277,7 +275,7 @@ impl Kernel {
         match self {
             Kernel::TracePhotons => "caustic_maps/photon_buffer",
             Kernel::BuildPyramid => "caustic_maps/pyramid",
-            Kernel::WriteArgs | Kernel::Traverse | Kernel::GatherPhotons => "caustic_maps/gather",
+            Kernel::WriteArgs | Kernel::Traverse => "caustic_maps/gather",
             Kernel::Splat => "caustic_maps/splat",
             Kernel::Resolve => "caustic_maps/resolve",
         }
@@ -325,10 +323,10 @@ fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dis
     let mut source = ALL_NODES;
     let fixed_count = (p >> start) * (p >> start);
     for level in (0..=start).rev() {
-        let (kernel, destination) = if level == 0 { (Kernel::GatherPhotons, NO_TARGET) } else { (Kernel::Traverse, (start - level) % 2) };
+        let destination = if level == 0 { NO_TARGET } else { (start - level) % 2 };
         let step = GpuStep { level, source, destination, args_slot: slot, fixed_count, ..default() };
         push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
-        push(kernel, step, Groups::Indirect(slot), &mut steps);
+        push(Kernel::Traverse, step, Groups::Indirect(slot), &mut steps);
         (slot, source) = (slot + 1, destination);
     }
     let step = GpuStep { source: LIST_GATHERED, destination: NO_TARGET, args_slot: slot, ..default() };
