@@ -27,6 +27,8 @@ pub enum HeadlessError {
     NoAdapter(String),
     #[error("the frame was not read back after {0} extra updates")]
     NoReadback(u32),
+    #[error("a pipeline failed to build: {0}")]
+    Pipeline(String),
     #[error("cannot write {path}: {reason}")]
     Write { path: String, reason: String },
 }
@@ -152,10 +154,32 @@ impl HeadlessRenderer {
             let bytes = result.lock().ok().and_then(|mut s| s.take());
             if let Some(bytes) = bytes {
                 self.app.world_mut().despawn(reader);
+                if let Some(failure) = self.failed_pipeline() {
+                    return Err(HeadlessError::Pipeline(failure));
+                }
                 return Ok(RenderedImage { width: self.width, height: self.height, pixels: decode_rgba16f(&bytes) });
             }
         }
         Err(HeadlessError::NoReadback(MAX_EXTRA))
+    }
+}
+
+impl HeadlessRenderer {
+    /// The first pipeline whose shader did not compile or whose pipeline was refused,
+    /// with its label and why: a frame drawn without it is not the frame asked for.
+    fn failed_pipeline(&self) -> Option<String> {
+        use bevy::render::render_resource::{CachedPipelineState, PipelineCache, PipelineDescriptor};
+        let cache = self.app.get_sub_app(bevy::render::RenderApp)?.world().get_resource::<PipelineCache>()?;
+        cache.pipelines().find_map(|p| match &p.state {
+            CachedPipelineState::Err(error) => {
+                let label = match &p.descriptor {
+                    PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
+                    PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
+                };
+                Some(format!("{}: {error}", label.as_deref().unwrap_or("unlabelled")))
+            }
+            _ => None,
+        })
     }
 }
 

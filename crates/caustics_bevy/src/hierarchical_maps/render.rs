@@ -435,16 +435,6 @@ impl CausticMapsGpu {
         self.views.get(index).map(|v| &v.resolved)
     }
 
-    /// Light view `index`'s receiver map (an `R32Float` texture of view depths).
-    pub fn receiver_map(&self, index: usize) -> Option<&Texture> {
-        self.views.get(index).map(|v| &v.receivers.0)
-    }
-
-    /// The last light view's front and back maps (`Rgba32Float`: depth, octahedral normal, generator).
-    pub fn front_back_maps(&self) -> Option<(&Texture, &Texture)> {
-        self.scratch.as_ref().map(|s| (&s.front.0, &s.back.0))
-    }
-
     /// Bytes of GPU memory the caustic maps hold.
     pub fn bytes(&self) -> u64 {
         self.scratch.as_ref().map_or(0, |s| s.bytes)

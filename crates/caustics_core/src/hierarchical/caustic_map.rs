@@ -280,7 +280,7 @@ pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photo
     c * intensity * ratio * ratio * view.receiver_jacobian(p, n)
 }
 
-/// The photons of node `index` of `level` (for tests): the photon buffer texels below it.
+/// The photon buffer texels (row-major indices) below node `index` of pyramid level `level`.
 pub fn photons_below(pyramid: &PhotonPyramid, level: u32, index: u32) -> Vec<u32> {
     let mut nodes = vec![index];
     for l in (1..=level).rev() {

@@ -145,12 +145,6 @@ impl PhotonPyramid {
     pub fn width(&self, level: u32) -> u32 {
         self.resolution >> level
     }
-
-    /// Bytes the levels above the photon buffer take on a GPU (a `u32` texel and four
-    /// `f32` a node).
-    pub fn gpu_bytes(&self) -> u64 {
-        self.levels[1..].iter().map(|l| l.len() as u64 * 20).sum()
-    }
 }
 
 /// The level the hierarchical gather starts from: the one `start_resolution` nodes
@@ -167,11 +161,8 @@ pub struct GatherEntry {
 }
 
 impl GatherEntry {
-    /// The GPU's packing: the level in the top eight bits.
-    pub fn packed(&self) -> u32 {
-        (self.level << 24) | self.node
-    }
-
+    /// An entry of the GPU's gathered list: the level in the top eight bits, the node
+    /// (below 2²⁴) in the rest.
     pub fn unpacked(packed: u32) -> Self {
         Self { level: packed >> 24, node: packed & 0x00ff_ffff }
     }

@@ -217,17 +217,6 @@ impl ViewCaustics {
         let intensity = light_intensity(&self.light) * self.light.color.element_sum() / 3.0;
         caustic_map::irradiance_at(&self.view, &self.maps, &self.resolved, self.settings.photon_resolution, intensity, p, n)
     }
-
-    /// Bytes this view's buffers take on a GPU: the front and back maps (two `vec4`
-    /// a texel), their depth, the photon buffer, the pyramid, two traversal lists and
-    /// the gathered list (one `u32` a photon each at worst), the receiver map with its
-    /// depth, the map levels (two `u32` a texel) and the resolved map.
-    pub fn gpu_bytes(&self) -> u64 {
-        let p = self.settings.photon_resolution as u64 * self.settings.photon_resolution as u64;
-        let m = self.settings.map_resolution as u64 * self.settings.map_resolution as u64;
-        let levels: u64 = self.map.levels.iter().map(|l| l.len() as u64 * 8).sum();
-        p * (32 + 4) + self.photons.gpu_bytes() + self.pyramid.gpu_bytes() + 3 * 4 * p + m * (4 + 4 + 4) + levels
-    }
 }
 
 /// Every light view of every light of `scene` with its caustic map; empty without

@@ -155,11 +155,6 @@ impl PhotonBuffer {
     pub fn photon(&self, x: u32, y: u32) -> Photon {
         self.photons[(y * self.resolution + x) as usize]
     }
-
-    /// Bytes the buffer takes on a GPU (four `f32` a photon).
-    pub fn gpu_bytes(&self) -> u64 {
-        self.resolution as u64 * self.resolution as u64 * 16
-    }
 }
 
 /// A photon's path, as far as it went.
