@@ -101,7 +101,7 @@ fn cpu_scene(interaction: SpecularInteraction) -> Scene {
     }
 }
 
-fn gpu<'a>(renderer: &'a mut HeadlessRenderer) -> &'a CausticMapsGpu {
+fn gpu(renderer: &mut HeadlessRenderer) -> &CausticMapsGpu {
     renderer.app.sub_app_mut(RenderApp).world().resource::<CausticMapsGpu>()
 }
 

@@ -102,7 +102,8 @@ fn plan_caustic_maps(
     let mut receiver_bounds: Option<(Vec3, Vec3)> = None;
     if generator_bounds.is_some() {
         for ((mesh, transform, visible, aabb), receiver, no_shadows) in &occluders {
-            if !visible.get() || !(receiver || !no_shadows) {
+            // Receivers, and every other mesh that casts shadows, block caustic light.
+            if !visible.get() || (!receiver && no_shadows) {
                 continue;
             }
             if receiver && let Some(aabb) = aabb {

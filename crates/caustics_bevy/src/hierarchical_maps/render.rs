@@ -640,7 +640,7 @@ impl Scratch {
 /// a texel) are the largest bindings.
 fn fitting(device: &RenderDevice, settings: &CausticMapSettings) -> CausticMapSettings {
     let limits = device.limits();
-    let largest = (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+    let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
     let mut fitted = *settings;
     let side = |r: u32| (r as u64).pow(2);
     while fitted.photon_resolution > 16 && (side(fitted.photon_resolution) * 8 > largest || fitted.photon_resolution > limits.max_texture_dimension_2d) {

@@ -292,7 +292,7 @@ fn exit_distance(
 #[inline]
 pub fn texel_of(uv: Vec2, resolution: u32) -> Option<(u32, u32)> {
     let t = uv * resolution as f32;
-    (t.x >= 0.0 && t.y >= 0.0 && t.x < resolution as f32 && t.y < resolution as f32).then(|| (t.x as u32, t.y as u32))
+    (t.x >= 0.0 && t.y >= 0.0 && t.x < resolution as f32 && t.y < resolution as f32).then_some((t.x as u32, t.y as u32))
 }
 
 /// The image-plane line a map coordinate boundary lies on, and the parameter at which
