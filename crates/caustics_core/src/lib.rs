@@ -16,6 +16,7 @@ pub mod params;
 pub mod rng;
 pub mod scene;
 pub mod scenes;
+pub mod technique;
 pub mod tracer;
 pub mod view;
 pub mod volumes;

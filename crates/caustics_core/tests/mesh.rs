@@ -40,19 +40,7 @@ fn the_solid_ring_is_closed_with_walls_facing_in_and_out() {
     let ring = TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, 16);
     // Closed: every edge is shared by exactly two triangles, once in each direction,
     // counting vertices by position (the walls, top and bottom have their own).
-    let key = |p: Vec3| (p * 1e4).round().as_ivec3().to_array();
-    let mut edges = std::collections::HashMap::new();
-    for t in 0..ring.triangles().len() {
-        let corners = ring.corners(t);
-        for k in 0..3 {
-            let (from, to) = (key(corners[k]), key(corners[(k + 1) % 3]));
-            *edges.entry((from, to)).or_insert(0) += 1;
-        }
-    }
-    for (&(from, to), &count) in &edges {
-        assert_eq!(count, 1, "edge {from:?} → {to:?} used {count} times");
-        assert_eq!(edges.get(&(to, from)), Some(&1), "edge {from:?} → {to:?} has no twin: the ring is open");
-    }
+    assert!(ring.is_closed());
     // Walls: normals horizontal, to the axis on the inner radius and away on the outer;
     // smooth around (a vertex normal is the exact radial direction).
     for (p, n) in ring.positions().iter().zip(ring.normals()) {
@@ -86,13 +74,32 @@ fn the_bunny_asset_is_closed_and_wound_outwards() {
     let bunny = TriMesh::from_obj(include_str!("../../../assets/models/bunny.obj")).unwrap();
     assert_eq!((bunny.positions().len(), bunny.triangles().len()), (1839, 3674));
     // Every edge once each way: closed, consistently wound; positive volume: outwards.
-    let mut edges = std::collections::HashMap::new();
-    for t in bunny.triangles() {
-        for k in 0..3 {
-            *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
-        }
-    }
-    assert!(edges.iter().all(|(&(a, b), &n)| n == 1 && edges.get(&(b, a)) == Some(&1)));
+    assert!(bunny.is_closed());
     let volume: f32 = (0..bunny.triangles().len()).map(|t| { let [a, b, c] = bunny.corners(t); a.dot(b.cross(c)) / 6.0 }).sum();
     assert!(volume > 0.0);
+}
+
+#[test]
+fn closedness_welds_split_vertices_and_sees_holes_and_flips() {
+    let sphere = TriMesh::uv_sphere(Vec3::ZERO, 0.5, 16, 32);
+    let cube = TriMesh::cuboid(Vec3::ZERO, Vec3::ONE);
+    // Both split their corners: the sphere at its seam and poles, the cube per face.
+    assert!(sphere.is_closed(), "a UV sphere (seam and poles welded)");
+    assert!(cube.is_closed(), "a cube with a vertex set per face");
+    assert!(TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, 64).is_closed());
+    assert!(!TriMesh::ring(Vec3::ZERO, 1.0, 0.3, 64).is_closed(), "an open cylinder wall");
+    assert!(!TriMesh::quad(Vec3::ZERO, Vec3::X, Vec3::Z).is_closed(), "a plane");
+    let rebuilt = |positions: Vec<Vec3>, triangles: Vec<[u32; 3]>| TriMesh::new(positions, cube.normals().to_vec(), triangles).unwrap();
+    // A face missing: open.
+    let tris = cube.triangles();
+    assert!(!rebuilt(cube.positions().to_vec(), tris[..tris.len() - 2].to_vec()).is_closed());
+    // A face wound the wrong way: edges meet in the same direction.
+    let mut flipped = tris.to_vec();
+    flipped[0].swap(1, 2);
+    flipped[1].swap(1, 2);
+    assert!(!rebuilt(cube.positions().to_vec(), flipped).is_closed());
+    // Corners off by 10⁻⁶ (rounding in an exporter) still weld; a 1 cm gap does not.
+    let jitter = |d: f32| cube.positions().iter().enumerate().map(|(i, p)| *p + Vec3::splat(d * (i % 3) as f32)).collect::<Vec<_>>();
+    assert!(rebuilt(jitter(1e-6), tris.to_vec()).is_closed());
+    assert!(!rebuilt(jitter(1e-2), tris.to_vec()).is_closed());
 }
