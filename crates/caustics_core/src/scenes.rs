@@ -42,14 +42,17 @@ pub fn wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) -> Tri
     TriMesh::heightfield(n, size, h, nrm).expect("heightfield normals have y = 1")
 }
 
+/// The waves of the reference pool (`shared/reference/wave_pool_scene.json`).
+pub const POOL_WAVES: [Wave; 2] = [
+    Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 },
+    Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 },
+];
+
 /// The rippled pool of `shared/reference` with an `n × n` water grid: directional
 /// light along (0.3, −1, −0.2) with irradiance 1, water IOR 1.333 at y ≈ 0.8, floor
 /// y = 0 measured over x, z ∈ [−1, 1] on `cells × cells` cells.
 pub fn wave_pool(n: usize, cells: usize) -> BenchScene {
-    let waves = [
-        Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 },
-        Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 },
-    ];
+    let waves = POOL_WAVES;
     let desc = SceneDescription {
         name: "wave_pool".into(),
         light: LightDescription { kind: "directional".into(), direction: [0.3, -1.0, -0.2], irradiance: 1.0 },
@@ -94,6 +97,17 @@ pub fn metal_ring(segments: usize) -> BenchScene {
         receivers: vec![floor(4.0)],
     };
     BenchScene { name: "metal_ring".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
+}
+
+/// The rippled pool of [`wave_pool`] with a roof over half of it: a grey slab 1.6 m up
+/// over x < 0, past the water's edges, which shadows that half of the water (the
+/// sunlight slants 17° off zenith towards +x, so the shadow reaches x ≈ 0.3 on the floor).
+pub fn roofed_pool(n: usize, cells: usize) -> BenchScene {
+    let mut bench = wave_pool(n, cells);
+    let roof = TriMesh::quad(Vec3::new(-1.5, 1.6, 0.0), Vec3::Z * 2.5, Vec3::X * 1.5);
+    bench.scene.receivers.push(Receiver { mesh: roof, albedo: Vec3::splat(0.5) });
+    bench.name = "roofed_pool".into();
+    bench
 }
 
 /// A square floor `size` wide at y = 0, facing up, light grey.

@@ -15,6 +15,8 @@
 //!   points the generator itself shadows (their receiver map), so they go first,
 //!   except inside a participating medium, whose shafts only the volumes draw.
 
+use crate::mesh::TriMesh;
+use crate::params::SpecularInteraction;
 use std::fmt;
 
 /// The four published techniques.
@@ -68,6 +70,17 @@ pub enum GeneratorShape {
 }
 
 impl GeneratorShape {
+    /// The shape of a generator mesh that is neither a pool nor an ocean (those are
+    /// open surfaces by construction, known to the caller): a mirror, or a refractor
+    /// closed or open by [`TriMesh::is_closed`].
+    pub fn of(mesh: &TriMesh, interaction: &SpecularInteraction) -> Self {
+        match interaction {
+            SpecularInteraction::Reflect => GeneratorShape::Mirror,
+            SpecularInteraction::Refract { .. } if mesh.is_closed() => GeneratorShape::ClosedRefractor,
+            SpecularInteraction::Refract { .. } => GeneratorShape::OpenRefractor,
+        }
+    }
+
     /// The shape in prose.
     pub fn label(self) -> &'static str {
         match self {

@@ -140,10 +140,13 @@ fn focusing_mirror(focus: Vec3, l: Vec3) -> Scene {
         },
     )
     .unwrap();
+    // The volumes reach the receivers' bounds: a tile at y = 3, off to the side so as
+    // not to shade the mirror, takes them past the focus.
+    let far_tile = TriMesh::quad(Vec3::new(20.0, 3.0, 0.0), Vec3::Z, Vec3::X);
     Scene {
         lights: vec![sun(l)],
         generators: vec![Generator { mesh, interaction: SpecularInteraction::Reflect }],
-        receivers: vec![floor(8.0, 3.0), floor(8.0, 0.0)],
+        receivers: vec![Receiver { mesh: far_tile, albedo: Vec3::ONE }, floor(8.0, 0.0)],
     }
 }
 
@@ -426,4 +429,41 @@ fn the_test_settings_are_the_defaults() {
     let d = VolumeSettings::default();
     assert_eq!((d.max_magnification, d.min_ray_cosine), (INTERPOLATED.max_magnification, INTERPOLATED.min_ray_cosine));
     assert_eq!(d.intensity, IntensityMode::Conserving);
+}
+
+#[test]
+fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
+    use caustics_core::estimate::IrradianceGrid;
+    use caustics_core::tracer::{PhotonTracer, TraceSettings};
+    let bench = caustics_core::scenes::roofed_pool(129, 64);
+    let region = bench.region;
+    let tracer = PhotonTracer::new(&bench.scene).unwrap();
+    let mut grid = IrradianceGrid::new(region);
+    tracer.trace(&TraceSettings { photons_per_light: 1 << 21, seed: 7, ..Default::default() }, &mut grid, &|_, _| {});
+    let truth = grid.irradiance_mean();
+    let set = build_scene_volumes(&bench.scene, &CONSERVING);
+    assert!(set.stats.shadowed > 1000, "half the water is in the roof's shadow: {:?}", set.stats);
+    let volumes: Vec<f32> = floor_irradiance(&set, &region, &CONSERVING).iter().map(|e| e.x).collect();
+    // Cells the tracer leaves dark with all their neighbours: the roof's shadow, less
+    // one cell at its edge (where a generator triangle half in shadow fades out).
+    let n = region.nu;
+    let dark = |r: usize, c: usize| {
+        (r.saturating_sub(1)..=(r + 1).min(n - 1)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(n - 1)).all(|cc| truth[rr * n + cc] == 0.0))
+    };
+    let shadow: Vec<usize> = (0..n * n).filter(|&i| dark(i / n, i % n)).collect();
+    assert!(shadow.len() > n * n / 3, "the roof shadows a third of the floor or more: {} cells", shadow.len());
+    let lit_mean = truth.iter().sum::<f32>() / (n * n - shadow.len()) as f32;
+    let under_roof = shadow.iter().map(|&i| volumes[i]).fold(0.0, f32::max);
+    assert!(under_roof == 0.0, "caustic light under the roof: up to {under_roof} (lit mean {lit_mean})");
+    // Where the sun reaches the water, the roof changes nothing: the open pool's
+    // volumes, away from the shadow's edge (x ≈ 0.24 on the water, 0.42 below it on the
+    // floor; waves bend light up to 0.2 m further).
+    let open = caustics_core::scenes::wave_pool(129, 64);
+    let open_volumes: Vec<f32> =
+        floor_irradiance(&build_scene_volumes(&open.scene, &CONSERVING), &region, &CONSERVING).iter().map(|e| e.x).collect();
+    let lit: Vec<usize> = (0..n * n).filter(|&i| region.cell_center(i / n, i % n).x > 0.75).collect();
+    let pick = |v: &[f32]| lit.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    let same = caustics_core::metrics::relative_l1(&pick(&volumes), &pick(&open_volumes));
+    assert!(same < 1e-6, "lit cells differ from the open pool's: relative L1 {same}");
+    eprintln!("{} of {} cells under the roof, {} lit", shadow.len(), n * n, lit.len());
 }

@@ -1,6 +1,7 @@
 //! Building caustic volumes from generator meshes and lights (§3, §3.4).
 
 use super::{BoundingShape, CausticVolume, VolumeSettings};
+use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
 use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
 use crate::params::SpecularInteraction;
@@ -55,6 +56,8 @@ pub struct BuildStats {
     pub volumes: usize,
     /// Triangles facing away from the light, or outside a spot light's cone.
     pub unlit: usize,
+    /// Triangles that another surface hides from the light at all three vertices.
+    pub shadowed: usize,
     /// Triangles with a vertex ray lost to total internal reflection.
     pub total_internal_reflection: usize,
     /// Triangles with a vertex ray too close to the triangle's plane (grazing light).
@@ -74,6 +77,7 @@ impl std::ops::Add for BuildStats {
     fn add(mut self, o: Self) -> Self {
         self.volumes += o.volumes;
         self.unlit += o.unlit;
+        self.shadowed += o.shadowed;
         self.total_internal_reflection += o.total_internal_reflection;
         self.grazing += o.grazing;
         self.degenerate += o.degenerate;
@@ -99,11 +103,35 @@ fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
     }
 }
 
+/// Whether a surface of `occluders` hides `p` from `light`. The generators are not
+/// among them, so the shadow ray may start at `p` itself (a hair along, for rounding).
+fn in_shadow(occluders: &SceneBvh, light: &Light, p: Vec3) -> bool {
+    let (to_light, distance) = match light.kind {
+        LightKind::Directional { direction, .. } => (-direction.normalize_or_zero(), f32::INFINITY),
+        LightKind::Point { position, .. } | LightKind::Spot { position, .. } => {
+            let d = position - p;
+            (d.normalize_or_zero(), d.length())
+        }
+    };
+    let hair = 1e-5 * (1.0 + p.abs().max_element());
+    occluders.intersect(p, to_light, hair, distance).is_some()
+}
+
 /// A vertex ray: unit direction and the fraction of flux it carries (Fresnel).
 #[derive(Clone, Copy)]
 enum VertexRay {
     Ray { direction: Vec3, fresnel: f32, irradiance: f32, incident: Vec3 },
     TotalInternalReflection { irradiance: f32, incident: Vec3 },
+}
+
+impl VertexRay {
+    /// The same ray carrying no light: its vertex is in shadow.
+    fn shadowed(self) -> Self {
+        match self {
+            VertexRay::Ray { direction, fresnel, incident, .. } => VertexRay::Ray { direction, fresnel, irradiance: 0.0, incident },
+            VertexRay::TotalInternalReflection { incident, .. } => VertexRay::TotalInternalReflection { irradiance: 0.0, incident },
+        }
+    }
 }
 
 fn vertex_ray(light: &Light, interaction: &SpecularInteraction, ior: Option<f32>, p: Vec3, n: Vec3) -> VertexRay {
@@ -179,8 +207,12 @@ fn flattened(frame: &Frame, p: Vec3, ray: Vec3, min_cos: f32) -> Option<(Vec3, V
 
 /// Builds the caustic volumes of one generator mesh under one light, for one colour
 /// channel (`ior` overrides a refractor's index, for dispersion). `depth_bounds` are
-/// the world bounds of the receivers: every volume ends beyond them. Volumes are
-/// appended to `out`; triangles run in parallel.
+/// the world bounds of the receivers: every volume ends beyond them. A vertex that
+/// `occluders` (the scene's surfaces other than generators) hide from the light
+/// carries no irradiance — past the paper, whose §3.1 lights every generator — so a
+/// generator in shadow casts nothing and one in partial shadow casts a caustic that
+/// fades across its shadow's edge, to the triangle. Volumes are appended to `out`;
+/// triangles run in parallel.
 #[allow(clippy::too_many_arguments)]
 pub fn build_generator_volumes(
     mesh: &TriMesh,
@@ -190,6 +222,7 @@ pub fn build_generator_volumes(
     light: &Light,
     color: Vec3,
     depth_bounds: (Vec3, Vec3),
+    occluders: Option<&SceneBvh>,
     settings: &VolumeSettings,
     out: &mut Vec<CausticVolume>,
 ) -> BuildStats {
@@ -207,6 +240,12 @@ pub fn build_generator_volumes(
         .zip(mesh.normals().par_iter())
         .map(|(&p, &n)| vertex_ray(light, interaction, ior, p, n))
         .collect();
+    let shadowed: Vec<bool> = match occluders {
+        Some(occluders) => mesh.positions().par_iter().map(|&p| in_shadow(occluders, light, p)).collect(),
+        None => Vec::new(),
+    };
+    let rays: Vec<VertexRay> =
+        rays.into_iter().zip(shadowed.iter().copied().chain(std::iter::repeat(false))).map(|(r, s)| if s { r.shadowed() } else { r }).collect();
     // The mean ray direction: a slicing axis shared by the triangles whose rays all
     // leave steeply enough along it.
     let slicing_axis = rays
@@ -217,7 +256,7 @@ pub fn build_generator_volumes(
         })
         .sum::<Vec3>()
         .try_normalize();
-    let context = TriangleContext { mesh, fans, rays: &rays, two_sided, slicing_axis, color, depth_bounds, settings };
+    let context = TriangleContext { mesh, fans, rays: &rays, shadowed: &shadowed, two_sided, slicing_axis, color, depth_bounds, settings };
     let results: Vec<(Option<CausticVolume>, BuildStats)> =
         (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
     let mut stats = BuildStats::default();
@@ -234,6 +273,8 @@ struct TriangleContext<'a> {
     mesh: &'a TriMesh,
     fans: &'a VertexFans,
     rays: &'a [VertexRay],
+    /// Per vertex, whether an occluder hides it from the light; empty without occluders.
+    shadowed: &'a [bool],
     two_sided: bool,
     slicing_axis: Option<Vec3>,
     color: Vec3,
@@ -244,7 +285,7 @@ struct TriangleContext<'a> {
 impl TriangleContext<'_> {
     /// The caustic volume of triangle `t`, or why there is none.
     fn volume(&self, t: usize) -> (Option<CausticVolume>, BuildStats) {
-        let TriangleContext { mesh, fans, rays, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
+        let TriangleContext { mesh, fans, rays, shadowed, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
             *self;
         let tri = mesh.triangles()[t];
         let p = mesh.corners(t);
@@ -283,7 +324,11 @@ impl TriangleContext<'_> {
         }
         let flux_estimate = |w: Vec3| (color * ((w.x + w.y + w.z) / 3.0 * 0.5 * cross.length())).as_dvec3();
         if !lit {
-            stats.unlit = 1;
+            if !shadowed.is_empty() && tri.iter().all(|&i| shadowed[i as usize]) {
+                stats.shadowed = 1;
+            } else {
+                stats.unlit = 1;
+            }
             return (None, stats);
         }
         if tir {
@@ -407,7 +452,7 @@ impl TriangleContext<'_> {
 /// Builds every volume of a scene: each light × generator, and one set per RGB
 /// channel for a dispersive refractor (its Cauchy index at the channel's wavelength,
 /// the flux in that channel only — Ernst et al. render one pass per colour, §5).
-/// Volumes end beyond the bounds of all receivers.
+/// Volumes end beyond the bounds of all receivers, which shadow the generators.
 pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::VolumeSet {
     let bounds = scene
         .receivers
@@ -415,6 +460,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
         .map(|r| r.mesh.bounds())
         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
         .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let occluders = SceneBvh::build(&Scene { receivers: scene.receivers.clone(), ..Scene::default() });
     let mut volumes = Vec::new();
     let mut stats = BuildStats::default();
     for generator in &scene.generators {
@@ -430,6 +476,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
                         light,
                         color,
                         bounds,
+                        Some(&occluders),
                         settings,
                         &mut volumes,
                     );
