@@ -29,7 +29,7 @@ use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Receiver, Scene};
 use std::collections::HashSet;
-use support::{caustic_irradiance, read_buffer, render};
+use support::{caustic_irradiance, read_buffer, render, render_without_caustics};
 
 const SIZE: u32 = 96;
 /// The view is `VIEW` metres across, centred on the origin, looking down.
@@ -161,15 +161,13 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     let (ball, light) = spawn_scene(&mut renderer);
 
-    // A technique no pass draws: no caustic maps, the baseline image.
-    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::IlluminationTextures;
-    let without = render(&mut renderer, 3);
+    // No technique available: no caustic maps, the baseline image.
+    let without = render_without_caustics(&mut renderer, 3);
     let report = renderer.pass_report();
     assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 0), "{report:?}");
     assert_eq!(gpu(&mut renderer).view_count(), 0);
 
     // The maps are made once, then only projected while nothing changes.
-    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::HierarchicalMaps;
     let made: u32 = (0..4)
         .map(|_| {
             renderer.app.update();
@@ -264,9 +262,7 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     // Several lights add up: a second spot where the first stands doubles every pixel's
     // caustics (against the two spots' own direct light).
     let second = renderer.world_mut().spawn(spot()).id();
-    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::IlluminationTextures;
-    let without_both = render(&mut renderer, 3);
-    renderer.world_mut().get_mut::<CausticGenerator>(ball).unwrap().technique = CausticTechnique::HierarchicalMaps;
+    let without_both = render_without_caustics(&mut renderer, 3);
     let doubled = caustic_irradiance(&render(&mut renderer, 3), &without_both);
     assert_eq!(gpu(&mut renderer).view_count(), 2);
     let twice: Vec<f32> = image.iter().map(|e| 2.0 * e).collect();

@@ -19,7 +19,7 @@ use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
 use caustics_core::volumes::{MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
-use support::{caustic_irradiance, exposure, render};
+use support::{caustic_irradiance, exposure, render, render_without_caustics};
 
 const SIZE: u32 = 96;
 /// The view is `VIEW` metres across, centred on the origin, looking down.
@@ -77,10 +77,6 @@ fn cpu_twin(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, setting
     set.irradiance_at(&points, &normals, &settings.core()).iter().map(|e| e.x).collect()
 }
 
-fn set_technique(renderer: &mut HeadlessRenderer, generator: Entity, technique: CausticTechnique) {
-    renderer.world_mut().get_mut::<CausticGenerator>(generator).unwrap().technique = technique;
-}
-
 fn save(image: &RenderedImage, name: &str) {
     image.save_png(&std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(name), 1.0).unwrap();
 }
@@ -89,16 +85,14 @@ fn save(image: &RenderedImage, name: &str) {
 fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     let mesh = water_mesh();
-    let water = CausticGenerator::refractive(1.333);
+    let water = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.333) };
     let generator = spawn_scene(&mut renderer, &mesh, water.clone(), SUN);
 
-    // No generator drawn by volumes: no volume pass (and nothing else to do).
-    set_technique(&mut renderer, generator, CausticTechnique::Convolution);
-    let without = render(&mut renderer, 4);
+    // No technique available: no volume pass (and nothing else to do).
+    let without = render_without_caustics(&mut renderer, 4);
     assert_eq!(renderer.pass_report().views("volumes"), 0, "{:?}", renderer.pass_report());
 
     let settings = WarpedVolumesSettings::default();
-    set_technique(&mut renderer, generator, CausticTechnique::WarpedVolumes);
     let with = render(&mut renderer, 4);
     save(&with, "gpu_volumes_pool.png");
     let report = renderer.pass_report();
@@ -129,9 +123,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         renderer.world_mut().insert_resource(settings);
         let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.world_mut()).unwrap();
         renderer.world_mut().entity_mut(camera).insert(msaa);
-        set_technique(&mut renderer, generator, CausticTechnique::Convolution);
-        let without = render(&mut renderer, 3);
-        set_technique(&mut renderer, generator, CausticTechnique::WarpedVolumes);
+        let without = render_without_caustics(&mut renderer, 3);
         let gpu = caustic_irradiance(&render(&mut renderer, 3), &without);
         let error = relative_l2(&gpu, &cpu_twin(&mesh, water.specular_interaction(), SUN, &settings));
         eprintln!("GPU vs CPU twin, {intensity:?}, {msaa:?}: {error:.2e}");
@@ -177,32 +169,50 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert!(scattered > 0.01, "too little in-scattering to compare ({scattered})");
     assert!(error < 0.01, "GPU and CPU in-scattering differ: relative L2 {error}");
 
-    // Stiff: a mirror 1 m up, facing down, lit from below (light travelling up), whose
-    // normals focus the light exactly onto the floor; then grazing light. The caustic
-    // triangles at the focus have zero area.
+    // Stiff: a glass lens 1 m up under an overhead sun, whose normals refract the light
+    // exactly onto one point of the floor (n ∝ η₁ i − η₂ t, Snell's law in vector form);
+    // then grazing light. The caustic triangles at the focus have zero area.
     let focus = caustics_core::glam::Vec3::ZERO;
-    let up = caustics_core::glam::Vec3::Y;
-    let mirror = TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
+    let down = caustics_core::glam::Vec3::NEG_Y;
+    let lens = TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
         let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
-        (to_focus - up).normalize()
+        (down - 1.5 * to_focus).normalize()
     })
     .unwrap();
-    let mirror_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&mirror));
-    renderer.world_mut().entity_mut(generator).insert((Mesh3d(mirror_mesh), CausticGenerator::mirror()));
-    for sun in [Vec3::Y, Vec3::new(1.0, 1e-3, 0.0)] {
+    let lens_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&lens));
+    let glass = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
+    renderer.world_mut().entity_mut(generator).insert((Mesh3d(lens_mesh), glass));
+    for sun in [Vec3::NEG_Y, Vec3::new(1.0, 1e-3, 0.0)] {
         let mut lights = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
         for mut t in lights.iter_mut(renderer.world_mut()) {
             *t = Transform::default().looking_to(sun, Vec3::Z);
         }
         let image = render(&mut renderer, 3);
         assert!(image.pixels.iter().all(|p| p.is_finite()), "non-finite pixel with the light along {sun}");
-        if sun == Vec3::Y {
+        if sun == Vec3::NEG_Y {
             save(&image, "gpu_volumes_focus.png");
             let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
             assert_eq!(stats.volumes, 2 * 16 * 16, "{stats:?}");
             assert!(image.pixels.iter().any(|p| p.x > 0.0), "the focused light reaches the floor somewhere");
         }
     }
+
+    // A roof over the lens (any mesh that casts shadows) hides every vertex from the
+    // sun: no volumes, no volume pass; the roof gone, the lens casts again.
+    let mut lights = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
+    for mut t in lights.iter_mut(renderer.world_mut()) {
+        *t = Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z);
+    }
+    let slab = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Cuboid::new(3.0, 0.1, 3.0));
+    let roof = renderer.world_mut().spawn((Mesh3d(slab), Transform::from_xyz(0.0, 2.0, 0.0))).id();
+    render(&mut renderer, 3);
+    let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
+    assert_eq!((stats.volumes, stats.shadowed), (0, 2 * 16 * 16), "{stats:?}");
+    assert_eq!(renderer.pass_report().views("volumes"), 0, "{:?}", renderer.pass_report());
+    renderer.world_mut().despawn(roof);
+    render(&mut renderer, 3);
+    assert_eq!(renderer.world_mut().resource::<CausticVolumes>().stats.volumes, 2 * 16 * 16);
+    assert_eq!(renderer.pass_report().views("volumes"), 1, "{:?}", renderer.pass_report());
 
     // No generators at all: no volume pass.
     renderer.world_mut().entity_mut(generator).remove::<CausticGenerator>();

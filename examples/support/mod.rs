@@ -200,7 +200,8 @@ const RING_SUN_LUX: f32 = 20_000.0;
 const RING_SUN_DIRECTION: Vec3 = Vec3::new(1.0, -0.45, 0.0);
 
 /// Ernst et al.'s Fig. 1: a solid metal ring of `segments` around on a wooden floor,
-/// under a low sun (the `ring` and `volumes_compare` examples).
+/// under a low sun (the `ring` and `volumes_compare` examples), drawn by warped volumes
+/// (`Auto` would pick the caustic maps for a mirror).
 pub fn ring_scene(world: &mut World, segments: usize, intensity: VolumeIntensity) {
     world.insert_resource(WarpedVolumesSettings { intensity, ..default() });
     world.insert_resource(GlobalAmbientLight { brightness: 300.0, ..default() });
@@ -216,7 +217,8 @@ pub fn ring_scene(world: &mut World, segments: usize, intensity: VolumeIntensity
     });
     let ring = bevy_mesh(&TriMesh::solid_ring(glam::Vec3::ZERO, 1.0, 1.05, 0.3, segments));
     let ring = world.resource_mut::<Assets<Mesh>>().add(ring);
-    world.spawn((Mesh3d(ring), MeshMaterial3d(metal), CausticGenerator::mirror()));
+    let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };
+    world.spawn((Mesh3d(ring), MeshMaterial3d(metal), mirror));
     world.spawn((
         DirectionalLight { illuminance: RING_SUN_LUX, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(RING_SUN_DIRECTION, Vec3::Y),

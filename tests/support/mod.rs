@@ -54,6 +54,17 @@ pub fn read_buffer(renderer: &mut HeadlessRenderer, buffer: &bevy::render::rende
     slice.get_mapped_range().to_vec()
 }
 
+/// Renders `frames` frames with no caustic technique available, so that every
+/// generator casts nothing: the baseline that caustic irradiance is measured against.
+pub fn render_without_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
+    use bevy_caustics::AvailableCausticTechniques;
+    let available = renderer.world_mut().resource::<AvailableCausticTechniques>().clone();
+    renderer.world_mut().insert_resource(AvailableCausticTechniques(Default::default()));
+    let image = render(renderer, frames);
+    renderer.world_mut().insert_resource(available);
+    image
+}
+
 /// Renders `frames` frames, panicking with the renderer's error.
 pub fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
     renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))

@@ -1,5 +1,6 @@
 //! An egui window showing what the caustics plugin does: the entities it sees, the
-//! passes that ran in the last frame, and every invalid entity with its reason.
+//! technique each generator draws with and why, the passes that ran in the last frame,
+//! and every invalid entity with its reason.
 //! Behind the `egui` cargo feature.
 
 use crate::{CausticGenerator, CausticPassReport, CausticReceiver, InvalidCausticParams, ParticipatingMedium};
@@ -26,8 +27,10 @@ fn panel(
     generators: Query<(), With<CausticGenerator>>,
     receivers: Query<(), With<CausticReceiver>>,
     media: Query<(), With<ParticipatingMedium>>,
-    invalid: Query<(Entity, &InvalidCausticParams, Option<&Name>)>,
+    invalid: Query<(Entity, &InvalidCausticParams)>,
+    names: Query<&Name>,
 ) -> Result {
+    let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
     egui::Window::new("Caustics").default_width(280.0).show(contexts.ctx_mut()?, |ui| {
         ui.label(format!(
             "{} generators, {} receivers, {} media",
@@ -36,6 +39,10 @@ fn panel(
             media.iter().count()
         ));
         ui.separator();
+        for (entity, choice) in &report.generators {
+            ui.label(format!("{}: {choice}", label(*entity)));
+        }
+        ui.separator();
         ui.label("Passes in the last frame:");
         if report.is_empty() {
             ui.label("  none");
@@ -43,9 +50,8 @@ fn panel(
         for (pass, views) in &report.passes {
             ui.label(format!("  {pass}: {views} view(s)"));
         }
-        for (entity, InvalidCausticParams(reason), name) in &invalid {
-            let label = name.map_or_else(|| entity.to_string(), |n| n.to_string());
-            ui.colored_label(egui::Color32::YELLOW, format!("{label} skipped: {reason}"));
+        for (entity, InvalidCausticParams(reason)) in &invalid {
+            ui.colored_label(egui::Color32::YELLOW, format!("{} skipped: {reason}", label(entity)));
         }
     });
     Ok(())

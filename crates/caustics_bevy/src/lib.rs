@@ -21,6 +21,7 @@ pub mod irradiance;
 pub mod ocean;
 pub mod reference;
 pub mod report;
+pub mod technique;
 #[cfg(feature = "warped-volumes")]
 pub mod warped_volumes;
 
@@ -35,6 +36,7 @@ pub use convolution::{DropPebble, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
 pub use report::CausticPassReport;
+pub use technique::{AvailableCausticTechniques, CausticTechniqueChoice};
 
 use bevy::prelude::*;
 
@@ -68,6 +70,7 @@ impl Plugin for CausticsPlugin {
                     .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate)
                     .after(components::validate_caustic_params),
             );
+        technique::build(app);
         report::build(app);
         irradiance::build(app);
         #[cfg(feature = "warped-volumes")]
@@ -92,7 +95,8 @@ pub mod prelude {
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
-        CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsPlugin,
+        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique,
+        CausticTechniqueChoice, CausticsPlugin,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };
 }

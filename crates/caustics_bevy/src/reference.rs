@@ -38,6 +38,19 @@ pub type LightComponents = (
     &'static InheritedVisibility,
 );
 
+/// What the techniques read of a mesh entity: its mesh, placement, visibility and bounds.
+pub type MeshComponents = (&'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static Aabb>);
+
+/// A mesh that is not a generator, and whether it receives caustics or opts out of
+/// casting shadows.
+pub type OccluderComponents = (MeshComponents, Has<CausticReceiver>, Has<bevy::light::NotShadowCaster>);
+
+/// Whether a mesh that is not a generator blocks caustic light: a visible receiver, or
+/// a visible mesh that casts Bevy's shadows (`NotShadowCaster` opts out of both).
+pub fn blocks_caustic_light(visible: &InheritedVisibility, receiver: bool, no_shadows: bool) -> bool {
+    visible.get() && (receiver || !no_shadows)
+}
+
 /// Any of Bevy's lights.
 pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 

@@ -1,22 +1,33 @@
-//! Which caustics passes ran in the last rendered frame, for tests, profiling
-//! overlays and "no generators, no work" guarantees.
+//! Which caustics passes ran in the last rendered frame, and which technique draws
+//! each generator and why, for tests, profiling overlays and "no generators, no work"
+//! guarantees.
 
+use crate::technique::{CausticTechniqueChoice, TechniqueChoice};
 use bevy::prelude::*;
 use bevy::render::{Render, RenderApp, RenderSystems};
 use std::sync::{Arc, Mutex};
 
 /// The passes that ran in the last frame the renderer finished, with the number of
-/// views each ran for. Empty when the scene needed no caustics work.
+/// views each ran for, and this frame's technique for every generator. `passes` is
+/// empty when the scene needed no caustics work.
 #[derive(Resource, Clone, Debug, Default, PartialEq, Eq)]
 pub struct CausticPassReport {
     /// Passes by name (`"inject"`, `"composite"`, …) and how many views ran them.
     pub passes: Vec<(&'static str, u32)>,
+    /// Each generator with a technique, by entity, with the choice and its reason
+    /// (`closed refractor → hierarchical maps`).
+    pub generators: Vec<(Entity, TechniqueChoice)>,
 }
 
 impl CausticPassReport {
     /// How many views ran `pass` (0 if it did not run).
     pub fn views(&self, pass: &str) -> u32 {
         self.passes.iter().find(|(p, _)| *p == pass).map_or(0, |(_, n)| *n)
+    }
+
+    /// The choice for `generator`, if it has one.
+    pub fn technique_of(&self, generator: Entity) -> Option<&TechniqueChoice> {
+        self.generators.iter().find(|(e, _)| *e == generator).map(|(_, c)| c)
     }
 
     /// Whether no caustics pass ran at all.
@@ -57,14 +68,24 @@ pub(crate) fn build(app: &mut App) {
     app.insert_resource(recorder.clone())
         .init_resource::<CausticPassReport>()
         .add_systems(First, |recorder: Res<PassRecorder>, mut report: ResMut<CausticPassReport>| {
-            let last = recorder.last();
-            if *report != last {
-                *report = last;
+            let last = recorder.last().passes;
+            if report.passes != last {
+                report.passes = last;
             }
-        });
+        })
+        .add_systems(PostUpdate, report_choices.in_set(crate::CausticsSystems::ReadScene));
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
         render_app
             .insert_resource(recorder)
             .add_systems(Render, (|r: Res<PassRecorder>| r.publish()).in_set(RenderSystems::Cleanup));
+    }
+}
+
+/// Copies every generator's [`CausticTechniqueChoice`] into the report.
+fn report_choices(choices: Query<(Entity, &CausticTechniqueChoice)>, mut report: ResMut<CausticPassReport>) {
+    let mut generators: Vec<(Entity, TechniqueChoice)> = choices.iter().map(|(e, c)| (e, c.0.clone())).collect();
+    generators.sort_by_key(|(e, _)| *e);
+    if report.generators != generators {
+        report.generators = generators;
     }
 }

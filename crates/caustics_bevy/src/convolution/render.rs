@@ -2,7 +2,9 @@
 //! the projection of the floor irradiance into each view's caustic irradiance buffer.
 
 use super::{PoolRipples, PoolSurface};
-use crate::components::{CausticGenerator, CausticTechnique, GeneratorInteraction, InvalidCausticParams};
+use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
+use crate::technique::CausticTechniqueChoice;
+use caustics_core::technique::Technique;
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -156,16 +158,22 @@ pub(super) fn build(app: &mut App) {
 type ConvolutionPools = Query<
     'static,
     'static,
-    (Entity, &'static PoolRipples, &'static PoolSurface, &'static CausticGenerator, &'static GlobalTransform),
+    (
+        Entity,
+        &'static PoolRipples,
+        &'static PoolSurface,
+        (&'static CausticGenerator, &'static CausticTechniqueChoice),
+        &'static GlobalTransform,
+    ),
     Without<InvalidCausticParams>,
 >;
 
 /// The sunlight a pool sees: the brightest directional light.
 type Suns = Query<'static, 'static, (&'static DirectionalLight, &'static GlobalTransform)>;
 
-fn uses_convolution(generator: &CausticGenerator) -> Option<f32> {
-    match (generator.technique, generator.interaction) {
-        (CausticTechnique::Convolution, GeneratorInteraction::Refract { ior, .. }) => Some(ior),
+fn uses_convolution((generator, choice): (&CausticGenerator, &CausticTechniqueChoice)) -> Option<f32> {
+    match (choice.technique(), generator.interaction) {
+        (Technique::Convolution, GeneratorInteraction::Refract { ior, .. }) => Some(ior),
         _ => None,
     }
 }
@@ -185,7 +193,7 @@ fn brightest_sun<'a>(suns: impl Iterator<Item = (&'a DirectionalLight, &'a Globa
 /// Main world: aims each pool's kernels at the sunlight it refracts (the lobe is
 /// expanded about it); only a change of light, index or pool orientation redraws them.
 fn aim_kernels(
-    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, &CausticGenerator, &GlobalTransform), Without<InvalidCausticParams>>,
+    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, (&CausticGenerator, &CausticTechniqueChoice), &GlobalTransform), Without<InvalidCausticParams>>,
     suns: Query<(&DirectionalLight, &GlobalTransform)>,
 ) {
     let Some((_, sun)) = brightest_sun(suns.iter()) else { return };
@@ -203,7 +211,7 @@ fn aim_kernels(
 /// Main world: the views have convolution work while a pool refracts a sun.
 fn mark_active(
     mut active: ResMut<ActiveCausticTechniques>,
-    pools: Query<&CausticGenerator, (With<PoolSurface>, Without<InvalidCausticParams>)>,
+    pools: Query<(&CausticGenerator, &CausticTechniqueChoice), (With<PoolSurface>, Without<InvalidCausticParams>)>,
     suns: Query<(), With<DirectionalLight>>,
 ) {
     let any = !suns.is_empty() && pools.iter().any(|generator| uses_convolution(generator).is_some());

@@ -3,15 +3,15 @@
 //! does, so that an unchanged scene keeps its maps.
 
 use super::HierarchicalMapsSettings;
-use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
+use crate::components::{CausticGenerator, InvalidCausticParams};
+use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{AnyLight, LightComponents, core_light, to_core, world_aabb};
-use bevy::camera::primitives::Aabb;
-use bevy::light::NotShadowCaster;
+use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, to_core, world_aabb};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
 use caustics_core::params::SpecularInteraction;
+use caustics_core::technique::Technique;
 
 /// One light view to make a caustic map for, with the light it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,14 +48,12 @@ pub(super) fn build(app: &mut App) {
     app.init_resource::<CausticMapPlan>().add_systems(PostUpdate, plan_caustic_maps.in_set(crate::CausticsSystems::ReadScene));
 }
 
-type MeshComponents = (&'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static Aabb>);
-
 /// Main world: plans the caustic maps (light views, instances) and bumps the
 /// generation when the plan, or a mesh it draws, changed.
 #[allow(clippy::too_many_arguments)]
 fn plan_caustic_maps(
-    generators: Query<(Entity, &CausticGenerator, MeshComponents), Without<InvalidCausticParams>>,
-    occluders: Query<(MeshComponents, Has<CausticReceiver>, Has<NotShadowCaster>), Without<CausticGenerator>>,
+    generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
+    occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     lights: Query<LightComponents, AnyLight>,
     settings: Res<HierarchicalMapsSettings>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
@@ -80,8 +78,8 @@ fn plan_caustic_maps(
     };
     let mut next = CausticMapPlan { settings: Some(core_settings), generation: plan.generation, ..default() };
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
-    for (entity, generator, (mesh, transform, visible, aabb)) in &generators {
-        if generator.technique != CausticTechnique::HierarchicalMaps || !visible.get() || !valid {
+    for (entity, generator, choice, (mesh, transform, visible, aabb)) in &generators {
+        if choice.technique() != Technique::HierarchicalMaps || !visible.get() || !valid {
             continue;
         }
         if next.generators.len() == super::render::MAX_GENERATORS {
@@ -102,8 +100,7 @@ fn plan_caustic_maps(
     let mut receiver_bounds: Option<(Vec3, Vec3)> = None;
     if generator_bounds.is_some() {
         for ((mesh, transform, visible, aabb), receiver, no_shadows) in &occluders {
-            // Receivers, and every other mesh that casts shadows, block caustic light.
-            if !visible.get() || (!receiver && no_shadows) {
+            if !blocks_caustic_light(visible, receiver, no_shadows) {
                 continue;
             }
             if receiver && let Some(aabb) = aabb {

@@ -2,16 +2,20 @@
 //! on changed.
 
 use super::WarpedVolumesSettings;
-use crate::components::{CausticGenerator, CausticReceiver, CausticTechnique, InvalidCausticParams};
+use crate::components::{CausticGenerator, CausticReceiver, InvalidCausticParams};
+use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{AnyLight, LightComponents, core_light, core_mesh, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb};
 use bevy::camera::primitives::Aabb;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::scene::Light;
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
+use caustics_core::bvh::SceneBvh;
 use caustics_core::mesh::TriMesh;
+use caustics_core::scene::{Receiver, Scene};
 use caustics_core::params::SpecularInteraction;
+use caustics_core::technique::Technique;
 use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels};
 use std::sync::Arc;
 
@@ -36,13 +40,20 @@ type LightChanged = Or<(
     Changed<SpotLight>,
     Changed<InheritedVisibility>,
 )>;
-type ReceiverChanged = Or<(Changed<GlobalTransform>, Changed<Aabb>)>;
+type OccluderChanged = Or<(Changed<GlobalTransform>, Changed<Aabb>, Changed<Mesh3d>, Changed<InheritedVisibility>)>;
 type GeneratorChanged =
-    Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<CausticGenerator>, Changed<InheritedVisibility>)>;
+    Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<CausticGenerator>, Changed<CausticTechniqueChoice>, Changed<InheritedVisibility>)>;
 type Generators<'w, 's> = Query<
     'w,
     's,
-    (Entity, &'static CausticGenerator, &'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility),
+    (
+        Entity,
+        &'static CausticGenerator,
+        &'static CausticTechniqueChoice,
+        &'static Mesh3d,
+        &'static GlobalTransform,
+        &'static InheritedVisibility,
+    ),
     Without<InvalidCausticParams>,
 >;
 
@@ -69,9 +80,10 @@ struct BuildState {
     running: Option<Task<BuildOutput>>,
 }
 
-/// Rebuilds every caustic volume when a generator, light, receiver or the settings
-/// changed, or a generator's mesh asset was modified (an animated ocean: every
-/// frame). The build runs on the async compute pool, in parallel over triangles,
+/// Rebuilds every caustic volume when a generator, light, receiver, shadow caster or
+/// the settings changed, or a generator's or occluder's mesh asset was modified (an
+/// animated ocean: every frame). Receivers and shadow casters hide generator vertices
+/// from the light (`build_generator_volumes`). The build runs on the async compute pool, in parallel over triangles,
 /// while the frames go on with the previous volumes: no frame waits for it. Changes
 /// that arrive during a build start one more when it ends.
 #[allow(clippy::too_many_arguments)]
@@ -80,11 +92,11 @@ fn build_volumes(
     changed_generators: Query<(), (With<CausticGenerator>, GeneratorChanged)>,
     lights: Query<LightComponents, AnyLight>,
     changed_lights: Query<(), (AnyLight, LightChanged)>,
-    receivers: Query<(&GlobalTransform, Option<&Aabb>), With<CausticReceiver>>,
-    changed_receivers: Query<(), (With<CausticReceiver>, ReceiverChanged)>,
-    mut removed: RemovedComponents<CausticGenerator>,
+    occluders: Query<OccluderComponents, Without<CausticGenerator>>,
+    changed_occluders: Query<(), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
+    mut removed: RemovedComponents<CausticTechniqueChoice>,
     mut removed_invalid: RemovedComponents<InvalidCausticParams>,
-    mut removed_receivers: RemovedComponents<CausticReceiver>,
+    (mut removed_meshes, mut removed_receivers): (RemovedComponents<Mesh3d>, RemovedComponents<CausticReceiver>),
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
@@ -102,12 +114,13 @@ fn build_volumes(
         || settings.is_changed()
         || !changed_generators.is_empty()
         || !changed_lights.is_empty()
-        || !changed_receivers.is_empty()
+        || !changed_occluders.is_empty()
         || removed.read().count() > 0
         || removed_invalid.read().count() > 0
+        || removed_meshes.read().count() > 0
         || removed_receivers.read().count() > 0
         // A mesh that had not loaded at the last build.
-        || generators.iter().any(|(_, _, m, ..)| !state.meshes.contains(&m.id()));
+        || generators.iter().any(|(_, _, _, m, ..)| !state.meshes.contains(&m.id()));
 
     if let Some(task) = state.running.as_mut() {
         let Some((built, stats, fans)) = block_on(poll_once(task)) else {
@@ -131,16 +144,28 @@ fn build_volumes(
         .filter(|l| l.validate().is_ok())
         .collect();
     // Volumes end beyond the receivers' world bounds.
-    let bounds = receivers
+    let bounds = occluders
         .iter()
-        .filter_map(|(t, aabb)| aabb.map(|a| world_aabb(t, a)))
+        .filter(|(_, receiver, _)| *receiver)
+        .filter_map(|((_, t, _, aabb), ..)| aabb.map(|a| world_aabb(t, a)))
         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
         .map(|(lo, hi)| (to_core(lo), to_core(hi)));
     state.meshes.clear();
-    let mut inputs = Vec::new();
-    for (entity, generator, mesh3d, transform, visible) in &generators {
+    // What shadows the generators: receivers and the other meshes that cast shadows.
+    let mut shadowing = Vec::new();
+    for ((mesh3d, transform, visible, _), receiver, no_shadows) in &occluders {
+        if !blocks_caustic_light(visible, receiver, no_shadows) {
+            continue;
+        }
         state.meshes.insert(mesh3d.id());
-        let uses_volumes = matches!(generator.technique, CausticTechnique::Auto | CausticTechnique::WarpedVolumes);
+        if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
+            shadowing.push(Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE });
+        }
+    }
+    let mut inputs = Vec::new();
+    for (entity, generator, choice, mesh3d, transform, visible) in &generators {
+        state.meshes.insert(mesh3d.id());
+        let uses_volumes = choice.technique() == Technique::WarpedVolumes;
         let (Some(mesh), true, true) = (meshes.get(&mesh3d.0), visible.get(), uses_volumes) else {
             continue;
         };
@@ -164,6 +189,7 @@ fn build_volumes(
         let Some(bounds) = bounds else {
             return (built, stats, kept);
         };
+        let occluders = SceneBvh::build(&Scene { receivers: shadowing, ..Scene::default() });
         for input in inputs {
             let mut fan = fans.remove(&input.entity).unwrap_or_default();
             if !fan.fits(&input.mesh) {
@@ -179,6 +205,7 @@ fn build_volumes(
                         light,
                         color,
                         bounds,
+                        Some(&occluders),
                         &core_settings,
                         &mut built,
                     );

@@ -1,0 +1,197 @@
+//! Main world: the technique each generator gets. [`choose_techniques`] reads what a
+//! generator is — mirror, rippling pool, ocean, closed or open refractor (its mesh
+//! welded and checked for holes once per mesh asset), inside a participating medium or
+//! not — and applies `caustics_core::technique`'s table. The result is a
+//! [`CausticTechniqueChoice`] on the generator, which is all the techniques' own
+//! systems read: a generator draws with exactly one technique, and never with none
+//! without a warning.
+
+use crate::components::{CausticGenerator, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
+use crate::reference::{core_mesh, world_aabb};
+use bevy::camera::primitives::Aabb;
+use bevy::platform::collections::{HashMap, HashSet};
+use bevy::prelude::*;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::technique::{GeneratorFacts, GeneratorShape, choose};
+pub use caustics_core::technique::{Technique, TechniqueChoice};
+
+/// The technique a generator draws with and why (`closed refractor → hierarchical
+/// maps`), kept up to date by the plugin. Read it to see what `Auto` decided.
+#[derive(Component, Clone, Debug, PartialEq, Eq, Deref)]
+pub struct CausticTechniqueChoice(pub TechniqueChoice);
+
+impl CausticTechniqueChoice {
+    /// The technique drawing the generator.
+    pub fn technique(&self) -> Technique {
+        self.0.technique
+    }
+}
+
+/// The techniques this app draws with: those compiled in (a cargo feature each), less
+/// any the app takes out at run time — a game may drop the caustic maps on hardware
+/// too slow for them. A generator that asks for a technique not listed gets `Auto`'s
+/// choice among the rest, with a warning.
+#[derive(Resource, Clone, Debug, PartialEq, Eq)]
+pub struct AvailableCausticTechniques(pub HashSet<Technique>);
+
+impl Default for AvailableCausticTechniques {
+    /// Every technique this build contains.
+    fn default() -> Self {
+        let compiled = [
+            (Technique::WarpedVolumes, cfg!(feature = "warped-volumes")),
+            (Technique::Convolution, cfg!(feature = "convolution")),
+            (Technique::HierarchicalMaps, cfg!(feature = "hierarchical-maps")),
+        ];
+        Self(compiled.into_iter().filter_map(|(t, on)| on.then_some(t)).collect())
+    }
+}
+
+impl CausticTechnique {
+    /// The technique asked for; `None` for `Auto`.
+    pub fn requested(self) -> Option<Technique> {
+        match self {
+            CausticTechnique::Auto => None,
+            CausticTechnique::WarpedVolumes => Some(Technique::WarpedVolumes),
+            CausticTechnique::IlluminationTextures => Some(Technique::IlluminationTextures),
+            CausticTechnique::Convolution => Some(Technique::Convolution),
+            CausticTechnique::HierarchicalMaps => Some(Technique::HierarchicalMaps),
+        }
+    }
+}
+
+pub(crate) fn build(app: &mut App) {
+    app.init_resource::<AvailableCausticTechniques>().add_systems(
+        PostUpdate,
+        choose_techniques
+            .after(crate::components::validate_caustic_params)
+            .after(bevy::transform::TransformSystems::Propagate)
+            .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
+            .before(crate::CausticsSystems::ReadScene),
+    );
+}
+
+/// What the choice reads of a generator entity. The pool and ocean markers are open
+/// surfaces by construction (their meshes change every frame and are never welded).
+type GeneratorQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        Entity,
+        &'static CausticGenerator,
+        &'static Mesh3d,
+        &'static GlobalTransform,
+        Option<&'static Aabb>,
+        Has<InvalidCausticParams>,
+        Has<PoolMarker>,
+        Has<OceanMarker>,
+        Option<&'static CausticTechniqueChoice>,
+    ),
+>;
+
+#[cfg(feature = "convolution")]
+type PoolMarker = crate::PoolRipples;
+#[cfg(not(feature = "convolution"))]
+type PoolMarker = NeverPresent;
+#[cfg(feature = "ocean")]
+type OceanMarker = crate::Ocean;
+#[cfg(not(feature = "ocean"))]
+type OceanMarker = NeverPresent;
+
+/// Stands in for a marker whose feature is off; never inserted.
+#[cfg(any(not(feature = "convolution"), not(feature = "ocean")))]
+#[derive(Component)]
+struct NeverPresent;
+
+/// Gives every valid generator a [`CausticTechniqueChoice`], updated when what it reads
+/// changes (closedness is kept per mesh asset until the asset changes); warns once per new choice that passed over the technique a generator asked
+/// for, or that found nothing to draw with.
+#[allow(clippy::too_many_arguments)]
+pub fn choose_techniques(
+    mut commands: Commands,
+    generators: GeneratorQuery<'_, '_>,
+    media: Query<(&GlobalTransform, &InheritedVisibility), (With<ParticipatingMedium>, Without<InvalidCausticParams>)>,
+    mut removed: RemovedComponents<CausticGenerator>,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    meshes: Res<Assets<Mesh>>,
+    available: Res<AvailableCausticTechniques>,
+    mut closed: Local<HashMap<AssetId<Mesh>, bool>>,
+    mut silent: Local<HashSet<Entity>>,
+) {
+    for event in mesh_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::Removed { id } = event {
+            closed.remove(id);
+        }
+    }
+    for entity in removed.read() {
+        silent.remove(&entity);
+        if let Ok(mut e) = commands.get_entity(entity) {
+            e.try_remove::<CausticTechniqueChoice>();
+        }
+    }
+    // Unit cubes of the media, as world bounds.
+    let media: Vec<(Vec3, Vec3)> = media
+        .iter()
+        .filter(|(_, visible)| visible.get())
+        .map(|(t, _)| world_aabb(t, &Aabb::from_min_max(Vec3::splat(-0.5), Vec3::splat(0.5))))
+        .collect();
+    for (entity, generator, mesh3d, transform, aabb, invalid, pool, ocean, current) in &generators {
+        if invalid {
+            if current.is_some() {
+                commands.entity(entity).remove::<CausticTechniqueChoice>();
+            }
+            continue;
+        }
+        let shape = match generator.specular_interaction() {
+            SpecularInteraction::Reflect => GeneratorShape::Mirror,
+            _ if pool => GeneratorShape::Pool,
+            _ if ocean => GeneratorShape::OpenRefractor,
+            _ => {
+                let id = mesh3d.id();
+                let is_closed = match closed.get(&id) {
+                    Some(&c) => c,
+                    None => {
+                        // Not loaded yet: no choice, no work, until it is.
+                        let Some(mesh) = meshes.get(id) else { continue };
+                        // A malformed mesh counts as open: the volumes then report it.
+                        let c = core_mesh(mesh, &GlobalTransform::IDENTITY).is_ok_and(|m| m.is_closed());
+                        closed.insert(id, c);
+                        c
+                    }
+                };
+                if is_closed { GeneratorShape::ClosedRefractor } else { GeneratorShape::OpenRefractor }
+            }
+        };
+        let in_medium = aabb.is_some_and(|aabb| {
+            let (lo, hi) = world_aabb(transform, aabb);
+            media.iter().any(|&(mlo, mhi)| lo.cmple(mhi).all() && mlo.cmple(hi).all())
+        });
+        let facts = GeneratorFacts { shape, in_medium };
+        let requested = generator.technique.requested();
+        match choose(requested, facts, |t| available.0.contains(&t)) {
+            Some(choice) => {
+                silent.remove(&entity);
+                if current.map(|c| &c.0) == Some(&choice) {
+                    continue;
+                }
+                if let Some(asked) = requested.filter(|&t| t != choice.technique) {
+                    warn!("bevy_caustics: CausticGenerator {entity} asked for {asked}; it draws with {}: {choice}", choice.technique);
+                } else if !choice.passed_over.is_empty() {
+                    info!("bevy_caustics: CausticGenerator {entity}: {choice}");
+                }
+                commands.entity(entity).insert(CausticTechniqueChoice(choice));
+            }
+            None => {
+                if silent.insert(entity) {
+                    warn!(
+                        "bevy_caustics: CausticGenerator {entity} casts no caustics: no technique in this app draws a {} (available: {:?})",
+                        shape.label(),
+                        available.0
+                    );
+                }
+                if current.is_some() {
+                    commands.entity(entity).remove::<CausticTechniqueChoice>();
+                }
+            }
+        }
+    }
+}
