@@ -14,7 +14,8 @@ use caustics_core::estimate::{GridRegion, IrradianceGrid};
 use caustics_core::glam::{Vec2, Vec3};
 use caustics_core::metrics::{relative_l1, relative_l2};
 use caustics_core::params::SpecularInteraction;
-use caustics_core::scene::LightKind;
+use caustics_core::scene::{LightKind, Scene};
+use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose};
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{IntensityMode, VolumeSettings, build_scene_volumes};
@@ -115,7 +116,7 @@ pub struct WarpedVolumes {
 
 /// Points per cell side at which the volumes are evaluated: the tracer bins flux per
 /// cell, so both estimate the cell means.
-const SUPERSAMPLE: usize = 4;
+pub const SUPERSAMPLE: usize = 4;
 
 /// The three intensity modes: the plugin's default, the paper's, and constant.
 pub const VOLUME_METHODS: [WarpedVolumes; 3] = [
@@ -130,26 +131,95 @@ impl BenchMethod for WarpedVolumes {
     }
     fn qualities(&self, scene: &str, quick: bool) -> Vec<u64> {
         match (scene, quick) {
-            ("ring", false) => vec![16, 32, 64, 128, 256, 512, 1024],
-            ("ring", true) => vec![16, 64, 256, 1024],
-            ("pool", false) => vec![16, 32, 64, 128, 256],
-            ("pool", true) => vec![32, 128],
-            // Single-bounce (§3.1): a closed glass sphere needs two refractions.
+            ("ring" | "mirror_bunny", false) => vec![16, 32, 64, 128, 256, 512, 1024],
+            ("ring" | "mirror_bunny", true) => vec![16, 64, 256, 1024],
+            ("pool" | "roofed_pool" | "ball_pool", false) => vec![16, 32, 64, 128, 256],
+            ("pool" | "roofed_pool" | "ball_pool", true) => vec![32, 128],
+            // One bounce (§3.1) where the sphere bends light twice: measured to show it.
+            ("sphere", false) => vec![16, 32, 64, 128],
+            ("sphere", true) => vec![32],
             _ => vec![],
         }
     }
     fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
         let tessellated = crate::scenes::tessellated(name, quality as usize)
             .ok_or_else(|| format!("{}: no tessellation for this scene", self.name))?;
-        let settings = VolumeSettings { intensity: self.intensity, ..VolumeSettings::default() };
-        let set = build_scene_volumes(&tessellated.scene, &settings);
-        let region = scene.region;
-        let points = cell_sample_points(&region);
-        // The floor faces up (the region's `edge_u × edge_v` may point either way).
-        let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
-        let normals = vec![up; points.len()];
-        let irradiance: Vec<f32> = set.irradiance_at(&points, &normals, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
-        Ok((cell_means(&irradiance), set.volumes.len() as u64))
+        Ok(volumes_irradiance(&tessellated.scene, &scene.region, self.intensity))
+    }
+}
+
+/// The caustic irradiance per cell of `region` from every generator of `scene` by the
+/// volumes' CPU twin, and the number of volumes.
+pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode) -> (Vec<f32>, u64) {
+    let settings = VolumeSettings { intensity, ..VolumeSettings::default() };
+    let set = build_scene_volumes(scene, &settings);
+    let points = cell_sample_points(region);
+    // The floor faces up (the region's `edge_u × edge_v` may point either way).
+    let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
+    let normals = vec![up; points.len()];
+    let irradiance: Vec<f32> = set.irradiance_at(&points, &normals, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
+    (cell_means(&irradiance), set.volumes.len() as u64)
+}
+
+/// What a game gets by default: each generator drawn by the technique `Auto` picks for
+/// it (`caustics_core::technique`, as the plugin picks), the techniques' caustics
+/// added. Step `quality` of [`Auto::steps`] sets the tessellation of the scene's
+/// tessellated generator (the volumes' quality) and the photons per light view of the
+/// caustic maps (the full method).
+pub struct Auto;
+
+impl Auto {
+    /// `(tessellation, photons per side)` per step; tessellation 0 keeps the scene's own.
+    fn steps(scene: &str, quick: bool) -> Vec<(usize, u32)> {
+        let steps: &[(usize, u32)] = match scene {
+            "pool" | "roofed_pool" | "ball_pool" => &[(32, 256), (64, 512), (128, 1024), (256, 2048)],
+            "sphere" => &[(64, 256), (64, 512), (64, 1024), (64, 2048)],
+            "ring" | "mirror_bunny" => &[(64, 256), (128, 512), (256, 1024), (1024, 2048)],
+            _ => &[(0, 256), (0, 512), (0, 1024), (0, 2048)],
+        };
+        if quick { vec![steps[0], steps[2]] } else { steps.to_vec() }
+    }
+}
+
+impl BenchMethod for Auto {
+    fn name(&self) -> &'static str {
+        "auto"
+    }
+    fn qualities(&self, scene: &str, quick: bool) -> Vec<u64> {
+        (0..Self::steps(scene, quick).len() as u64).collect()
+    }
+    fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
+        let (tessellation, photons) = Self::steps(name, false)[quality as usize];
+        let own = match tessellation {
+            0 => scene.clone(),
+            n => crate::scenes::tessellated(name, n).ok_or_else(|| format!("auto: no tessellation of {name}"))?,
+        };
+        let mut groups: Vec<(Technique, Scene)> = Vec::new();
+        for generator in &own.scene.generators {
+            let facts = GeneratorFacts { shape: GeneratorShape::of(&generator.mesh, &generator.interaction), in_medium: false };
+            let choice = choose(None, facts, |_| true).ok_or("auto: no technique draws a generator")?;
+            match groups.iter_mut().find(|(t, _)| *t == choice.technique) {
+                Some((_, group)) => group.generators.push(generator.clone()),
+                None => groups.push((choice.technique, Scene { generators: vec![generator.clone()], ..own.scene.clone() })),
+            }
+        }
+        let mut total = vec![0.0f32; scene.region.nu * scene.region.nv];
+        let mut work = 0;
+        for (technique, group) in groups {
+            let (image, done) = match technique {
+                Technique::WarpedVolumes => volumes_irradiance(&group, &scene.region, IntensityMode::Conserving),
+                Technique::HierarchicalMaps => {
+                    crate::hierarchical::irradiance(&BenchScene { scene: group, ..scene.clone() }, photons, &crate::hierarchical::VARIANTS[4])?
+                }
+                other => return Err(format!("auto: the bench does not run {other}")),
+            };
+            total.iter_mut().zip(image).for_each(|(t, e)| *t += e);
+            work += done;
+        }
+        Ok((total, work))
+    }
+    fn quality_label(&self, quality: u64) -> String {
+        format!("step {quality}")
     }
 }
 
@@ -412,6 +482,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];
     methods.extend(VOLUME_METHODS.iter().map(|m| m as &dyn BenchMethod));
     methods.extend(CONVOLUTION_METHODS.iter().map(|m| m as &dyn BenchMethod));
+    methods.push(&Auto);
     let mut notes = String::new();
     let reference_photons: u64 = if args.quick { 1 << 21 } else { 1 << 26 };
     let mut rows = Vec::new();
@@ -421,8 +492,8 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         // The truth is the smooth surface: the reference traces a far finer generator
         // than any method here uses (the scene's own tessellation for the sphere).
         let fine = match name.as_str() {
-            "pool" => crate::scenes::tessellated(name, 1024),
-            "ring" => crate::scenes::tessellated(name, 4096),
+            "pool" | "roofed_pool" | "ball_pool" => crate::scenes::tessellated(name, 1024),
+            "ring" | "mirror_bunny" => crate::scenes::tessellated(name, 4096),
             _ => None,
         };
         let scene = fine.unwrap_or(scene);

@@ -14,6 +14,8 @@ use caustics_core::hierarchical::hierarchy::{self, PhotonPyramid};
 use caustics_core::hierarchical::{
     Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, Splats, light_intensity,
 };
+use caustics_core::glam::Vec3;
+use caustics_core::scene::Scene;
 use caustics_core::scenes::BenchScene;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -98,39 +100,12 @@ pub fn bench_scene(
     out: &Path,
     rows: &mut Vec<Measurement>,
 ) -> Result<String, String> {
-    let generators = scene.scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
-    let receivers = scene
-        .scene
-        .receivers
-        .iter()
-        .map(|r| r.mesh.bounds())
-        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
-        .ok_or("caustic maps: the scene has no receivers")?;
-    let materials: Vec<_> = scene.scene.generators.iter().map(|g| g.interaction).collect();
     let points = cell_sample_points(&scene.region);
-    let up = if scene.region.normal().y < 0.0 { -scene.region.normal() } else { scene.region.normal() };
+    let up = up(scene);
     let mut stages = Vec::new();
     for p in photon_resolutions(quick) {
-        let clock = Instant::now();
-        let mut traced = Vec::new();
-        for light in &scene.scene.lights {
-            for view in LightView::for_light(light, generators, receivers) {
-                let maps = LightMaps::ray_cast(&scene.scene, &view, p, MAP_RESOLUTION);
-                let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
-                traced.push((view, light, intensity, maps));
-            }
-        }
-        let maps_seconds = clock.elapsed().as_secs_f64();
+        let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, p)?;
         eprintln!("{name:>8} caustic maps {p:>5}²: {} light views ray cast in {maps_seconds:.3} s", traced.len());
-        let clock = Instant::now();
-        let traced: Vec<Traced> = traced
-            .into_iter()
-            .map(|(view, light, intensity, maps)| {
-                let photons = PhotonBuffer::trace(&maps, &view, &materials, light, 4);
-                Traced { view, intensity, maps, photons }
-            })
-            .collect();
-        let tracing_seconds = clock.elapsed().as_secs_f64();
         eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced in {tracing_seconds:.3} s");
         for variant in &VARIANTS {
             let mut row = StageRow {
@@ -152,26 +127,17 @@ pub fn bench_scene(
             let mut irradiance = vec![0.0f32; points.len()];
             let (mut flux_in, mut flux_capped) = (0.0, 0.0);
             for t in &traced {
-                let clock = Instant::now();
-                let pyramid = PhotonPyramid::for_gather(&t.photons, MAP_RESOLUTION, variant.gather);
-                row.pyramid += clock.elapsed().as_secs_f64();
-                let clock = Instant::now();
-                let (entries, stats) = hierarchy::gather(&pyramid, variant.gather);
-                row.gather += clock.elapsed().as_secs_f64();
-                let clock = Instant::now();
-                let (map, splat_stats) = CausticMap::splat_all(&t.photons, &pyramid, &entries, variant.splats, MAP_RESOLUTION);
-                let resolved = map.resolve();
-                row.splat += clock.elapsed().as_secs_f64();
+                let g = gather_view(t, variant, p, &points, up, &mut irradiance);
+                row.pyramid += g.seconds[0];
+                row.gather += g.seconds[1];
+                row.splat += g.seconds[2];
                 row.texels += t.photons.photons.len() as u64;
                 row.valid += t.photons.stats.caustic;
-                row.processed += stats.total_processed();
-                row.splats += stats.splats();
-                row.clustered += stats.clustered_photons;
-                flux_in += splat_stats.flux_in;
-                flux_capped += splat_stats.flux_dropped_by_cap;
-                for (e, &q) in irradiance.iter_mut().zip(&points) {
-                    *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, p, t.intensity, q, up);
-                }
+                row.processed += g.stats.total_processed();
+                row.splats += g.stats.splats();
+                row.clustered += g.stats.clustered_photons;
+                flux_in += g.splat_stats.flux_in;
+                flux_capped += g.splat_stats.flux_dropped_by_cap;
             }
             row.capped = if flux_in > 0.0 { flux_capped / flux_in } else { 0.0 };
             let image = cell_means(&irradiance);
@@ -195,6 +161,81 @@ pub fn bench_scene(
     }
     plot_processed(&out.join(format!("bench-{name}-maps.png")), name, &stages)?;
     Ok(stage_table(name, &stages))
+}
+
+/// The receiver region's upward normal (its `edge_u × edge_v` may point either way).
+fn up(scene: &BenchScene) -> Vec3 {
+    let n = scene.region.normal();
+    if n.y < 0.0 { -n } else { n }
+}
+
+/// Caustic irradiance per cell of the region from `scene`'s generators by `variant`
+/// at `photons`² photons per light view, and the photons processed.
+pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant) -> Result<(Vec<f32>, u64), String> {
+    let points = cell_sample_points(&scene.region);
+    let (traced, ..) = trace_light_views(&scene.scene, photons)?;
+    let mut irradiance = vec![0.0f32; points.len()];
+    let processed = traced.iter().map(|t| gather_view(t, variant, photons, &points, up(scene), &mut irradiance).stats.total_processed()).sum();
+    Ok((cell_means(&irradiance), processed))
+}
+
+/// Every light view of `scene` with its light maps (ray cast) and photon buffer at
+/// `photons`² texels, and the seconds the maps and the photon trace took.
+fn trace_light_views(scene: &Scene, photons: u32) -> Result<(Vec<Traced>, f64, f64), String> {
+    let generators = scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
+    let receivers = scene
+        .receivers
+        .iter()
+        .map(|r| r.mesh.bounds())
+        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+        .ok_or("caustic maps: the scene has no receivers")?;
+    let materials: Vec<_> = scene.generators.iter().map(|g| g.interaction).collect();
+    let clock = Instant::now();
+    let mut views = Vec::new();
+    for light in &scene.lights {
+        for view in LightView::for_light(light, generators, receivers) {
+            let maps = LightMaps::ray_cast(scene, &view, photons, MAP_RESOLUTION);
+            let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
+            views.push((view, light, intensity, maps));
+        }
+    }
+    let maps_seconds = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let traced = views
+        .into_iter()
+        .map(|(view, light, intensity, maps)| {
+            let photons = PhotonBuffer::trace(&maps, &view, &materials, light, 4);
+            Traced { view, intensity, maps, photons }
+        })
+        .collect();
+    Ok((traced, maps_seconds, clock.elapsed().as_secs_f64()))
+}
+
+/// What one gather of one light view did, and the seconds its pyramid, gather and
+/// splats (with the resolve) took.
+struct Gathered {
+    stats: hierarchy::GatherStats,
+    splat_stats: caustic_map::SplatStats,
+    seconds: [f64; 3],
+}
+
+/// Gathers and splats one light view's photons by `variant` and adds the resolved
+/// map's irradiance at `points` (receivers facing `up`) into `irradiance`.
+fn gather_view(t: &Traced, variant: &Variant, photons: u32, points: &[Vec3], up: Vec3, irradiance: &mut [f32]) -> Gathered {
+    let clock = Instant::now();
+    let pyramid = PhotonPyramid::for_gather(&t.photons, MAP_RESOLUTION, variant.gather);
+    let pyramid_seconds = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let (entries, stats) = hierarchy::gather(&pyramid, variant.gather);
+    let gather_seconds = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let (map, splat_stats) = CausticMap::splat_all(&t.photons, &pyramid, &entries, variant.splats, MAP_RESOLUTION);
+    let resolved = map.resolve();
+    let splat_seconds = clock.elapsed().as_secs_f64();
+    for (e, &q) in irradiance.iter_mut().zip(points) {
+        *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, photons, t.intensity, q, up);
+    }
+    Gathered { stats, splat_stats, seconds: [pyramid_seconds, gather_seconds, splat_seconds] }
 }
 
 /// Photons processed against photons in the buffer, one line per gather.

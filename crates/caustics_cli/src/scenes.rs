@@ -4,33 +4,76 @@
 
 use caustics_core::estimate::GridRegion;
 use caustics_core::glam::Vec3;
-use caustics_core::scenes::{BenchScene, SceneDescription, glass_sphere, metal_ring, wave_pool};
+use caustics_core::glam::Affine3A;
+use caustics_core::mesh::TriMesh;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::{Generator, Light, LightKind};
+use caustics_core::scenes::{
+    BenchScene, POOL_WAVES, SceneDescription, glass_sphere, metal_ring, roofed_pool, wave_heightfield, wave_pool,
+};
 use caustics_core::view::PinholeCamera;
 use std::path::Path;
 
-/// Names of the built-in scenes.
-pub const BUILT_IN: [&str; 3] = ["pool", "sphere", "ring"];
+/// Names of the built-in scenes: one generator each (the pool, the sphere, the ring),
+/// then scenes that mix generator kinds and occluders.
+pub const BUILT_IN: [&str; 6] = ["pool", "sphere", "ring", "roofed_pool", "ball_pool", "mirror_bunny"];
 
 /// A built-in scene by name, at the default tessellation.
 pub fn built_in(name: &str) -> Option<BenchScene> {
     let default = match name {
-        "pool" => 128,
+        "pool" | "roofed_pool" | "ball_pool" => 128,
         "sphere" => 64,
-        "ring" => 256,
+        "ring" | "mirror_bunny" => 256,
         _ => return None,
     };
     tessellated(name, default)
 }
 
-/// A built-in scene with its generator cut into `cells` (the pool's water grid has
-/// `cells`² cells, the sphere and the ring `cells` segments around).
+/// A built-in scene with its tessellated generator cut into `cells` (a pool's water
+/// grid has `cells`² cells, the sphere and the rings `cells` segments around; the
+/// ball beside the pool and the bunny keep theirs).
 pub fn tessellated(name: &str, cells: usize) -> Option<BenchScene> {
     match name {
         "pool" => Some(wave_pool(cells + 1, 128)),
         "sphere" => Some(glass_sphere(cells)),
         "ring" => Some(metal_ring(cells)),
+        "roofed_pool" => Some(roofed_pool(cells + 1, 128)),
+        "ball_pool" => Some(ball_beside_pool(cells)),
+        "mirror_bunny" => Some(ring_beside_bunny(cells)),
         _ => None,
     }
+}
+
+/// The pool's rippled water over x ∈ [−2, 0] (`cells`² cells) beside a glass ball
+/// (IOR 1.5, radius 0.3, 64 segments) standing over the floor at x = 0.55, under the
+/// pool's sun: open and closed refractors side by side.
+fn ball_beside_pool(cells: usize) -> BenchScene {
+    let mut bench = wave_pool(cells + 1, 128);
+    bench.scene.generators[0].mesh = wave_heightfield(cells + 1, 2.0, 0.8, &POOL_WAVES)
+        .transformed(&Affine3A::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
+    bench.scene.generators.push(Generator {
+        mesh: TriMesh::uv_sphere(Vec3::new(0.55, 0.45, 0.0), 0.3, 32, 64),
+        interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
+    });
+    bench.name = "ball_pool".into();
+    bench
+}
+
+/// A glass Stanford bunny (0.6 m tall, IOR 1.5, floating 0.3 m up) beside a polished
+/// ring (radius 0.35, `segments` around) under a point light low on the left: a closed
+/// refractor and a mirror.
+fn ring_beside_bunny(segments: usize) -> BenchScene {
+    let mut bench = metal_ring(segments);
+    bench.scene.lights = vec![Light::white(LightKind::Point { position: Vec3::new(-2.0, 1.6, 0.2), intensity: 20.0 })];
+    bench.scene.generators[0].mesh = TriMesh::solid_ring(Vec3::new(0.5, 0.0, 0.0), 0.35, 0.38, 0.2, segments);
+    let bunny = TriMesh::from_obj(include_str!("../../../assets/models/bunny.obj")).expect("the bunny asset parses (tested)");
+    let place = Affine3A::from_translation(Vec3::new(-0.5, 0.3, 0.0)) * Affine3A::from_scale(Vec3::splat(0.06));
+    bench.scene.generators.push(Generator {
+        mesh: bunny.transformed(&place),
+        interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
+    });
+    bench.name = "mirror_bunny".into();
+    bench
 }
 
 /// A scene with a camera to view it from.
