@@ -27,6 +27,10 @@ pub enum HeadlessError {
     NoAdapter(String),
     #[error("the frame was not read back after {0} extra updates")]
     NoReadback(u32),
+    #[error("reading the GPU back failed: {0}")]
+    Readback(String),
+    #[error("the entity is not a rendered camera")]
+    NotACamera,
     #[error("a pipeline failed to build: {0}")]
     Pipeline(String),
     #[error("cannot write {path}: {reason}")]
@@ -165,6 +169,61 @@ impl HeadlessRenderer {
 }
 
 impl HeadlessRenderer {
+    /// The caustic irradiance `E` (the light's units per m², lux for Bevy's lights) that
+    /// the techniques added to `camera`'s view in the last frame rendered, read back from
+    /// the view's caustic irradiance buffer with the camera's exposure divided out: one
+    /// RGB value per pixel of the viewport, row-major from the top-left. Zero where the
+    /// view had no caustics work.
+    pub fn caustic_irradiance(&mut self, camera: Entity) -> Result<Vec<Vec3>, HeadlessError> {
+        use crate::irradiance::ViewCausticIrradiance;
+        use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
+        use bevy::render::renderer::{RenderDevice, RenderQueue};
+        use bevy::render::sync_world::RenderEntity;
+        let world = self.app.world();
+        let exposure = world.get::<bevy::camera::Exposure>(camera).copied().unwrap_or_default().exposure();
+        let render_entity = world.get::<RenderEntity>(camera).ok_or(HeadlessError::NotACamera)?.id();
+        let render_world = self.app.sub_app_mut(bevy::render::RenderApp).world_mut();
+        let Some(view) = render_world.get::<ViewCausticIrradiance>(render_entity) else {
+            return Ok(vec![Vec3::ZERO; (self.width * self.height) as usize]);
+        };
+        let texture = view.texture.texture.clone();
+        let (width, height) = (texture.width(), texture.height());
+        let (device, queue) = (render_world.resource::<RenderDevice>().clone(), render_world.resource::<RenderQueue>().clone());
+        // Rows padded to wgpu's copy alignment, 8 bytes a pixel.
+        let row = (8 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let usage = BufferUsages::COPY_DST | BufferUsages::MAP_READ;
+        let size = (row * height) as u64;
+        let staging = device.create_buffer(&BufferDescriptor { label: Some("caustic_irradiance_readback"), size, usage, mapped_at_creation: false });
+        let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &staging,
+                layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(height) },
+            },
+            texture.size(),
+        );
+        queue.submit([encoder.finish()]);
+        let slice = staging.slice(..);
+        let mapped: Arc<Mutex<Option<bool>>> = Arc::default();
+        let done = mapped.clone();
+        slice.map_async(MapMode::Read, move |result| {
+            if let Ok(mut slot) = done.lock() {
+                *slot = Some(result.is_ok());
+            }
+        });
+        device.poll(PollType::wait_indefinitely()).map_err(|e| HeadlessError::Readback(e.to_string()))?;
+        if mapped.lock().ok().and_then(|s| *s) != Some(true) {
+            return Err(HeadlessError::Readback("the caustic irradiance buffer did not map".into()));
+        }
+        let bytes = slice.get_mapped_range();
+        Ok(bytes
+            .chunks_exact(row as usize)
+            .flat_map(|r| decode_rgba16f(&r[..(8 * width) as usize]))
+            .map(|e| e.truncate() / exposure)
+            .collect())
+    }
+
     /// The first pipeline whose shader did not compile or whose pipeline was refused,
     /// with its label and why: a frame drawn without it is not the frame asked for.
     fn failed_pipeline(&self) -> Option<String> {

@@ -3,7 +3,7 @@
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
-use crate::{CausticGenerator, CausticReceiver, GeneratorInteraction, InjectedIrradiance};
+use crate::{CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InjectedIrradiance};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Aabb;
 use bevy::camera::{Exposure, Hdr, RenderTarget};
@@ -188,6 +188,31 @@ pub fn spawn_scene(
         let image = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
         world.resource_mut::<Assets<Image>>().add(image)
     });
+    spawn_scene_content(world, scene, injected.is_none().then_some(CausticTechnique::Auto));
+    let mut camera = world.spawn((
+        Camera3d::default(),
+        Hdr,
+        target,
+        exposure_for(typical),
+        Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),
+        Transform::from_translation(to_bevy(camera.position)).looking_at(to_bevy(camera.look_at), to_bevy(camera.up)),
+    ));
+    if let Some(injected) = injected {
+        camera.insert(InjectedIrradiance(injected));
+    }
+}
+
+/// The exposure at which `typical` lux on a white receiver comes out at mid grey:
+/// exposure = 1 / (1.2 · 2^ev100), and white at `typical` lux has radiance typical/π.
+pub fn exposure_for(typical: f32) -> Exposure {
+    let exposure = 0.18 * PI / typical.max(1e-6);
+    Exposure { ev100: (1.0 / (1.2 * exposure)).log2() }
+}
+
+/// Spawns `scene`'s receivers, generators and lights into `world` (see
+/// [`spawn_scene`]), with ambient light off. With a `technique`, each generator gets a
+/// [`CausticGenerator`] asking for it; without, generators are plain meshes.
+pub fn spawn_scene_content(world: &mut World, scene: &Scene, technique: Option<CausticTechnique>) {
     for receiver in &scene.receivers {
         let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&receiver.mesh));
         let a = receiver.albedo;
@@ -219,8 +244,8 @@ pub fn spawn_scene(
         };
         let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
         let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
-        if injected.is_none() {
-            entity.insert(component);
+        if let Some(technique) = technique {
+            entity.insert(CausticGenerator { technique, ..component });
         }
     }
     for light in &scene.lights {
@@ -250,17 +275,4 @@ pub fn spawn_scene(
     }
     // Core scenes are lit by their lights alone.
     world.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
-    // exposure = 1 / (1.2 · 2^ev100); white at `typical` lux → radiance typical/π → 0.18.
-    let exposure = 0.18 * PI / typical.max(1e-6);
-    let mut camera = world.spawn((
-        Camera3d::default(),
-        Hdr,
-        target,
-        Exposure { ev100: (1.0 / (1.2 * exposure)).log2() },
-        Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),
-        Transform::from_translation(to_bevy(camera.position)).looking_at(to_bevy(camera.look_at), to_bevy(camera.up)),
-    ));
-    if let Some(injected) = injected {
-        camera.insert(InjectedIrradiance(injected));
-    }
 }

@@ -1,11 +1,18 @@
 //! `caustics render`: one scene, one method, one image.
 
+use crate::bench::{Auto, BenchMethod, CONVOLUTION_GRIDS, CONVOLUTION_METHODS, SUPERSAMPLE, volumes_irradiance};
 use crate::images::{percentile_white, write_exr, write_png};
 use crate::scenes::{LoadedScene, default_camera, open};
 use crate::{prepare_output, progress};
 use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_bevy::headless::HeadlessRenderer;
+use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
+use caustics_bevy::reference::{exposure_for, spawn_scene_content};
+use caustics_bevy::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
+use caustics_bevy::CausticTechnique;
+use caustics_core::estimate::GridRegion;
+use caustics_core::scenes::BenchScene;
 use caustics_core::glam::Vec3;
 use caustics_core::scene::LightKind;
 use caustics_core::view::render_view;
@@ -17,6 +24,44 @@ use std::path::PathBuf;
 pub enum Method {
     /// The ground-truth CPU photon tracer.
     Reference,
+    /// Warped caustic volumes, energy-conserving interpolation (the plugin's default).
+    Volumes,
+    /// Warped caustic volumes, constant intensity per volume.
+    VolumesConstant,
+    /// Warped caustic volumes, the paper's interpolated intensity (§3.4).
+    VolumesPaper,
+    /// Convolution caustics (a heightfield pool only).
+    Convolution,
+    /// Hierarchical caustic maps, the full method (clustering, variable splats).
+    Maps,
+    /// Hierarchical caustic maps, the flat gather with fixed splats.
+    MapsFlat,
+    /// Each generator by the technique the plugin's `Auto` picks for it.
+    Auto,
+}
+
+impl Method {
+    /// The technique a generator asks for, `None` for the reference.
+    fn technique(self) -> Option<CausticTechnique> {
+        Some(match self {
+            Method::Reference => return None,
+            Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => CausticTechnique::WarpedVolumes,
+            Method::Convolution => CausticTechnique::Convolution,
+            Method::Maps | Method::MapsFlat => CausticTechnique::HierarchicalMaps,
+            Method::Auto => CausticTechnique::Auto,
+        })
+    }
+
+    /// The volumes' settings (intensity mode) and the caustic maps' (gather, splats).
+    fn settings(self) -> (WarpedVolumesSettings, HierarchicalMapsSettings) {
+        let intensity = match self {
+            Method::VolumesConstant => VolumeIntensity::Constant,
+            Method::VolumesPaper => VolumeIntensity::Interpolated,
+            _ => VolumeIntensity::Conserving,
+        };
+        let maps = if self == Method::MapsFlat { HierarchicalMapsSettings::FLAT } else { HierarchicalMapsSettings::FULL };
+        (WarpedVolumesSettings { intensity, ..Default::default() }, maps)
+    }
 }
 
 /// What draws the view.
@@ -57,6 +102,23 @@ pub struct RenderArgs {
     /// Seed of the photon streams.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// With --irradiance-plane: the method's CPU twin instead of its GPU passes.
+    #[arg(long)]
+    pub twin: bool,
+    /// With --irradiance-plane: the square measured, `X0,Z0,SIZE[,Y]` (metres), for a
+    /// scene of one's own; by default the scene's receiver region.
+    #[arg(long, value_parser = parse_region)]
+    pub region: Option<(f32, f32, f32, Option<f32>)>,
+}
+
+fn parse_region(s: &str) -> Result<(f32, f32, f32, Option<f32>), String> {
+    let values: Vec<f32> = s.split(',').map(|v| v.trim().parse::<f32>().map_err(|_| format!("region {s:?}: {v:?} is not a number"))).collect::<Result<_, _>>()?;
+    match values[..] {
+        [x0, z0, size] | [x0, z0, size, _] if size > 0.0 && values.iter().all(|v| v.is_finite()) => {
+            Ok((x0, z0, size, values.get(3).copied()))
+        }
+        _ => Err(format!("region {s:?} is not X0,Z0,SIZE[,Y] with a positive SIZE")),
+    }
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
@@ -71,31 +133,37 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 pub fn run(args: RenderArgs) -> Result<(), String> {
     let (width, height) = args.size;
     let cells = if args.irradiance_plane { width as usize } else { 128 };
-    let LoadedScene { bench, camera } = open(&args.scene, cells)?;
-    let Method::Reference = args.method;
+    let LoadedScene { mut bench, camera } = open(&args.scene, cells)?;
+    if let Some((x0, z0, size, y)) = args.region {
+        bench.region = GridRegion::horizontal(x0, z0, y.unwrap_or(bench.region.origin.y), size, cells);
+    }
     let tracer = PhotonTracer::new(&bench.scene).map_err(|e| format!("{}: {e}", args.scene))?;
     let settings = TraceSettings { photons_per_light: args.photons, seed: args.seed, ..Default::default() };
     let out = prepare_output(&args.out)?;
+    let method = args.method;
 
     let (pixels, w, h) = if args.irradiance_plane {
-        let mut grid = IrradianceGrid::new(bench.region);
-        tracer.trace(&settings, &mut grid, &progress("tracing"));
-        (grid.irradiance(), width, width)
+        let pixels = match (method, args.twin) {
+            (Method::Reference, _) => {
+                let mut grid = IrradianceGrid::new(bench.region);
+                tracer.trace(&settings, &mut grid, &progress("tracing"));
+                grid.irradiance()
+            }
+            (_, true) => twin_plane(method, &args.scene, &bench)?.into_iter().map(Vec3::splat).collect(),
+            (_, false) => gpu_plane(method, &bench)?,
+        };
+        (pixels, width, width)
     } else {
-        let mut photons = PhotonList::default();
-        tracer.trace(&settings, &mut photons, &progress("tracing"));
-        let radius = kernel_radius(&photons, &bench.region);
-        let map = PhotonMap::new(photons.0, radius);
         let camera = camera.unwrap_or_else(|| default_camera(&bench, width, height));
         let camera = caustics_core::view::PinholeCamera { width, height, ..camera };
-        eprintln!("shading {width}×{height} (kernel radius {radius:.4} m)");
-        match args.renderer {
-            Renderer::Cpu => (render_view(&tracer, &bench.scene, &camera, &map).radiance, width, height),
-            Renderer::Bevy => {
-                let r = &bench.region;
-                let center = r.origin + 0.5 * (r.edge_u + r.edge_v);
-                (render_with_bevy(&tracer, center, &bench.scene, &camera, &map)?, width, height)
+        match (args.renderer, method) {
+            (Renderer::Cpu, Method::Reference) => {
+                let map = photon_map(&tracer, &settings, &bench.region);
+                eprintln!("shading {width}×{height} (kernel radius {:.4} m)", map.radius());
+                (render_view(&tracer, &bench.scene, &camera, &map).radiance, width, height)
             }
+            (Renderer::Cpu, _) => return Err(format!("the CPU renderer draws the reference only: --method {method:?} needs --renderer bevy or --irradiance-plane")),
+            (Renderer::Bevy, _) => (render_with_bevy(&tracer, &settings, &bench, &camera, method)?, width, height),
         }
     };
     // Bevy's frame is already exposed (mid grey at 0.18); the CPU's is in light units.
@@ -113,31 +181,150 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
     Ok(())
 }
 
-/// The view drawn by Bevy, with the reference caustics injected into the plugin.
-fn render_with_bevy(
-    tracer: &PhotonTracer,
-    region_center: Vec3,
-    scene: &caustics_core::scene::Scene,
-    camera: &caustics_core::view::PinholeCamera,
-    map: &PhotonMap,
-) -> Result<Vec<Vec3>, String> {
-    use caustics_bevy::reference::{spawn_scene, view_irradiance};
-    let irradiance = view_irradiance(tracer, map, camera);
-    // Expose for the lights' own irradiance where the caustic lands.
-    let typical: f32 = scene
+/// The tracer's photons as a photon map for shading a view.
+fn photon_map(tracer: &PhotonTracer, settings: &TraceSettings, region: &GridRegion) -> PhotonMap {
+    let mut photons = PhotonList::default();
+    tracer.trace(settings, &mut photons, &progress("tracing"));
+    let radius = kernel_radius(&photons, region);
+    PhotonMap::new(photons.0, radius)
+}
+
+/// A method's caustic irradiance per cell of the region by its CPU twin (the bench's).
+fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>, String> {
+    let (image, _) = match method {
+        Method::Reference => unreachable!("the reference is traced, not twinned"),
+        Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => {
+            volumes_irradiance(&bench.scene, &bench.region, method.settings().0.core().intensity)
+        }
+        Method::Convolution => {
+            // The finest grid whose texel centres fall on the water's vertices.
+            let grids = (0..CONVOLUTION_GRIDS.len() as u64).rev();
+            let mut runs = grids.map(|q| CONVOLUTION_METHODS[0].run(name, bench, q));
+            let first_error = runs.next().unwrap_or_else(|| Err("no grid".into()));
+            first_error.or_else(|e| runs.find(Result::is_ok).unwrap_or(Err(e))).map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
+        }
+        Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4])?,
+        Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0])?,
+        Method::Auto => Auto.run(name, bench, 2)?,
+    };
+    Ok(image)
+}
+
+/// Metres between the region and the top-down camera: it sees the receiver region
+/// itself, not what stands over it (a roof, the water, a ball), as the tracer bins it.
+const CAMERA_LIFT: f32 = 0.01;
+
+/// A method's caustic irradiance on the region by the plugin's GPU passes in the
+/// headless renderer: the scene spawned with every generator asking for the method's
+/// technique, a top-down orthographic view of the region [`SUPERSAMPLE`]² pixels per
+/// cell, its caustic irradiance buffer read back with the exposure divided out and
+/// averaged per cell (the estimator of the twins and the tracer: cell means).
+fn gpu_plane(method: Method, bench: &BenchScene) -> Result<Vec<Vec3>, String> {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy::prelude::{Camera3d, OrthographicProjection, Projection, Transform};
+    let technique = method.technique().ok_or("the reference is traced on the CPU")?;
+    let region = &bench.region;
+    let cells = region.nu;
+    let pixels = (cells * SUPERSAMPLE) as u32;
+    let mut renderer = HeadlessRenderer::new(pixels, pixels).map_err(|e| e.to_string())?;
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    let (volumes, maps) = method.settings();
+    world.insert_resource(volumes);
+    world.insert_resource(maps);
+    spawn_scene_content(world, &bench.scene, Some(technique));
+    let size = region.edge_u.length();
+    let centre = region.origin + 0.5 * (region.edge_u + region.edge_v);
+    let camera = world
+        .spawn((
+            Camera3d::default(),
+            target,
+            bevy::camera::Hdr,
+            Tonemapping::None,
+            exposure_for(typical_irradiance(&bench.scene, centre)),
+            Projection::from(OrthographicProjection { scale: size / pixels as f32, ..OrthographicProjection::default_3d() }),
+            Transform::from_translation(to_bevy(centre) + CAMERA_LIFT * bevy::math::Vec3::Y)
+                .looking_at(to_bevy(centre), bevy::math::Vec3::NEG_Z),
+        ))
+        .id();
+    // Frames until every technique has built its work (the volumes build asynchronously).
+    let mut report = renderer.pass_report();
+    for _ in 0..16 {
+        renderer.render(2).map_err(|e| e.to_string())?;
+        report = renderer.pass_report();
+        if ["volumes", "caustic map projection", "pool floor"].iter().any(|pass| report.views(pass) > 0) {
+            break;
+        }
+    }
+    if let Some((entity, choice)) = report.generators.iter().find(|(_, c)| technique.requested().is_some_and(|t| t != c.technique)) {
+        return Err(format!("--method {method:?} does not apply to generator {entity}: {choice}"));
+    }
+    for (entity, choice) in &report.generators {
+        eprintln!("generator {entity}: {choice}");
+    }
+    let irradiance = renderer.caustic_irradiance(camera).map_err(|e| e.to_string())?;
+    let cell_mean = |row: usize, column: usize| {
+        let samples = (0..SUPERSAMPLE * SUPERSAMPLE).map(|k| {
+            let (y, x) = (row * SUPERSAMPLE + k / SUPERSAMPLE, column * SUPERSAMPLE + k % SUPERSAMPLE);
+            irradiance[y * pixels as usize + x]
+        });
+        Vec3::from_array((samples.sum::<bevy::math::Vec3>() / (SUPERSAMPLE * SUPERSAMPLE) as f32).to_array())
+    };
+    Ok((0..cells * cells).map(|i| cell_mean(i / cells, i % cells)).collect())
+}
+
+/// The lights' own irradiance at `at` (normal incidence): what to expose for.
+fn typical_irradiance(scene: &caustics_core::scene::Scene, at: Vec3) -> f32 {
+    scene
         .lights
         .iter()
         .map(|light| match light.kind {
             LightKind::Directional { irradiance, .. } => irradiance,
             LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
-                intensity / (position - region_center).length_squared().max(1e-6)
+                intensity / (position - at).length_squared().max(1e-6)
             }
         })
-        .sum();
+        .sum()
+}
+
+fn to_bevy(v: Vec3) -> bevy::math::Vec3 {
+    bevy::math::Vec3::from_array(v.to_array())
+}
+
+/// The view drawn by Bevy: the reference caustics injected into the plugin, or the
+/// plugin's own technique live.
+fn render_with_bevy(
+    tracer: &PhotonTracer,
+    settings: &TraceSettings,
+    bench: &BenchScene,
+    camera: &caustics_core::view::PinholeCamera,
+    method: Method,
+) -> Result<Vec<Vec3>, String> {
+    use caustics_bevy::reference::{spawn_scene, view_irradiance};
+    let r = &bench.region;
+    let typical = typical_irradiance(&bench.scene, r.origin + 0.5 * (r.edge_u + r.edge_v));
     let mut renderer = HeadlessRenderer::new(camera.width, camera.height).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
-    spawn_scene(renderer.world_mut(), scene, camera, target, Some(&irradiance), typical);
-    let image = renderer.render(8).map_err(|e| e.to_string())?;
+    let image = match method.technique() {
+        None => {
+            let map = photon_map(tracer, settings, r);
+            eprintln!("shading {}×{} (kernel radius {:.4} m)", camera.width, camera.height, map.radius());
+            let irradiance = view_irradiance(tracer, &map, camera);
+            spawn_scene(renderer.world_mut(), &bench.scene, camera, target, Some(&irradiance), typical);
+            renderer.render(8)
+        }
+        Some(technique) => {
+            let world = renderer.world_mut();
+            let (volumes, maps) = method.settings();
+            world.insert_resource(volumes);
+            world.insert_resource(maps);
+            spawn_scene(world, &bench.scene, camera, target, None, typical);
+            let mut generators = world.query::<&mut caustics_bevy::CausticGenerator>();
+            generators.iter_mut(world).for_each(|mut g| g.technique = technique);
+            renderer.render(24)
+        }
+    }
+    .map_err(|e| e.to_string())?;
     Ok(image.pixels.iter().map(|p| Vec3::new(p.x, p.y, p.z)).collect())
 }
 

@@ -273,7 +273,8 @@ fn prepare_irradiance_buffers(
                 sample_count: 1,
                 dimension: TextureDimension::D2,
                 format: CAUSTIC_IRRADIANCE_FORMAT,
-                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT,
+                // COPY_SRC: tools read it back (`HeadlessRenderer::caustic_irradiance`).
+                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT | TextureUsages::COPY_SRC,
                 view_formats: &[],
             },
         );
