@@ -37,8 +37,23 @@ pub enum HeadlessError {
     Write { path: String, reason: String },
 }
 
+/// The adapter wgpu finds on the backends Bevy would use.
+#[derive(Clone, Debug)]
+pub struct Adapter {
+    /// Its name and backend, e.g. `llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)`.
+    pub name: String,
+    /// The timestamp-query features it has, of those GPU pass times need.
+    pub timestamps: wgpu::Features,
+}
+
+/// Timestamps at encoder and pass boundaries: what `RenderDiagnosticsPlugin` needs to
+/// time passes on the GPU.
+const TIMESTAMP_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
+
 /// Checks that wgpu finds an adapter on the backends Bevy would use.
-pub fn probe_adapter() -> Result<String, HeadlessError> {
+pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
         backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all()),
         ..wgpu::InstanceDescriptor::new_without_display_handle()
@@ -46,7 +61,7 @@ pub fn probe_adapter() -> Result<String, HeadlessError> {
     let adapter = bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
         .map_err(|e| HeadlessError::NoAdapter(e.to_string()))?;
     let info = adapter.get_info();
-    Ok(format!("{} ({:?})", info.name, info.backend))
+    Ok(Adapter { name: format!("{} ({:?})", info.name, info.backend), timestamps: adapter.features() & TIMESTAMP_FEATURES })
 }
 
 /// Linear RGBA pixels of a rendered frame, row-major from the top-left.
@@ -91,6 +106,8 @@ impl RenderedImage {
 /// tonemapping unless the camera asks for it), with [`CausticsPlugin`] added.
 pub struct HeadlessRenderer {
     pub app: App,
+    /// The adapter it renders on.
+    pub adapter: Adapter,
     target: Handle<Image>,
     width: u32,
     height: u32,
@@ -99,24 +116,65 @@ pub struct HeadlessRenderer {
 impl HeadlessRenderer {
     /// Builds the app, after checking that an adapter exists.
     pub fn new(width: u32, height: u32) -> Result<Self, HeadlessError> {
-        probe_adapter()?;
+        Self::build(width, height, false)
+    }
+
+    /// Builds the app with Bevy's `RenderDiagnosticsPlugin` and whichever timestamp
+    /// queries the adapter has, so that [`Self::gpu_pass_times`] reads every timed
+    /// pass's GPU time.
+    pub fn timed(width: u32, height: u32) -> Result<Self, HeadlessError> {
+        Self::build(width, height, true)
+    }
+
+    fn build(width: u32, height: u32, timed: bool) -> Result<Self, HeadlessError> {
+        use bevy::render::settings::{RenderCreation, WgpuSettings};
+        let adapter = probe_adapter()?;
+        let features = if timed { adapter.timestamps } else { wgpu::Features::empty() };
+        let render_creation = RenderCreation::Automatic(Box::new(WgpuSettings { features, ..default() }));
         let mut app = App::new();
-        app.add_plugins(
-            DefaultPlugins
-                .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
-                .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
-                .disable::<WinitPlugin>()
-                // Each update renders the frame it extracted, and the render world stays
-                // in the app where tests can read the GPU's buffers.
-                .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>(),
-        )
-        .add_plugins(CausticsPlugin);
+        let plugins = DefaultPlugins
+            .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+            .set(RenderPlugin { render_creation, synchronous_pipeline_compilation: true, ..default() })
+            .disable::<WinitPlugin>()
+            // Each update renders the frame it extracted, and the render world stays
+            // in the app where tests can read the GPU's buffers.
+            .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>();
+        // One logger a process: a second renderer (the bench makes many) logs through it.
+        if bevy::log::tracing::dispatcher::has_been_set() {
+            app.add_plugins(plugins.disable::<bevy::log::LogPlugin>());
+        } else {
+            app.add_plugins(plugins);
+        }
+        app.add_plugins(CausticsPlugin);
+        if timed {
+            app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+        }
         app.finish();
         app.cleanup();
         let mut image = Image::new_target_texture(width, height, TextureFormat::Rgba16Float, None);
         image.texture_descriptor.usage |= TextureUsages::COPY_SRC | TextureUsages::TEXTURE_BINDING;
         let target = app.world_mut().resource_mut::<Assets<Image>>().add(image);
-        Ok(Self { app, target, width, height })
+        Ok(Self { app, adapter, target, width, height })
+    }
+
+    /// The GPU time (ms) of every pass timed in the newest frame whose diagnostics have
+    /// arrived (a frame or two behind), by span (`caustics/volumes`,
+    /// `caustic_maps/gather`, Bevy's own `main_opaque_pass_3d`…), from timestamp
+    /// queries. Empty unless built [`Self::timed`] on an adapter with timestamp queries.
+    pub fn gpu_pass_times(&self) -> Vec<(String, f64)> {
+        let Some(store) = self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>() else {
+            return Vec::new();
+        };
+        let spans: Vec<(String, bevy::platform::time::Instant, f64)> = store
+            .iter()
+            .filter_map(|d| {
+                let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+                let last = d.measurement()?;
+                Some((span.to_owned(), last.time, last.value))
+            })
+            .collect();
+        let newest = spans.iter().map(|(_, time, _)| *time).max();
+        spans.into_iter().filter(|(_, time, _)| Some(*time) == newest).map(|(span, _, ms)| (span, ms)).collect()
     }
 
     /// The render target to put on the camera.

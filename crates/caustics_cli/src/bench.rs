@@ -19,6 +19,7 @@ use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{IntensityMode, VolumeSettings, build_scene_volumes};
+use crate::render::{GpuTimes, Method};
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -35,6 +36,10 @@ pub struct BenchArgs {
     /// Built-in scenes to run, comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = crate::scenes::BUILT_IN.map(String::from))]
     pub scenes: Vec<String>,
+    /// A scene of one's own (.gltf, .glb or .json), run after the built-in ones; repeat
+    /// for more. `--scenes ''` runs only these.
+    #[arg(long = "scene")]
+    pub files: Vec<String>,
 }
 
 /// One quality setting of one method on one scene.
@@ -44,7 +49,10 @@ pub struct Measurement {
     pub quality: String,
     /// Photons (or other work items) the run processed.
     pub work: u64,
+    /// The CPU twin's run time (the tracer's, for the reference).
     pub seconds: f64,
+    /// The same method and quality by the plugin's GPU passes, where it has them.
+    pub gpu: Option<GpuColumns>,
     /// Caustic irradiance on the scene's region against the reference.
     pub error: Errors,
     /// Against the method's own limit, which isolates the error of its approximations
@@ -53,6 +61,24 @@ pub struct Measurement {
     /// integral of eq. 2 on the same heightfield and footprint with scattering on
     /// ([`Convolution`]; the error of the three-convolution expansion).
     pub error_vs_limit: Option<Errors>,
+}
+
+/// A GPU run's adapter and times, or why there are none.
+pub struct GpuColumns {
+    pub adapter: String,
+    pub times: Option<GpuTimes>,
+}
+
+/// Runs `method` on the plugin's GPU passes for the bench's GPU columns; a failure is
+/// reported and leaves them empty.
+pub fn gpu_columns(method: Method, scene: &BenchScene, photons: Option<u32>) -> Option<GpuColumns> {
+    match crate::render::gpu_run(method, scene, photons) {
+        Ok(run) => Some(GpuColumns { adapter: run.adapter, times: run.times }),
+        Err(e) => {
+            eprintln!("{:>8} {method:?}: no GPU run: {e}", scene.name);
+            None
+        }
+    }
 }
 
 /// Relative L2 (the figure of merit) and relative L1 (robust to the heavy tail of
@@ -138,13 +164,23 @@ impl BenchMethod for WarpedVolumes {
             // One bounce (§3.1) where the sphere bends light twice: measured to show it.
             ("sphere", false) => vec![16, 32, 64, 128],
             ("sphere", true) => vec![32],
-            _ => vec![],
+            // A scene of one's own, as it is.
+            _ => vec![0],
         }
     }
     fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
-        let tessellated = crate::scenes::tessellated(name, quality as usize)
-            .ok_or_else(|| format!("{}: no tessellation for this scene", self.name))?;
-        Ok(volumes_irradiance(&tessellated.scene, &scene.region, self.intensity))
+        Ok(volumes_irradiance(&tessellated(name, scene, quality as usize)?.scene, &scene.region, self.intensity))
+    }
+}
+
+/// A built-in scene at tessellation `cells` measured on `scene`'s region; tessellation
+/// 0 is `scene` as it is (a scene of one's own has no other).
+fn tessellated(name: &str, scene: &BenchScene, cells: usize) -> Result<BenchScene, String> {
+    match cells {
+        0 => Ok(scene.clone()),
+        n => crate::scenes::tessellated(name, n)
+            .map(|t| BenchScene { region: scene.region, ..t })
+            .ok_or_else(|| format!("{name}: no tessellation {n}")),
     }
 }
 
@@ -190,10 +226,7 @@ impl BenchMethod for Auto {
     }
     fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
         let (tessellation, photons) = Self::steps(name, false)[quality as usize];
-        let own = match tessellation {
-            0 => scene.clone(),
-            n => crate::scenes::tessellated(name, n).ok_or_else(|| format!("auto: no tessellation of {name}"))?,
-        };
+        let own = tessellated(name, scene, tessellation)?;
         let mut groups: Vec<(Technique, Scene)> = Vec::new();
         for generator in &own.scene.generators {
             let facts = GeneratorFacts { shape: GeneratorShape::of(&generator.mesh, &generator.interaction), in_medium: false };
@@ -486,8 +519,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     let mut notes = String::new();
     let reference_photons: u64 = if args.quick { 1 << 21 } else { 1 << 26 };
     let mut rows = Vec::new();
-    for name in &args.scenes {
-        let scene = crate::scenes::built_in(name)
+    let mut scenes = Vec::new();
+    for name in args.scenes.iter().filter(|n| !n.is_empty()) {
+        let own = crate::scenes::built_in(name)
             .ok_or_else(|| format!("unknown scene {name:?} (built-in: {})", crate::scenes::BUILT_IN.join(", ")))?;
         // The truth is the smooth surface: the reference traces a far finer generator
         // than any method here uses (the scene's own tessellation for the sphere).
@@ -496,17 +530,25 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             "ring" | "mirror_bunny" => crate::scenes::tessellated(name, 4096),
             _ => None,
         };
-        let scene = fine.unwrap_or(scene);
+        scenes.push((name.clone(), fine.unwrap_or_else(|| own.clone()), own));
+    }
+    for file in &args.files {
+        // The file's name, extension included: never a built-in scene's name.
+        let name = std::path::Path::new(file).file_name().map_or_else(|| file.clone(), |s| s.to_string_lossy().into_owned());
+        let bench = BenchScene { name: name.clone(), ..crate::scenes::open(file, 128)?.bench };
+        scenes.push((name, bench.clone(), bench));
+    }
+    for (name, scene, own) in &scenes {
         let label = format!("{name}: reference with {reference_photons} photons");
-        let (truth, _) = trace_grid(&scene, reference_photons, 1, &progress(&label))?;
+        let (truth, _) = trace_grid(scene, reference_photons, 1, &progress(&label))?;
         let volumes_limit = match VOLUME_METHODS[2].qualities(name, args.quick).last() {
-            Some(&finest) => Some(VOLUME_METHODS[2].run(name, &scene, 4 * finest)?.0),
-            None => None,
+            Some(&finest) if finest > 0 => Some(VOLUME_METHODS[2].run(name, scene, 4 * finest)?.0),
+            _ => None,
         };
         for method in &methods {
             for quality in method.qualities(name, args.quick) {
                 let start = Instant::now();
-                let (image, work) = method.run(name, &scene, quality)?;
+                let (image, work) = method.run(name, scene, quality)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let error = Errors::between(&image, &truth);
                 let label = method.quality_label(quality);
@@ -514,7 +556,17 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                 let is_volumes = VOLUME_METHODS.iter().any(|m| m.name == method.name());
                 let error_vs_limit = match volumes_limit.as_ref().filter(|_| is_volumes) {
                     Some(limit) => Some(Errors::between(&image, limit)),
-                    None => method.error_vs_own_limit(name, &scene, quality)?,
+                    None => method.error_vs_own_limit(name, scene, quality)?,
+                };
+                // The GPU passes' cost: the default volumes (the other intensity modes
+                // draw the same prisms) and Auto.
+                let gpu = match method.name() {
+                    "volumes" => gpu_columns(Method::Volumes, &tessellated(name, scene, quality as usize)?, None),
+                    "auto" => {
+                        let (tessellation, photons) = Auto::steps(name, false)[quality as usize];
+                        gpu_columns(Method::Auto, &tessellated(name, scene, tessellation)?, Some(photons))
+                    }
+                    _ => None,
                 };
                 rows.push(Measurement {
                     scene: name.clone(),
@@ -522,17 +574,17 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                     quality: label,
                     work,
                     seconds,
+                    gpu,
                     error,
                     error_vs_limit,
                 });
             }
         }
         // Caustic maps run on the scene's own tessellation, measured on its region.
-        let own = crate::scenes::built_in(name).ok_or_else(|| format!("unknown scene {name:?}"))?;
-        notes.push_str(&crate::hierarchical::bench_scene(name, &own, &truth, args.quick, &args.out, &mut rows)?);
+        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, args.quick, &args.out, &mut rows)?);
         if name == "pool" {
             let start = Instant::now();
-            notes.push_str(&convolution_vs_direct(&scene)?);
+            notes.push_str(&convolution_vs_direct(scene)?);
             eprintln!("{name:>8}: convolution against the direct integral tabulated in {:.3} s", start.elapsed().as_secs_f64());
         }
     }
@@ -567,18 +619,40 @@ fn convergence_slope(rows: &[&Measurement]) -> f64 {
     sxy / sxx
 }
 
+/// The GPU columns of a row: the adapter (or why none), then the milliseconds of the
+/// technique's passes and of all timed passes in its costliest frame.
+fn gpu_cells(r: &Measurement) -> [String; 3] {
+    match &r.gpu {
+        None => ["CPU only".into(), String::new(), String::new()],
+        Some(GpuColumns { adapter, times: None }) => [format!("{adapter}: no timestamp queries"), String::new(), String::new()],
+        Some(GpuColumns { adapter, times: Some(t) }) => {
+            [adapter.clone(), format!("{:.3}", t.technique_ms), format!("{:.3}", t.timed_passes_ms)]
+        }
+    }
+}
+
 /// Writes the tables and plots; `notes` go at the end of `bench.md`.
 fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, notes: &str) -> Result<(), String> {
     let csv_path = prepare_output(&dir.join("bench.csv"))?;
     let limit = |r: &Measurement, sep: &str| {
         r.error_vs_limit.map_or(sep.to_string(), |e| format!("{:.4}{sep}{:.4}", e.l2, e.l1))
     };
-    let mut csv =
-        String::from("scene,method,quality,work,seconds,relative_l2,relative_l1,relative_l2_vs_limit,relative_l1_vs_limit\n");
+    let mut csv = String::from(
+        "scene,method,quality,work,cpu_twin_seconds,relative_l2,relative_l1,relative_l2_vs_limit,relative_l1_vs_limit,\
+         gpu_adapter,gpu_technique_ms,gpu_timed_passes_ms\n",
+    );
     for r in rows {
         let (scene, method, quality, work, seconds, error) = (&r.scene, &r.method, &r.quality, r.work, r.seconds, r.error);
-        let limit = limit(r, ",");
-        writeln!(csv, "{scene},{method},{quality},{work},{seconds:.6},{:.6},{:.6},{limit}", error.l2, error.l1).unwrap();
+        let [adapter, technique, passes] = gpu_cells(r);
+        let adapter = adapter.replace('"', "\"\"");
+        writeln!(
+            csv,
+            "{scene},{method},{quality},{work},{seconds:.6},{:.6},{:.6},{},\"{adapter}\",{technique},{passes}",
+            error.l2,
+            error.l1,
+            limit(r, ",")
+        )
+        .unwrap();
     }
     std::fs::write(&csv_path, csv).map_err(|e| format!("cannot write {}: {e}", csv_path.display()))?;
 
@@ -590,14 +664,23 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, n
          Relative L2 and L1 against the reference tracer (the convolution with the narrowest lobe its kernel holds); \
          also against the method's own limit: for the volumes constant intensity on a 4× finer generator than the \
          finest here, for the convolution the direct integral of eq. 2 with scattering on (a = 50, n = 100).\n\n\
-         | scene | method | quality | work | time (s) | relative L2 | relative L1 | L2 vs limit | L1 vs limit |\n\
-         |---|---|---|---:|---:|---:|---:|---:|---:|\n",
+         CPU twin (s): the method's CPU twin on this machine (the tracer's time for the reference). GPU (ms): \
+         the plugin's passes for the same method and quality in the headless renderer, from timestamp queries \
+         on the adapter named, in the frame where they cost most (the frame that made the maps or drew the \
+         volumes): the technique's own passes, and every timed pass of that frame (Bevy's included); \
+         \"CPU only\" where the bench runs no GPU pass for the row.\n\n\
+         | scene | method | quality | work | CPU twin (s) | relative L2 | relative L1 | L2 vs limit | L1 vs limit | GPU adapter | GPU technique (ms) | GPU timed passes (ms) |\n\
+         |---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|\n",
     );
     for r in rows {
         let (scene, method, quality, work, seconds, error) = (&r.scene, &r.method, &r.quality, r.work, r.seconds, r.error);
-        let limit = limit(r, " | ");
-        writeln!(md, "| {scene} | {method} | {quality} | {work} | {seconds:.3} | {:.4} | {:.4} | {limit} |", error.l2, error.l1)
-            .unwrap();
+        let (limit, [adapter, technique, passes]) = (limit(r, " | "), gpu_cells(r));
+        writeln!(
+            md,
+            "| {scene} | {method} | {quality} | {work} | {seconds:.3} | {:.4} | {:.4} | {limit} | {adapter} | {technique} | {passes} |",
+            error.l2, error.l1
+        )
+        .unwrap();
     }
     let mut series: Vec<(String, Series)> = Vec::new();
     md.push('\n');

@@ -7,7 +7,8 @@
 //! the gathers; each gather's run time is those stages' plus its own pyramid, traversal,
 //! splats and resolve.
 
-use crate::bench::{Errors, Measurement, cell_means, cell_sample_points};
+use crate::bench::{Errors, Measurement, cell_means, cell_sample_points, gpu_columns};
+use crate::render::Method;
 use crate::plot::{Axes, Series, plot_log_log};
 use caustics_core::hierarchical::caustic_map::{self, CausticMap};
 use caustics_core::hierarchical::hierarchy::{self, PhotonPyramid};
@@ -21,11 +22,13 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
-/// One gather of the bench: a name, the traversal and the splats.
+/// One gather of the bench: a name, the traversal and the splats, and the CLI method
+/// whose GPU passes the bench times for it (the plugin's presets).
 pub struct Variant {
     pub name: &'static str,
     pub gather: Gather,
     pub splats: Splats,
+    pub gpu: Option<Method>,
 }
 
 /// The paper's constant splats: 3 texels across (Fig. 4's 3² splats).
@@ -36,19 +39,31 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 /// levels 0–3 (§3.3), splats past level 3 clamped into it (`maps-full`) or dropped as the
 /// paper does (`maps-full-cap`).
 pub const VARIANTS: [Variant; 6] = [
-    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED },
-    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED },
-    Variant { name: "maps-combine-last", gather: Gather::Hierarchical { clustering: Clustering::LastLevel }, splats: FIXED },
-    Variant { name: "maps-combine-all", gather: Gather::Hierarchical { clustering: Clustering::AllLevels }, splats: FIXED },
+    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, gpu: Some(Method::MapsFlat) },
+    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, gpu: None },
+    Variant {
+        name: "maps-combine-last",
+        gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
+        splats: FIXED,
+        gpu: None,
+    },
+    Variant {
+        name: "maps-combine-all",
+        gather: Gather::Hierarchical { clustering: Clustering::AllLevels },
+        splats: FIXED,
+        gpu: None,
+    },
     Variant {
         name: "maps-full",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
+        gpu: Some(Method::Maps),
     },
     Variant {
         name: "maps-full-cap",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Discard },
+        gpu: None,
     },
 ];
 
@@ -153,6 +168,7 @@ pub fn bench_scene(
                 quality: format!("{p}²"),
                 work: row.processed,
                 seconds,
+                gpu: variant.gpu.and_then(|method| gpu_columns(method, scene, Some(p))),
                 error: row.errors,
                 error_vs_limit: None,
             });

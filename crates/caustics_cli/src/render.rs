@@ -107,7 +107,7 @@ pub struct RenderArgs {
     pub twin: bool,
     /// With --irradiance-plane: the square measured, `X0,Z0,SIZE[,Y]` (metres), for a
     /// scene of one's own; by default the scene's receiver region.
-    #[arg(long, value_parser = parse_region)]
+    #[arg(long, value_parser = parse_region, allow_hyphen_values = true)]
     pub region: Option<(f32, f32, f32, Option<f32>)>,
 }
 
@@ -150,7 +150,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                 grid.irradiance()
             }
             (_, true) => twin_plane(method, &args.scene, &bench)?.into_iter().map(Vec3::splat).collect(),
-            (_, false) => gpu_plane(method, &bench)?,
+            (_, false) => gpu_run(method, &bench, None)?.irradiance,
         };
         (pixels, width, width)
     } else {
@@ -214,22 +214,49 @@ fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>
 /// itself, not what stands over it (a roof, the water, a ball), as the tracer bins it.
 const CAMERA_LIFT: f32 = 0.01;
 
+/// What the plugin's GPU passes made of a method on a scene.
+pub struct GpuRun {
+    /// Caustic irradiance per cell of the region.
+    pub irradiance: Vec<Vec3>,
+    /// The adapter that ran it.
+    pub adapter: String,
+    /// GPU milliseconds, from timestamp queries, in the frame where the technique's
+    /// passes cost most (the frame that made its maps or volumes): its own passes
+    /// (spans `caustics/*`, `caustic_maps/*`) and every timed pass of that frame,
+    /// Bevy's included. `None` where the adapter has no timestamp queries.
+    pub times: Option<GpuTimes>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct GpuTimes {
+    pub technique_ms: f64,
+    pub timed_passes_ms: f64,
+}
+
+/// Frames to render after the technique's passes first ran: its GPU times arrive a
+/// frame or two late.
+const TIMING_FRAMES: u32 = 4;
+
 /// A method's caustic irradiance on the region by the plugin's GPU passes in the
-/// headless renderer: the scene spawned with every generator asking for the method's
-/// technique, a top-down orthographic view of the region [`SUPERSAMPLE`]² pixels per
-/// cell, its caustic irradiance buffer read back with the exposure divided out and
-/// averaged per cell (the estimator of the twins and the tracer: cell means).
-fn gpu_plane(method: Method, bench: &BenchScene) -> Result<Vec<Vec3>, String> {
+/// headless renderer, and their GPU time: the scene spawned with every generator
+/// asking for the method's technique (`photons` per side for the caustic maps), a
+/// top-down orthographic view of the region [`SUPERSAMPLE`]² pixels per cell, its
+/// caustic irradiance buffer read back with the exposure divided out and averaged per
+/// cell (the estimator of the twins and the tracer: cell means).
+pub fn gpu_run(method: Method, bench: &BenchScene, photons: Option<u32>) -> Result<GpuRun, String> {
     use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy::prelude::{Camera3d, OrthographicProjection, Projection, Transform};
     let technique = method.technique().ok_or("the reference is traced on the CPU")?;
     let region = &bench.region;
     let cells = region.nu;
     let pixels = (cells * SUPERSAMPLE) as u32;
-    let mut renderer = HeadlessRenderer::new(pixels, pixels).map_err(|e| e.to_string())?;
+    let mut renderer = HeadlessRenderer::timed(pixels, pixels).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
     let world = renderer.world_mut();
-    let (volumes, maps) = method.settings();
+    let (volumes, mut maps) = method.settings();
+    if let Some(photons) = photons {
+        maps.photon_resolution = photons;
+    }
     world.insert_resource(volumes);
     world.insert_resource(maps);
     spawn_scene_content(world, &bench.scene, Some(technique));
@@ -247,15 +274,29 @@ fn gpu_plane(method: Method, bench: &BenchScene) -> Result<Vec<Vec3>, String> {
                 .looking_at(to_bevy(centre), bevy::math::Vec3::NEG_Z),
         ))
         .id();
-    // Frames until every technique has built its work (the volumes build asynchronously).
-    let mut report = renderer.pass_report();
-    for _ in 0..16 {
-        renderer.render(2).map_err(|e| e.to_string())?;
-        report = renderer.pass_report();
-        if ["volumes", "caustic map projection", "pool floor"].iter().any(|pass| report.views(pass) > 0) {
-            break;
+    // Frames until every technique has built its work (the volumes build
+    // asynchronously), then a few for the GPU times to arrive.
+    let mut times: Option<GpuTimes> = None;
+    let mut left = None;
+    for _ in 0..48 {
+        renderer.app.update();
+        let spans = renderer.gpu_pass_times();
+        let ours = |span: &str| span.starts_with("caustics/") || span.starts_with("caustic_maps/");
+        let technique_ms: f64 = spans.iter().filter(|(span, _)| ours(span)).map(|(_, ms)| ms).sum();
+        if !spans.is_empty() && times.is_none_or(|t| technique_ms > t.technique_ms) {
+            times = Some(GpuTimes { technique_ms, timed_passes_ms: spans.iter().map(|(_, ms)| ms).sum() });
+        }
+        let report = renderer.pass_report();
+        if left.is_none() && ["volumes", "caustic map projection", "pool floor"].iter().any(|pass| report.views(pass) > 0) {
+            left = Some(TIMING_FRAMES);
+        }
+        match &mut left {
+            Some(0) => break,
+            Some(n) => *n -= 1,
+            None => {}
         }
     }
+    let report = renderer.pass_report();
     if let Some((entity, choice)) = report.generators.iter().find(|(_, c)| technique.requested().is_some_and(|t| t != c.technique)) {
         return Err(format!("--method {method:?} does not apply to generator {entity}: {choice}"));
     }
@@ -270,7 +311,13 @@ fn gpu_plane(method: Method, bench: &BenchScene) -> Result<Vec<Vec3>, String> {
         });
         Vec3::from_array((samples.sum::<bevy::math::Vec3>() / (SUPERSAMPLE * SUPERSAMPLE) as f32).to_array())
     };
-    Ok((0..cells * cells).map(|i| cell_mean(i / cells, i % cells)).collect())
+    let irradiance = (0..cells * cells).map(|i| cell_mean(i / cells, i % cells)).collect();
+    let adapter = renderer.adapter.name.clone();
+    match times {
+        Some(t) => eprintln!("GPU ({adapter}): {:.3} ms in the technique's passes, {:.3} ms in all timed passes", t.technique_ms, t.timed_passes_ms),
+        None => eprintln!("GPU ({adapter}): no timestamp queries, no GPU times"),
+    }
+    Ok(GpuRun { irradiance, adapter, times })
 }
 
 /// The lights' own irradiance at `at` (normal incidence): what to expose for.

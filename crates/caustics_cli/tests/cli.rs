@@ -184,3 +184,121 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
     let out = caustics(&["render", "sphere", "--method", "convolution", "--irradiance-plane", "--size", "16x16"]);
     assert_clean_failure(&out, "does not apply");
 }
+
+/// Writes a glTF scene no test has seen before: a glass box (KHR_materials_transmission,
+/// KHR_materials_ior 1.5, a closed mesh with its own vertices per face) 0.5 m over a
+/// grey floor, under a sun slanting 10° off zenith (KHR_lights_punctual), the vertex data
+/// in a `.bin` beside it.
+fn write_glass_box_gltf(dir: &std::path::Path) -> PathBuf {
+    use caustics_core::glam::{Quat, Vec3};
+    let (mut positions, mut normals, mut indices) = (Vec::<Vec3>::new(), Vec::<Vec3>::new(), Vec::<u32>::new());
+    let mut quad = |centre: Vec3, u: Vec3, v: Vec3| {
+        let first = positions.len() as u32;
+        positions.extend([centre - u - v, centre + u - v, centre + u + v, centre - u + v]);
+        normals.extend([u.cross(v).normalize(); 4]);
+        indices.extend([0, 1, 2, 0, 2, 3].map(|i| first + i));
+    };
+    let (centre, h) = (Vec3::new(0.0, 0.75, 0.0), 0.25);
+    for (n, u, v) in [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::Z, Vec3::X, Vec3::Y)] {
+        quad(centre + n * h, u * h, v * h);
+        quad(centre - n * h, v * h, u * h);
+    }
+    quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0);
+    // Six faces of four vertices and two triangles, then the floor, whose indices
+    // count from its own first vertex.
+    let box_counts = (24, 36);
+    indices[box_counts.1..].iter_mut().for_each(|i| *i -= box_counts.0 as u32);
+    let mut bin = Vec::new();
+    for list in [&positions, &normals] {
+        bin.extend(list.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
+    }
+    bin.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
+    std::fs::write(dir.join("glass_box.bin"), &bin).unwrap();
+    let (v, i) = (positions.len(), indices.len());
+    let view = |offset: usize, length: usize| format!(r#"{{"buffer": 0, "byteOffset": {offset}, "byteLength": {length}}}"#);
+    let vec3 = |view: usize, offset: usize, count: usize, bounds: Option<(Vec3, Vec3)>| {
+        let bounds = bounds.map_or(String::new(), |(lo, hi)| format!(r#", "min": {:?}, "max": {:?}"#, lo.to_array(), hi.to_array()));
+        format!(r#"{{"bufferView": {view}, "byteOffset": {}, "componentType": 5126, "count": {count}, "type": "VEC3"{bounds}}}"#, 12 * offset)
+    };
+    let bounds = |range: std::ops::Range<usize>| {
+        let p = &positions[range];
+        (p.iter().copied().reduce(Vec3::min).unwrap(), p.iter().copied().reduce(Vec3::max).unwrap())
+    };
+    let sun = Quat::from_rotation_arc(Vec3::NEG_Z, Vec3::new(0.15, -1.0, 0.1).normalize());
+    let gltf = format!(
+        r#"{{"asset": {{"version": "2.0"}},
+ "extensionsUsed": ["KHR_materials_transmission", "KHR_materials_ior", "KHR_lights_punctual"],
+ "extensions": {{"KHR_lights_punctual": {{"lights": [{{"type": "directional", "intensity": 2.0}}]}}}},
+ "scene": 0, "scenes": [{{"nodes": [0, 1, 2]}}],
+ "nodes": [{{"name": "glass box", "mesh": 0}}, {{"name": "floor", "mesh": 1}},
+           {{"name": "sun", "rotation": {:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}],
+ "materials": [
+   {{"name": "glass", "pbrMetallicRoughness": {{"metallicFactor": 0.0, "roughnessFactor": 0.0}},
+     "extensions": {{"KHR_materials_transmission": {{"transmissionFactor": 1.0}}, "KHR_materials_ior": {{"ior": 1.5}}}}}},
+   {{"name": "stone", "pbrMetallicRoughness": {{"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}}}}],
+ "meshes": [
+   {{"primitives": [{{"attributes": {{"POSITION": 0, "NORMAL": 1}}, "indices": 2, "material": 0}}]}},
+   {{"primitives": [{{"attributes": {{"POSITION": 3, "NORMAL": 4}}, "indices": 5, "material": 1}}]}}],
+ "accessors": [{}, {}, {{"bufferView": 2, "componentType": 5125, "count": {}, "type": "SCALAR"}},
+               {}, {}, {{"bufferView": 2, "byteOffset": {}, "componentType": 5125, "count": 6, "type": "SCALAR"}}],
+ "bufferViews": [{}, {}, {}],
+ "buffers": [{{"uri": "glass_box.bin", "byteLength": {}}}]}}"#,
+        sun.to_array(),
+        vec3(0, 0, box_counts.0, Some(bounds(0..box_counts.0))),
+        vec3(1, 0, box_counts.0, None),
+        box_counts.1,
+        vec3(0, box_counts.0, 4, Some(bounds(box_counts.0..v))),
+        vec3(1, box_counts.0, 4, None),
+        4 * box_counts.1,
+        view(0, 12 * v),
+        view(12 * v, 12 * v),
+        view(24 * v, 4 * i),
+        bin.len(),
+    );
+    let path = dir.join("glass_box.gltf");
+    std::fs::write(&path, gltf).unwrap();
+    path
+}
+
+#[test]
+fn a_gltf_scene_of_ones_own_goes_through_the_gpu_passes_and_the_bench() {
+    let dir = out_dir("own_gltf");
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = write_glass_box_gltf(&dir);
+    let scene = scene.to_str().unwrap();
+    // Its region: 2 m around the box, where the sun's caustic lands.
+    let plane = |method: &str, twin: bool| {
+        let exr = dir.join(format!("{method}-{twin}.exr"));
+        let (png, exr_arg) = (dir.join("plane.png").display().to_string(), exr.display().to_string());
+        let mut args = vec!["render", scene, "--method", method, "--irradiance-plane", "--size", "48x48", "--region", "-1,-1,2"];
+        args.extend(["--photons", "2000000", "--out", &png, "--exr", &exr_arg]);
+        if twin {
+            args.push("--twin");
+        }
+        let out = caustics(&args);
+        assert!(out.status.success(), "{method}: {}", String::from_utf8_lossy(&out.stderr));
+        (plane(&exr), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let ((gpu, log), (twin, _), (truth, _)) = (plane("auto", false), plane("auto", true), plane("reference", false));
+    assert!(log.contains("closed refractor → hierarchical maps"), "Auto on a closed glass box: {log}");
+    let (agree, error) = (relative_l2(&gpu, &twin), relative_l2(&gpu, &truth));
+    eprintln!("glass box, auto: GPU vs twin relative L2 {agree:.1e}, GPU vs reference {error:.3}");
+    assert!(agree < 5e-3, "GPU and twin differ: {agree}");
+    assert!(gpu.iter().sum::<f64>() > 0.5 * truth.iter().sum::<f64>(), "the box's caustic light is missing");
+
+    let bench = dir.join("bench");
+    let out = caustics(&["bench", "--quick", "--scenes", "", "--scene", scene, "--out", bench.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(bench.join("bench.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
+    let (method, ms) = (column("method"), column("gpu_technique_ms"));
+    // The adapter's name has commas inside its quotes: read the GPU columns from the end.
+    let from_end = header.len() - ms;
+    for timed in ["volumes", "maps-full", "auto"] {
+        let row = csv.lines().find(|l| l.split(',').nth(method) == Some(timed)).unwrap_or_else(|| panic!("no {timed} row: {csv}"));
+        let fields: Vec<&str> = row.split(',').collect();
+        let gpu_ms: f64 = fields[fields.len() - from_end].parse().unwrap_or_else(|_| panic!("{timed}: no GPU time in {row}"));
+        assert!(gpu_ms > 0.0, "{timed}: {row}");
+    }
+}

@@ -13,6 +13,7 @@ use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::{
+    diagnostic::RecordDiagnostics,
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     render_resource::{
         binding_types::{storage_buffer, storage_buffer_read_only, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
@@ -415,7 +416,10 @@ fn compute_floor_irradiance(
     let [Some(heights), Some(terms), Some(convolve)] = pipelines.compute.map(|id| cache.get_compute_pipeline(id)) else {
         return;
     };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });
+    let span = diagnostics.pass_span(&mut pass, "caustics/convolution");
     for buffers in gpu.0.values() {
         let Some(bind_group) = &buffers.compute else { continue };
         let uniform = buffers.uniform.get();
@@ -426,6 +430,7 @@ fn compute_floor_irradiance(
         }
         recorder.record("convolution");
     }
+    span.end(&mut pass);
 }
 
 /// Adds each pool's floor irradiance where the view sees its floor.
@@ -460,11 +465,15 @@ fn project_floor_irradiance(
     if bind_groups.is_empty() {
         return;
     }
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let mut pass = buffer.accumulate(ctx.command_encoder(), "pool_floor");
+    let span = diagnostics.pass_span(&mut pass, "caustics/pool_floor");
     pass.set_pipeline(render_pipeline);
     for bind_group in &bind_groups {
         pass.set_bind_group(0, bind_group, &[offset.offset]);
         pass.draw(0..3, 0..1);
     }
+    span.end(&mut pass);
     recorder.record("pool floor");
 }

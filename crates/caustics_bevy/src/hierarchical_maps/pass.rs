@@ -166,11 +166,15 @@ pub(super) fn project_caustic_maps(
             ))
         })
         .collect();
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let mut pass = buffer.accumulate(ctx.command_encoder(), "caustic_map_projection");
+    let span = diagnostics.pass_span(&mut pass, "caustic_maps/projection");
     pass.set_pipeline(render_pipeline);
     for bind_group in &bind_groups {
         pass.set_bind_group(0, bind_group, &[offset.offset]);
         pass.draw(0..3, 0..1);
     }
+    span.end(&mut pass);
     recorder.record("caustic map projection");
 }

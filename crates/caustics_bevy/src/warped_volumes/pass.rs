@@ -7,6 +7,7 @@ use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::ecs::system::SystemParam;
 use bevy::prelude::*;
 use bevy::render::{
+    diagnostic::RecordDiagnostics,
     render_resource::*,
     renderer::{RenderContext, ViewQuery},
     view::{ViewTarget, ViewUniformOffset, ViewUniforms},
@@ -24,7 +25,8 @@ pub(super) struct VolumeDraw<'w> {
 
 impl VolumeDraw<'_> {
     /// Draws every volume's bounding prism, 36 vertices an instance, into `target`
-    /// with the view's pipeline `pipeline_id`, and records `pass` in the report.
+    /// with the view's pipeline `pipeline_id`, times it as the span `caustics/{pass}`
+    /// and records `pass` in the report.
     fn draw(
         &self,
         ctx: &mut RenderContext,
@@ -51,6 +53,8 @@ impl VolumeDraw<'_> {
             &self.cache.get_bind_group_layout(&self.layouts.layouts[pipelines.multisampled as usize]),
             &BindGroupEntries::sequential((view, volumes, settings, depth, normal)),
         );
+        let diagnostics = ctx.diagnostic_recorder();
+        let diagnostics = diagnostics.as_deref();
         let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
             label: Some(pass),
             color_attachments: &[Some(RenderPassColorAttachment {
@@ -61,9 +65,11 @@ impl VolumeDraw<'_> {
             })],
             ..default()
         });
+        let span = diagnostics.pass_span(&mut render_pass, format!("caustics/{pass}"));
         render_pass.set_pipeline(pipeline);
         render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
         render_pass.draw(0..36, 0..self.buffers.count);
+        span.end(&mut render_pass);
         self.recorder.record(pass);
     }
 }
