@@ -329,3 +329,33 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let report = renderer.pass_report();
     assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 0), "{report:?}");
 }
+
+#[test]
+fn a_slab_between_the_spot_and_the_ball_keeps_the_light_off_the_ball() {
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    spawn_scene(&mut renderer);
+    render(&mut renderer, 3);
+    let valid = |buffer: &PhotonBuffer| buffer.photons.iter().filter(|p| p.is_valid()).count();
+    let open = valid(&gpu_photons(&mut renderer));
+    // A slab 0.9 m under the spot over part of its cone (x < −0.1), casting shadows but
+    // showing no caustics: the photons whose ball texel it hides are shadowed on the GPU
+    // as on the CPU twin, instead of landing beyond it.
+    let slab = TriMesh::cuboid(V3::new(-1.5, 3.0, -1.5), V3::new(-0.1, 3.1, 1.5));
+    let white = renderer.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    let slab_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&slab));
+    renderer.world_mut().spawn((Mesh3d(slab_mesh), MeshMaterial3d(white)));
+    render(&mut renderer, 3);
+    let photons = gpu_photons(&mut renderer);
+    let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
+    let mut scene = cpu_scene(SpecularInteraction::Refract { ior: 1.5, dispersion: None });
+    scene.receivers.push(Receiver { mesh: slab, albedo: V3::ONE });
+    let twin = ViewCaustics::compute(&scene, &scene.lights[0], &plan.views[0].view, &settings(&mut renderer).core());
+    let (gpu_valid, cpu_valid) = (valid(&photons), valid(&twin.photons));
+    eprintln!("slab: {gpu_valid} photons on the GPU, {cpu_valid} on the CPU twin ({} shadowed), {open} without the slab", twin.photons.stats.shadowed);
+    assert!(twin.photons.stats.shadowed as usize > open / 4, "the slab hides a good part of the ball: {:?}", twin.photons.stats);
+    assert!(gpu_valid < open - open / 4, "the GPU still lights the hidden ball: {gpu_valid} of {open}");
+    // Rasterised and ray-cast maps differ only along outlines (the ball's, the slab's).
+    assert!(gpu_valid.abs_diff(cpu_valid) < cpu_valid / 25, "GPU {gpu_valid} against CPU {cpu_valid}");
+    let on_both = photons.photons.iter().zip(&twin.photons.photons).filter(|(g, c)| g.is_valid() && c.is_valid()).count();
+    assert!(on_both > cpu_valid - cpu_valid / 25, "{on_both} of {cpu_valid} photons on both sides");
+}

@@ -40,6 +40,9 @@ pub struct BenchArgs {
     /// for more. `--scenes ''` runs only these.
     #[arg(long = "scene")]
     pub files: Vec<String>,
+    /// Leave out the GPU runs (their columns say "CPU only").
+    #[arg(long)]
+    pub cpu_only: bool,
 }
 
 /// One quality setting of one method on one scene.
@@ -559,8 +562,10 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                     None => method.error_vs_own_limit(name, scene, quality)?,
                 };
                 // The GPU passes' cost: the default volumes (the other intensity modes
-                // draw the same prisms) and Auto.
+                // draw the same prisms) and Auto; a quick run times the cheapest quality.
+                let timed = !args.cpu_only && (!args.quick || Some(&quality) == method.qualities(name, true).first());
                 let gpu = match method.name() {
+                    _ if !timed => None,
                     "volumes" => gpu_columns(Method::Volumes, &tessellated(name, scene, quality as usize)?, None),
                     "auto" => {
                         let (tessellation, photons) = Auto::steps(name, false)[quality as usize];
@@ -581,7 +586,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             }
         }
         // Caustic maps run on the scene's own tessellation, measured on its region.
-        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, args.quick, &args.out, &mut rows)?);
+        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, (args.quick, args.cpu_only), &args.out, &mut rows)?);
         if name == "pool" {
             let start = Instant::now();
             notes.push_str(&convolution_vs_direct(scene)?);

@@ -104,14 +104,16 @@ struct Traced {
     photons: PhotonBuffer,
 }
 
-/// Runs every variant at every photon count on `scene`, adding its rows to `rows`;
-/// returns the Markdown table of stages and writes `bench-<name>-maps.png` (photons
-/// processed against photon count) into `out`.
+/// Runs every variant at every photon count on `scene`, adding its rows to `rows`
+/// (with the plugin's GPU passes timed for the variants that have them, at the smallest
+/// photon count only when `quick`, never when `cpu_only`); returns the Markdown table of
+/// stages and writes `bench-<name>-maps.png` (photons processed against photon count)
+/// into `out`.
 pub fn bench_scene(
     name: &str,
     scene: &BenchScene,
     truth: &[f32],
-    quick: bool,
+    (quick, cpu_only): (bool, bool),
     out: &Path,
     rows: &mut Vec<Measurement>,
 ) -> Result<String, String> {
@@ -168,7 +170,11 @@ pub fn bench_scene(
                 quality: format!("{p}²"),
                 work: row.processed,
                 seconds,
-                gpu: variant.gpu.and_then(|method| gpu_columns(method, scene, Some(p))),
+                // A quick run times the GPU at the smallest photon count only.
+                gpu: variant
+                    .gpu
+                    .filter(|_| !cpu_only && (!quick || p == photon_resolutions(true)[0]))
+                    .and_then(|method| gpu_columns(method, scene, Some(p))),
                 error: row.errors,
                 error_vs_limit: None,
             });

@@ -519,3 +519,24 @@ fn settings_outside_their_range_are_refused() {
     }
     assert_eq!(FLUX_UNITS, 1048576.0);
 }
+
+#[test]
+fn a_roof_between_the_sun_and_the_water_keeps_the_maps_dark_under_it() {
+    // The reference pool with a roof over half its water: photons whose water texel the
+    // roof hides from the sun are shadowed, not landed on the roof's far side. The floor
+    // the tracer leaves dark stays dark; the lit side is the open pool's.
+    let bench = caustics_core::scenes::roofed_pool(129, 64);
+    let settings = settings(512, 512, CLUSTERED, VARIABLE);
+    let roofed = only_view(&bench.scene, &settings);
+    assert_all_finite(&roofed);
+    // The roof's shadow covers the water up to x ≈ 0.24 of [−2, 2]: 56 % of it.
+    let stats = roofed.photons.stats;
+    let share = stats.shadowed as f64 / (stats.shadowed + stats.caustic) as f64;
+    assert!((0.5..0.62).contains(&share), "{share}: {stats:?}");
+    let under_roof: Vec<f32> = (0..40).map(|i| roofed.irradiance_at(Vec3::new(-0.9 + 0.02 * i as f32, 0.0, 0.1), Vec3::Y)).collect();
+    assert!(under_roof.iter().all(|&e| e == 0.0), "caustic light under the roof: {under_roof:?}");
+    let open = only_view(&caustics_core::scenes::wave_pool(129, 64).scene, &settings);
+    let lit = |view: &ViewCaustics| (0..40).map(|i| view.irradiance_at(Vec3::new(0.8 + 0.005 * i as f32, 0.0, 0.1), Vec3::Y)).sum::<f32>();
+    let (roofed_lit, open_lit) = (lit(&roofed), lit(&open));
+    assert!(open_lit > 0.0 && (roofed_lit - open_lit).abs() < 0.02 * open_lit, "lit side: {roofed_lit} vs open {open_lit}");
+}

@@ -269,6 +269,12 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let uv0 = texel_center(id.x, id.y, n);
+    // `photons::trace_photon`: a surface nearer the light than the generator hides it.
+    let m = view.map_resolution;
+    let shadow_texel = min(vec2<u32>(uv0 * f32(m)), vec2(m - 1u));
+    if receiver_at(shadow_texel.x, shadow_texel.y) < front.depth - (1e-3 * abs(front.depth) + 1e-4) {
+        return;
+    }
     let ray = light_ray(view, uv0);
     let beam = relative_beam(view, uv0);
     let weight = beam * cone_attenuation(view, ray.direction);
