@@ -103,8 +103,9 @@ type OceanMarker = NeverPresent;
 struct NeverPresent;
 
 /// Gives every valid generator a [`CausticTechniqueChoice`], updated when what it reads
-/// changes (closedness is kept per mesh asset until the asset changes); warns once per new choice that passed over the technique a generator asked
-/// for, or that found nothing to draw with.
+/// changes (closedness is kept per mesh asset until the asset changes); warns once per
+/// new choice that passed over the technique a generator asked for, or that found
+/// nothing to draw with.
 #[allow(clippy::too_many_arguments)]
 pub fn choose_techniques(
     mut commands: Commands,

@@ -192,16 +192,20 @@ fn photon_map(tracer: &PhotonTracer, settings: &TraceSettings, region: &GridRegi
 /// A method's caustic irradiance per cell of the region by its CPU twin (the bench's).
 fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>, String> {
     let (image, _) = match method {
-        Method::Reference => unreachable!("the reference is traced, not twinned"),
+        Method::Reference => return Err("the reference is traced, not twinned".into()),
         Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => {
             volumes_irradiance(&bench.scene, &bench.region, method.settings().0.core().intensity)
         }
         Method::Convolution => {
             // The finest grid whose texel centres fall on the water's vertices.
-            let grids = (0..CONVOLUTION_GRIDS.len() as u64).rev();
-            let mut runs = grids.map(|q| CONVOLUTION_METHODS[0].run(name, bench, q));
-            let first_error = runs.next().unwrap_or_else(|| Err("no grid".into()));
-            first_error.or_else(|e| runs.find(Result::is_ok).unwrap_or(Err(e))).map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
+            let mut run = Err(String::new());
+            for grid in (0..CONVOLUTION_GRIDS.len() as u64).rev() {
+                run = CONVOLUTION_METHODS[0].run(name, bench, grid);
+                if run.is_ok() {
+                    break;
+                }
+            }
+            run.map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
         }
         Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4])?,
         Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0])?,

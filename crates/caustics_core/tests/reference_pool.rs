@@ -1,5 +1,6 @@
-//! The ground-truth tracer against an independent renderer: `shared/reference` is the
-//! rippled pool rendered by Mitsuba 3's particle tracer. Both images are blurred with
+//! The ground-truth tracer against an independent renderer: `tests/data/reference` (a
+//! copy of the project's `shared/reference`, its provenance beside it) is the rippled
+//! pool rendered by Mitsuba 3's particle tracer. Both images are blurred with
 //! the Gaussian (σ = 1.5 cells) that the reference's README prescribes, which takes
 //! its Monte Carlo noise from 2.6 % to well under 1 %; the issue asks for a relative
 //! L2 difference within 3 %.
@@ -11,12 +12,8 @@ use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use std::path::PathBuf;
 
 fn reference_dir() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/reference");
-    assert!(
-        dir.join("wave_pool_scene.json").is_file(),
-        "the independent reference is missing: expected {} (the project's shared/ folder beside the checkout)",
-        dir.display()
-    );
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference");
+    assert!(dir.join("wave_pool_scene.json").is_file(), "the independent reference is missing from {}", dir.display());
     dir
 }
 
