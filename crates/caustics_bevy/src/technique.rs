@@ -102,6 +102,10 @@ type OceanMarker = NeverPresent;
 #[derive(Component)]
 struct NeverPresent;
 
+/// The valid participating media, for whether a generator lies in one.
+type Media<'w, 's> =
+    Query<'w, 's, (&'static GlobalTransform, &'static InheritedVisibility), (With<ParticipatingMedium>, Without<InvalidCausticParams>)>;
+
 /// Gives every valid generator a [`CausticTechniqueChoice`], updated when what it reads
 /// changes (closedness is kept per mesh asset until the asset changes); warns once per
 /// new choice that passed over the technique a generator asked for, or that found
@@ -110,7 +114,7 @@ struct NeverPresent;
 pub fn choose_techniques(
     mut commands: Commands,
     generators: GeneratorQuery<'_, '_>,
-    media: Query<(&GlobalTransform, &InheritedVisibility), (With<ParticipatingMedium>, Without<InvalidCausticParams>)>,
+    media: Media,
     mut removed: RemovedComponents<CausticGenerator>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,

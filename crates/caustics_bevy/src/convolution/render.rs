@@ -155,17 +155,22 @@ pub(super) fn build(app: &mut App) {
         );
 }
 
+/// A pool's generator and the technique it got.
+type PoolGenerator = (&'static CausticGenerator, &'static CausticTechniqueChoice);
+
 /// The pools whose water refracts sunlight by this technique.
 type ConvolutionPools = Query<
     'static,
     'static,
-    (
-        Entity,
-        &'static PoolRipples,
-        &'static PoolSurface,
-        (&'static CausticGenerator, &'static CausticTechniqueChoice),
-        &'static GlobalTransform,
-    ),
+    (Entity, &'static PoolRipples, &'static PoolSurface, PoolGenerator, &'static GlobalTransform),
+    Without<InvalidCausticParams>,
+>;
+
+/// The pools whose kernels [`aim_kernels`] aims.
+type AimedPools<'w, 's> = Query<
+    'w,
+    's,
+    (Entity, &'static PoolRipples, &'static mut PoolSurface, PoolGenerator, &'static GlobalTransform),
     Without<InvalidCausticParams>,
 >;
 
@@ -194,7 +199,7 @@ fn brightest_sun<'a>(suns: impl Iterator<Item = (&'a DirectionalLight, &'a Globa
 /// Main world: aims each pool's kernels at the sunlight it refracts (the lobe is
 /// expanded about it); only a change of light, index or pool orientation redraws them.
 fn aim_kernels(
-    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, (&CausticGenerator, &CausticTechniqueChoice), &GlobalTransform), Without<InvalidCausticParams>>,
+    mut pools: AimedPools,
     suns: Query<(&DirectionalLight, &GlobalTransform)>,
 ) {
     let Some((_, sun)) = brightest_sun(suns.iter()) else { return };
@@ -212,7 +217,7 @@ fn aim_kernels(
 /// Main world: the views have convolution work while a pool refracts a sun.
 fn mark_active(
     mut active: ResMut<ActiveCausticTechniques>,
-    pools: Query<(&CausticGenerator, &CausticTechniqueChoice), (With<PoolSurface>, Without<InvalidCausticParams>)>,
+    pools: Query<PoolGenerator, (With<PoolSurface>, Without<InvalidCausticParams>)>,
     suns: Query<(), With<DirectionalLight>>,
 ) {
     let any = !suns.is_empty() && pools.iter().any(|generator| uses_convolution(generator).is_some());
