@@ -163,8 +163,13 @@ fn method_plane(dir: &std::path::Path, scene: &str, method: &str, twin: bool) ->
 fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
     let dir = out_dir("methods");
     std::fs::create_dir_all(&dir).unwrap();
-    let cases = [("sphere", ["maps", "maps-flat", "auto"]), ("pool", ["volumes", "volumes-constant", "auto"])];
-    for (scene, method) in cases.iter().flat_map(|&(scene, methods)| methods.map(|m| (scene, m))) {
+    let cases = [
+        ("sphere", &["maps", "maps-flat", "auto"][..]),
+        ("pool", &["volumes", "volumes-constant", "auto"]),
+        // Shadows from the light: the roof over half the water, on both techniques.
+        ("roofed_pool", &["volumes", "maps"]),
+    ];
+    for (scene, method) in cases.iter().flat_map(|&(scene, methods)| methods.iter().map(move |&m| (scene, m))) {
         let gpu = method_plane(&dir, scene, method, false);
         let twin = method_plane(&dir, scene, method, true);
         let truth = method_plane(&dir, scene, "reference", false);
@@ -173,10 +178,17 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
         // Measured on lavapipe: 4·10⁻⁴ (sphere, maps) and 7·10⁻⁴ (pool, volumes). The GPU stores E in
         // half floats (5·10⁻⁴ relative) and samples the same 4 × 4 points per cell.
         assert!(agree < 5e-3, "{scene} {method}: the GPU passes and their twin differ: relative L2 {agree}");
-        // Against the tracer (10⁶ photons on 64² cells): 0.009 and 0.63 measured, the
-        // volumes' error on the 128²-cell pool (README); twice that is a failure.
+        // Against the tracer (10⁶ photons on 64² cells), measured: 0.009 on the sphere,
+        // 0.57–0.63 on the pools (the volumes' error on 128² water cells, README), 0.98
+        // for the roofed pool's maps (they lose its shadow's edge, README). Well past
+        // that is a failure.
         let bound = if scene == "sphere" { 0.02 } else { 1.3 };
         assert!(error < bound, "{scene} {method}: relative L2 {error} against the reference");
+        if scene == "roofed_pool" {
+            // The floor under the roof (x < 0, the left half of every row) stays dark.
+            let under_roof = (0..64 * 64).filter(|i| i % 64 < 32).map(|i| gpu[i]).fold(0.0, f64::max);
+            assert_eq!(under_roof, 0.0, "{method}: caustic light under the roof");
+        }
     }
     // A method that does not apply: one line, non-zero exit.
     let out = caustics(&["render", "sphere", "--method", "convolution", "--irradiance-plane", "--twin", "--size", "16x16"]);
