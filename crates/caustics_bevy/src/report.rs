@@ -25,11 +25,6 @@ impl CausticPassReport {
         self.passes.iter().find(|(p, _)| *p == pass).map_or(0, |(_, n)| *n)
     }
 
-    /// The choice for `generator`, if it has one.
-    pub fn technique_of(&self, generator: Entity) -> Option<&TechniqueChoice> {
-        self.generators.iter().find(|(e, _)| *e == generator).map(|(_, c)| c)
-    }
-
     /// Whether no caustics pass ran at all.
     pub fn is_empty(&self) -> bool {
         self.passes.is_empty()

@@ -83,9 +83,10 @@ struct BuildState {
 /// Rebuilds every caustic volume when a generator, light, receiver, shadow caster or
 /// the settings changed, or a generator's or occluder's mesh asset was modified (an
 /// animated ocean: every frame). Receivers and shadow casters hide generator vertices
-/// from the light (`build_generator_volumes`). The build runs on the async compute pool, in parallel over triangles,
-/// while the frames go on with the previous volumes: no frame waits for it. Changes
-/// that arrive during a build start one more when it ends.
+/// from the light (`build_generator_volumes`). The build runs on the async compute
+/// pool, in parallel over triangles, while the frames go on with the previous volumes:
+/// no frame waits for it. Changes that arrive during a build start one more when it
+/// ends.
 #[allow(clippy::too_many_arguments)]
 fn build_volumes(
     generators: Generators<'_, '_>,
