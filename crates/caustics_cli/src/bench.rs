@@ -162,8 +162,8 @@ impl BenchMethod for WarpedVolumes {
         match (scene, quick) {
             ("ring" | "mirror_bunny", false) => vec![16, 32, 64, 128, 256, 512, 1024],
             ("ring" | "mirror_bunny", true) => vec![16, 64, 256, 1024],
-            ("pool" | "roofed_pool" | "ball_pool", false) => vec![16, 32, 64, 128, 256],
-            ("pool" | "roofed_pool" | "ball_pool", true) => vec![32, 128],
+            ("pool" | "roofed_pool" | "boxed_pool" | "ball_pool", false) => vec![16, 32, 64, 128, 256],
+            ("pool" | "roofed_pool" | "boxed_pool" | "ball_pool", true) => vec![32, 128],
             // One bounce (§3.1) where the sphere bends light twice: measured to show it.
             ("sphere", false) => vec![16, 32, 64, 128],
             ("sphere", true) => vec![32],
@@ -211,7 +211,7 @@ impl Auto {
     /// `(tessellation, photons per side)` per step; tessellation 0 keeps the scene's own.
     fn steps(scene: &str) -> [(usize, u32); 4] {
         match scene {
-            "pool" | "roofed_pool" | "ball_pool" => [(32, 256), (64, 512), (128, 1024), (256, 2048)],
+            "pool" | "roofed_pool" | "boxed_pool" | "ball_pool" => [(32, 256), (64, 512), (128, 1024), (256, 2048)],
             "sphere" => [(64, 256), (64, 512), (64, 1024), (64, 2048)],
             "ring" | "mirror_bunny" => [(64, 256), (128, 512), (256, 1024), (1024, 2048)],
             _ => [(0, 256), (0, 512), (0, 1024), (0, 2048)],
@@ -528,7 +528,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         // The truth is the smooth surface: the reference traces a far finer generator
         // than any method here uses (the scene's own tessellation for the sphere).
         let fine = match name.as_str() {
-            "pool" | "roofed_pool" | "ball_pool" => crate::scenes::tessellated(name, 1024),
+            "pool" | "roofed_pool" | "boxed_pool" | "ball_pool" => crate::scenes::tessellated(name, 1024),
             "ring" | "mirror_bunny" => crate::scenes::tessellated(name, 4096),
             _ => None,
         };

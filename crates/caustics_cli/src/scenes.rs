@@ -9,19 +9,20 @@ use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind};
 use caustics_core::scenes::{
-    BenchScene, POOL_WAVES, SceneDescription, glass_sphere, metal_ring, roofed_pool, wave_heightfield, wave_pool,
+    BenchScene, POOL_WAVES, SceneDescription, boxed_pool, glass_sphere, metal_ring, roofed_pool, wave_heightfield,
+    wave_pool,
 };
 use caustics_core::view::PinholeCamera;
 use std::path::Path;
 
 /// Names of the built-in scenes: one generator each (the pool, the sphere, the ring),
 /// then scenes that mix generator kinds and occluders.
-pub const BUILT_IN: [&str; 6] = ["pool", "sphere", "ring", "roofed_pool", "ball_pool", "mirror_bunny"];
+pub const BUILT_IN: [&str; 7] = ["pool", "sphere", "ring", "roofed_pool", "boxed_pool", "ball_pool", "mirror_bunny"];
 
 /// A built-in scene by name, at the default tessellation.
 pub fn built_in(name: &str) -> Option<BenchScene> {
     let default = match name {
-        "pool" | "roofed_pool" | "ball_pool" => 128,
+        "pool" | "roofed_pool" | "boxed_pool" | "ball_pool" => 128,
         "sphere" => 64,
         "ring" | "mirror_bunny" => 256,
         _ => return None,
@@ -38,6 +39,7 @@ pub fn tessellated(name: &str, cells: usize) -> Option<BenchScene> {
         "sphere" => Some(glass_sphere(cells)),
         "ring" => Some(metal_ring(cells)),
         "roofed_pool" => Some(roofed_pool(cells + 1, 128)),
+        "boxed_pool" => Some(boxed_pool(cells + 1, 128)),
         "ball_pool" => Some(ball_beside_pool(cells)),
         "mirror_bunny" => Some(ring_beside_bunny(cells)),
         _ => None,

@@ -168,6 +168,8 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
         ("pool", &["volumes", "volumes-constant", "auto"]),
         // Shadows from the light: the roof over half the water, on both techniques.
         ("roofed_pool", &["volumes", "maps"]),
+        // Shadows from the generator: the box standing in the pool.
+        ("boxed_pool", &["volumes", "maps"]),
     ];
     for (scene, method) in cases.iter().flat_map(|&(scene, methods)| methods.iter().map(move |&m| (scene, m))) {
         let gpu = method_plane(&dir, scene, method, false);
@@ -188,6 +190,19 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
             // The floor under the roof (x < 0, the left half of every row) stays dark.
             let under_roof = (0..64 * 64).filter(|i| i % 64 < 32).map(|i| gpu[i]).fold(0.0, f64::max);
             assert_eq!(under_roof, 0.0, "{method}: caustic light under the roof");
+        }
+        if scene == "boxed_pool" {
+            // The box's caustic shadow: floor cells (off the box's top, x, z ∈ [−0.3, 0.2],
+            // with a cell's margin) that the tracer leaves dark with their neighbours.
+            let centre = |i: usize| -1.0 + (i as f64 + 0.5) / 32.0;
+            let on_box = |r: usize, c: usize| (-0.35..0.25).contains(&centre(r)) && (-0.35..0.25).contains(&centre(c));
+            let dark = |r: usize, c: usize| {
+                (r.saturating_sub(1)..=(r + 1).min(63)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(63)).all(|cc| truth[rr * 64 + cc] == 0.0))
+            };
+            let shadow: Vec<usize> = (0..64 * 64).filter(|&i| !on_box(i / 64, i % 64) && dark(i / 64, i % 64)).collect();
+            assert!(shadow.len() >= 10, "the box's caustic shadow: {} cells", shadow.len());
+            let lit = shadow.iter().map(|&i| gpu[i]).fold(0.0, f64::max);
+            assert_eq!(lit, 0.0, "{method}: caustic light in the box's caustic shadow ({} cells)", shadow.len());
         }
     }
     // A method that does not apply: one line, non-zero exit.

@@ -110,6 +110,18 @@ pub fn roofed_pool(n: usize, cells: usize) -> BenchScene {
     bench
 }
 
+/// The rippled pool of [`wave_pool`] with a grey box 0.5 m tall standing on its floor
+/// over x, z ∈ [−0.3, 0.2]: the box's top takes the water's caustics, and the floor
+/// beside it on the far side from the sun (x > 0.2, z < 0.2) lies in its caustic
+/// shadow, about 0.1 m wide.
+pub fn boxed_pool(n: usize, cells: usize) -> BenchScene {
+    let mut bench = wave_pool(n, cells);
+    let block = TriMesh::cuboid(Vec3::new(-0.3, 0.0, -0.3), Vec3::new(0.2, 0.5, 0.2));
+    bench.scene.receivers.push(Receiver { mesh: block, albedo: Vec3::splat(0.5) });
+    bench.name = "boxed_pool".into();
+    bench
+}
+
 /// A square floor `size` wide at y = 0, facing up, light grey.
 pub fn floor(size: f32) -> Receiver {
     Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * (0.5 * size), Vec3::X * (0.5 * size)), albedo: Vec3::splat(0.8) }

@@ -45,6 +45,20 @@ fn floor_irradiance(set: &VolumeSet, region: &GridRegion, settings: &VolumeSetti
     set.irradiance_at(&points, &vec![Vec3::Y; points.len()], settings)
 }
 
+/// Mean irradiance over every cell of a horizontal region facing up, from `k × k`
+/// point samples per cell (a cell mean, like the tracer's, not a point sample).
+fn floor_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
+    let fine = GridRegion { nu: region.nu * k, nv: region.nv * k, ..*region };
+    let samples = floor_irradiance(set, &fine, settings);
+    (0..region.nv * region.nu)
+        .map(|i| {
+            let (r, c) = (i / region.nu, i % region.nu);
+            let cell = (0..k * k).map(|j| samples[(r * k + j / k) * fine.nu + c * k + j % k].x).sum::<f32>();
+            cell / (k * k) as f32
+        })
+        .collect()
+}
+
 fn assert_finite(values: &[Vec3]) {
     assert!(values.iter().all(|e| e.is_finite() && e.min_element() >= 0.0), "non-finite or negative irradiance");
 }
@@ -466,4 +480,99 @@ fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
     let same = caustics_core::metrics::relative_l1(&pick(&volumes), &pick(&open_volumes));
     assert!(same < 1e-6, "lit cells differ from the open pool's: relative L1 {same}");
     eprintln!("{} of {} cells under the roof, {} lit", shadow.len(), n * n, lit.len());
+}
+
+#[test]
+fn a_box_standing_in_the_pool_casts_its_caustic_shadow() {
+    use caustics_core::estimate::IrradianceGrid;
+    use caustics_core::metrics::{relative_l1, relative_l2};
+    use caustics_core::tracer::{PhotonTracer, TraceSettings};
+    use caustics_core::volumes::NO_HIT_PLANE;
+    let bench = caustics_core::scenes::boxed_pool(129, 64);
+    let region = bench.region;
+    let tracer = PhotonTracer::new(&bench.scene).unwrap();
+    let mut grid = IrradianceGrid::new(region);
+    tracer.trace(&TraceSettings { photons_per_light: 1 << 22, seed: 11, ..Default::default() }, &mut grid, &|_, _| {});
+    let truth = grid.irradiance_mean();
+    let set = build_scene_volumes(&bench.scene, &CONSERVING);
+    let volumes = floor_cell_means(&set, &region, 4, &CONSERVING);
+    // The same volumes with their rays running through the box (the paper's §3.1).
+    let mut through = set.clone();
+    through.volumes.iter_mut().for_each(|v| v.hit_planes = [NO_HIT_PLANE; 3]);
+    let through = VolumeSet::new(through.volumes, through.stats);
+    let unblocked = floor_cell_means(&through, &region, 4, &CONSERVING);
+    // Cells the tracer leaves dark with all their neighbours: under the box, and its
+    // caustic shadow on the floor beside it (x > 0.2 or z < −0.3).
+    let n = region.nu;
+    let dark = |r: usize, c: usize| {
+        (r.saturating_sub(1)..=(r + 1).min(n - 1)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(n - 1)).all(|cc| truth[rr * n + cc] == 0.0))
+    };
+    let shadow: Vec<usize> = (0..n * n).filter(|&i| dark(i / n, i % n)).collect();
+    let beside = |i: usize| {
+        let p = region.cell_center(i / n, i % n);
+        p.x > 0.2 || p.z < -0.3
+    };
+    let caustic_shadow = shadow.iter().filter(|&&i| beside(i)).count();
+    assert!(caustic_shadow >= 10, "the box's caustic shadow beside it: {caustic_shadow} cells");
+    let in_shadow = |v: &[f32]| shadow.iter().map(|&i| v[i]).fold(0.0, f32::max);
+    let lit_mean = truth.iter().sum::<f32>() / (n * n - shadow.len()) as f32;
+    assert_eq!(in_shadow(&volumes), 0.0, "caustic light in the box's shadow (lit mean {lit_mean})");
+    assert!(in_shadow(&unblocked) > lit_mean, "without hit planes the shadow would be lit: {}", in_shadow(&unblocked));
+    let (l1, l2) = (relative_l1(&volumes, &truth), relative_l2(&volumes, &truth));
+    let (l1_through, l2_through) = (relative_l1(&unblocked, &truth), relative_l2(&unblocked, &truth));
+    eprintln!(
+        "box in the pool, 64² cells: {} cells in shadow ({caustic_shadow} beside the box); relative L1/L2 against the tracer {l1:.3}/{l2:.3} with hit planes, {l1_through:.3}/{l2_through:.3} through the box",
+        shadow.len()
+    );
+    assert!(l1 < l1_through - 0.05 && l2 < l2_through, "hit planes bring the volumes nearer the tracer");
+    // Away from the box (≥ 0.4 m from it) the box changes nothing.
+    let far: Vec<usize> = (0..n * n)
+        .filter(|&i| {
+            let p = region.cell_center(i / n, i % n);
+            p.x < -0.7 || p.x > 0.6 || p.z < -0.7 || p.z > 0.6
+        })
+        .collect();
+    let pick = |v: &[f32]| far.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    assert!(relative_l1(&pick(&volumes), &pick(&unblocked)) < 1e-6, "the box changes the caustic far from it");
+}
+
+#[test]
+fn light_shafts_stop_at_an_occluder() {
+    // A parallel beam straight down from a 1 m flat sheet (IOR 1) at y = 2, with a slab
+    // at y = 1.5 over x > 0.025 (between two columns of the sheet's vertices).
+    let mesh = flat(21, 1.0, 2.0);
+    let slab = Receiver { mesh: TriMesh::quad(Vec3::new(1.025, 1.5, 0.0), Vec3::Z * 2.0, Vec3::X), albedo: Vec3::ONE };
+    let scene = Scene {
+        lights: vec![sun(Vec3::NEG_Y)],
+        generators: vec![Generator { mesh, interaction: SpecularInteraction::Refract { ior: 1.0, dispersion: None } }],
+        receivers: vec![floor(4.0, 0.0), slab],
+    };
+    let set = build_scene_volumes(&scene, &CONSERVING);
+    let coefficients = MediumCoefficients { scattering: 0.1, absorption: 0.05, asymmetry: 0.4 };
+    let medium = MediumBox { world_from_local: Affine3A::from_scale(Vec3::splat(8.0)), coefficients };
+    let sigma_t = coefficients.extinction();
+    let integral = |range: (f32, f32), f: &dyn Fn(f32) -> f32| {
+        let steps = 20000;
+        let dt = (range.1 - range.0) / steps as f32;
+        (0..steps).map(|i| f(range.0 + (i as f32 + 0.5) * dt) * dt).sum::<f32>()
+    };
+    // §3.5 takes each piece's attenuation at its midpoint: within (σₜΔx)²/24 of the
+    // integral, 1.4 % over the longest piece here.
+    // Looking straight down beside the sheet's middle, under the slab: the beam from
+    // y = 1.9 to the slab at 1.5 and nothing below it (d_s = 0.1 + t, cos θ = −1).
+    let got = in_scattered_radiance(&set.volumes, Vec3::new(0.31, 1.9, 0.12), Vec3::new(0.31, 0.0, 0.12), &medium, &CONSERVING);
+    let phase = henyey_greenstein(-1.0, coefficients.asymmetry);
+    let exact = integral((0.0, 0.4), &|t| coefficients.scattering * phase * (-sigma_t * (t + 0.1 + t)).exp());
+    assert!((got.x - exact).abs() < 0.02 * exact, "under the slab: {} vs {exact}", got.x);
+    // Beside the slab the beam reaches the floor: from y = 1.9 down to 0.
+    let open = in_scattered_radiance(&set.volumes, Vec3::new(-0.31, 1.9, 0.12), Vec3::new(-0.31, 0.0, 0.12), &medium, &CONSERVING);
+    let exact_open = integral((0.0, 1.9), &|t| coefficients.scattering * phase * (-sigma_t * (t + 0.1 + t)).exp());
+    assert!((open.x - exact_open).abs() < 0.02 * exact_open, "beside the slab: {} vs {exact_open}", open.x);
+    // Across the beam below the slab, light only where the slab does not cover it:
+    // x ∈ [−0.5, 0.025], to within the one column of volumes that the slab's edge splits.
+    let eye = Vec3::new(-3.0, 1.0, 0.1);
+    let across = in_scattered_radiance(&set.volumes, eye, Vec3::new(3.0, 1.0, 0.1), &medium, &CONSERVING);
+    let beam = |x: f32| coefficients.scattering * henyey_greenstein(0.0, coefficients.asymmetry) * (-sigma_t * ((x + 3.0) + 1.0)).exp();
+    let (low, high) = (integral((-0.5, -0.025), &beam), integral((-0.5, 0.075), &beam));
+    assert!(across.x > low && across.x < high, "across: {} not in [{low}, {high}]", across.x);
 }

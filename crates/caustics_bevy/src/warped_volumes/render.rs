@@ -41,6 +41,7 @@ pub(super) struct GpuCausticVolume {
     triangle_abc: Vec4,
     flux: Vec4,
     color: Vec4,
+    hit_planes: [Vec4; 3],
     corners: [Vec4; 8],
 }
 
@@ -65,6 +66,7 @@ impl From<&CausticVolume> for GpuCausticVolume {
             triangle_abc: p(v.triangle_abc),
             flux: p(v.flux),
             color: p(v.color),
+            hit_planes: v.hit_planes.map(|h| Vec4::from_array(h.to_array())),
             corners: v.bounds.corners.map(|c| p(c).with_w(1.0)),
         }
     }

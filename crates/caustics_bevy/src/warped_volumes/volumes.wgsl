@@ -23,6 +23,7 @@ struct CausticVolume {
     triangle_abc: vec4<f32>,    // the triangle's own a, b, c
     flux: vec4<f32>,            // per-vertex irradiance on the slicing plane
     color: vec4<f32>,
+    hit_planes: array<vec4<f32>, 3>, // per vertex ray: the first surface it meets, n·p + w < 0 behind
     corners: array<vec4<f32>, 8>,
 }
 
@@ -115,6 +116,17 @@ fn barycentric(v: CausticVolume, p: vec3<f32>) -> vec4<f32> {
     return vec4(lambda, select(0.0, 1.0, inside));
 }
 
+// `CausticVolume::occluded`: behind the hit planes of vertices weighing past one half.
+fn occluded(v: CausticVolume, p: vec3<f32>, lambda: vec3<f32>) -> bool {
+    var behind = 0.0;
+    for (var i = 0; i < 3; i++) {
+        if dot(v.hit_planes[i].xyz, p) + v.hit_planes[i].w < 0.0 {
+            behind += lambda[i];
+        }
+    }
+    return behind > 0.5;
+}
+
 struct VolumeSample {
     inside: bool,
     plane_irradiance: f32,
@@ -132,6 +144,9 @@ fn sample_volume(v: CausticVolume, world: vec3<f32>) -> VolumeSample {
         return s;
     }
     let lambda = bary.xyz;
+    if occluded(v, p, lambda) {
+        return s;
+    }
     let alpha = p.y;
     let max_mag = max(settings.max_magnification, 1.0);
     let abc = v.triangle_abc.xyz;
@@ -221,12 +236,13 @@ fn quadratic_roots(a: f32, b: f32, c: f32) -> vec2<f32> {
 }
 
 // `in_scattered_radiance` for one volume and one medium: the eye ray's pieces inside
-// the warped volume (roots of the βᵢ quadratics and the slab 0 ≤ α ≤ depth), each
+// the warped volume (roots of the βᵢ quadratics, the slab 0 ≤ α ≤ depth and the
+// hit planes: `ray_pieces`), each
 // scattering e^{−σt dₑ} e^{−σt dₛ} Δx σs p(cos θ) E_beam at its midpoint (§3.5).
 fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f32, exit: f32) -> vec3<f32> {
     let o = to_local(v, eye);
     let d = vec3(dot(dir, v.axis_x.xyz), dot(dir, v.axis_y.xyz), dot(dir, v.axis_z.xyz));
-    var cuts: array<f32, 10>;
+    var cuts: array<f32, 13>;
     var n = 0;
     cuts[n] = enter;
     n++;
@@ -255,9 +271,18 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
             }
         }
     }
+    for (var i = 0; i < 3; i++) {
+        let plane = v.hit_planes[i];
+        let along = dot(plane.xyz, d);
+        let t = -(dot(plane.xyz, o) + plane.w) / select(1.0, along, along != 0.0);
+        if along != 0.0 && t > enter && t < exit {
+            cuts[n] = t;
+            n++;
+        }
+    }
     cuts[n] = exit;
     n++;
-    // Insertion sort: at most ten cuts.
+    // Insertion sort: at most thirteen cuts.
     for (var i = 1; i < n; i++) {
         let x = cuts[i];
         var j = i - 1;

@@ -1,12 +1,12 @@
 //! Building caustic volumes from generator meshes and lights (§3, §3.4).
 
-use super::{BoundingShape, CausticVolume, VolumeSettings};
+use super::{BoundingShape, CausticVolume, NO_HIT_PLANE, OCCLUSION_SLACK, VolumeSettings};
 use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
 use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
 use crate::params::SpecularInteraction;
 use crate::scene::{Light, LightKind, Scene};
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
 /// The triangles around each vertex of a mesh (compressed rows), for the fans of §3.4.
@@ -117,6 +117,16 @@ fn in_shadow(occluders: &SceneBvh, light: &Light, p: Vec3) -> bool {
     occluders.intersect(p, to_light, hair, distance).is_some()
 }
 
+/// Where a vertex ray first meets a surface of `occluders`: the point and the
+/// surface's geometric normal.
+fn first_hit(occluders: &SceneBvh, p: Vec3, ray: &VertexRay) -> Option<(Vec3, Vec3)> {
+    let VertexRay::Ray { direction, .. } = *ray else {
+        return None;
+    };
+    let hair = 1e-5 * (1.0 + p.abs().max_element());
+    occluders.intersect(p, direction, hair, f32::INFINITY).map(|hit| (p + hit.t * direction, hit.geometric_normal))
+}
+
 /// A vertex ray: unit direction and the fraction of flux it carries (Fresnel).
 #[derive(Clone, Copy)]
 enum VertexRay {
@@ -178,6 +188,20 @@ impl Frame {
     fn world(&self, p: Vec3) -> Vec3 {
         self.origin + self.axes[0] * p.x + self.axes[1] * p.y + self.axes[2] * p.z
     }
+
+    /// The plane tangent to a surface at a vertex ray's first hit (point, normal), in
+    /// this frame and facing the local ray `r`, with the slack of [`OCCLUSION_SLACK`]
+    /// (at least 10⁻⁴ of the volume's depth) in its offset.
+    fn hit_plane(&self, (point, normal): (Vec3, Vec3), r: Vec3, depth: f32) -> Vec4 {
+        let mut n = self.local_dir(normal);
+        if n.dot(r) > 0.0 {
+            n = -n;
+        }
+        let q = self.local(point);
+        let slack = (OCCLUSION_SLACK * q.y).max(1e-4 * depth);
+        let plane = n.extend(slack - n.dot(q));
+        if plane.is_finite() { plane } else { NO_HIT_PLANE }
+    }
 }
 
 /// Area coefficients (a, b, c) of `A(α) = a + bα + cα²` for vertices `v` (y = 0) and
@@ -211,8 +235,10 @@ fn flattened(frame: &Frame, p: Vec3, ray: Vec3, min_cos: f32) -> Option<(Vec3, V
 /// `occluders` (the scene's surfaces other than generators) hide from the light
 /// carries no irradiance — past the paper, whose §3.1 lights every generator — so a
 /// generator in shadow casts nothing and one in partial shadow casts a caustic that
-/// fades across its shadow's edge, to the triangle. Volumes are appended to `out`;
-/// triangles run in parallel.
+/// fades across its shadow's edge, to the triangle. Each vertex ray also ends on the
+/// first surface of `occluders` it meets ([`CausticVolume::hit_planes`]): points
+/// behind it get no caustic light. Volumes are appended to `out`; triangles run in
+/// parallel.
 #[allow(clippy::too_many_arguments)]
 pub fn build_generator_volumes(
     mesh: &TriMesh,
@@ -246,6 +272,10 @@ pub fn build_generator_volumes(
     };
     let rays: Vec<VertexRay> =
         rays.into_iter().zip(shadowed.iter().copied().chain(std::iter::repeat(false))).map(|(r, s)| if s { r.shadowed() } else { r }).collect();
+    let hits: Vec<Option<(Vec3, Vec3)>> = match occluders {
+        Some(occluders) => mesh.positions().par_iter().zip(rays.par_iter()).map(|(&p, r)| first_hit(occluders, p, r)).collect(),
+        None => Vec::new(),
+    };
     // The mean ray direction: a slicing axis shared by the triangles whose rays all
     // leave steeply enough along it.
     let slicing_axis = rays
@@ -256,7 +286,8 @@ pub fn build_generator_volumes(
         })
         .sum::<Vec3>()
         .try_normalize();
-    let context = TriangleContext { mesh, fans, rays: &rays, shadowed: &shadowed, two_sided, slicing_axis, color, depth_bounds, settings };
+    let context =
+        TriangleContext { mesh, fans, rays: &rays, shadowed: &shadowed, hits: &hits, two_sided, slicing_axis, color, depth_bounds, settings };
     let results: Vec<(Option<CausticVolume>, BuildStats)> =
         (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
     let mut stats = BuildStats::default();
@@ -275,6 +306,8 @@ struct TriangleContext<'a> {
     rays: &'a [VertexRay],
     /// Per vertex, whether an occluder hides it from the light; empty without occluders.
     shadowed: &'a [bool],
+    /// Per vertex, where its ray first meets an occluder (point, normal); empty without occluders.
+    hits: &'a [Option<(Vec3, Vec3)>],
     two_sided: bool,
     slicing_axis: Option<Vec3>,
     color: Vec3,
@@ -285,7 +318,7 @@ struct TriangleContext<'a> {
 impl TriangleContext<'_> {
     /// The caustic volume of triangle `t`, or why there is none.
     fn volume(&self, t: usize) -> (Option<CausticVolume>, BuildStats) {
-        let TriangleContext { mesh, fans, rays, shadowed, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
+        let TriangleContext { mesh, fans, rays, shadowed, hits, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
             *self;
         let tri = mesh.triangles()[t];
         let p = mesh.corners(t);
@@ -441,6 +474,9 @@ impl TriangleContext<'_> {
             flux: weight,
             color,
             depth,
+            hit_planes: std::array::from_fn(|i| {
+                hits.get(tri[i] as usize).copied().flatten().map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth))
+            }),
             bounds: BoundingShape::new(v, r, depth, |q| frame.world(q)),
         };
         stats.volumes = 1;

@@ -35,12 +35,17 @@ impl MediumBox {
     }
 }
 
+/// The most pieces [`ray_pieces`] returns: between the two ends, the slab's two
+/// planes, two roots of each βᵢ and the three hit planes.
+pub const MAX_RAY_PIECES: usize = 12;
+
 /// The pieces `[t0, t1]` of the ray `o + t·d` (local frame) inside the warped volume,
 /// within `[start, end]`: the βᵢ along the ray are quadratics in t (the caustic
 /// triangle's corners move linearly with depth), so the boundary crossings are their
-/// roots. The pieces between consecutive crossings, at most nine.
-pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32) -> ([(f32, f32); 9], usize) {
-    let mut cuts = [0.0f32; 10];
+/// roots; the ray also crosses the vertex rays' hit planes, where the occlusion test
+/// may change. The pieces between consecutive crossings that lie inside.
+pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32) -> ([(f32, f32); MAX_RAY_PIECES], usize) {
+    let mut cuts = [0.0f32; MAX_RAY_PIECES + 1];
     let mut n = 0;
     cuts[n] = start;
     n += 1;
@@ -69,15 +74,24 @@ pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32
             }
         }
     }
+    for plane in volume.hit_planes {
+        let along = plane.truncate().dot(d);
+        let t = -(plane.truncate().dot(o) + plane.w) / along;
+        if along != 0.0 && t > start && t < end {
+            cuts[n] = t;
+            n += 1;
+        }
+    }
     cuts[n] = end;
     n += 1;
     let cuts = &mut cuts[..n];
     cuts.sort_by(f32::total_cmp);
-    let mut pieces = [(0.0, 0.0); 9];
+    let mut pieces = [(0.0, 0.0); MAX_RAY_PIECES];
     let mut count = 0;
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
-        if b > a && volume.barycentric(o + 0.5 * (a + b) * d).is_some() {
+        let mid = o + 0.5 * (a + b) * d;
+        if b > a && volume.barycentric(mid).is_some_and(|lambda| !volume.occluded(mid, lambda)) {
             pieces[count] = (a, b);
             count += 1;
         }

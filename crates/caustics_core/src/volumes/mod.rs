@@ -25,7 +25,11 @@
 //!   plane exists or the box is smaller ([`BoundingShape`]);
 //! - in a medium, the eye ray's path through the warped volume is found exactly (the
 //!   roots of three quadratics) rather than by the paper's straight-edged scan-plane
-//!   triangle (§3.5), and extinction along the beam uses σₜ, not σₛ.
+//!   triangle (§3.5), and extinction along the beam uses σₜ, not σₛ;
+//! - occluders: a vertex hidden from the light carries no flux, and each vertex ray
+//!   ends on the first surface it meets ([`CausticVolume::hit_planes`]), so a box
+//!   standing in the caustic casts its caustic shadow (§3.1 lights every receiver
+//!   point inside a volume).
 //!
 //! [`VolumeSet::irradiance_at`] is the CPU twin of the GPU pass in `caustics_bevy`.
 
@@ -34,15 +38,24 @@ mod medium;
 mod prism;
 
 pub use build::{BuildStats, VertexFans, build_generator_volumes, build_scene_volumes, channels};
-pub use medium::{MediumBox, in_scattered_radiance, ray_pieces};
+pub use medium::{MAX_RAY_PIECES, MediumBox, in_scattered_radiance, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// Half-width, in barycentric units, of the band along a shared side that only the
 /// side's owner counts: wider than the rounding of two volumes' different frames and
 /// of a point rebuilt from a depth buffer, far narrower than a pixel.
 pub const EDGE_EPSILON: f32 = 1.0e-4;
+
+/// How far behind the surface a vertex ray meets a point must lie to be in its
+/// shadow, as a fraction of the hit's depth α: receiver points rebuilt from a depth
+/// buffer, and curved receivers between the tangent planes at three hits, lie within
+/// it; occluders nearer a receiver than this (1 cm per metre) cast no caustic shadow.
+pub const OCCLUSION_SLACK: f32 = 1.0e-2;
+
+/// The hit plane of a vertex ray that meets no surface: nothing lies behind it.
+pub const NO_HIT_PLANE: Vec4 = Vec4::W;
 
 /// How irradiance varies inside one caustic triangle.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -123,6 +136,11 @@ pub struct CausticVolume {
     pub color: Vec3,
     /// Local depth α at which the volume ends (the far side of the receivers).
     pub depth: f32,
+    /// Per vertex, the plane tangent to the first surface its ray meets, in the local
+    /// frame and facing the ray: `n·p + w < 0` behind that surface (`w` holds a slack
+    /// of [`OCCLUSION_SLACK`] of the hit's depth). [`NO_HIT_PLANE`] for a ray that meets
+    /// nothing.
+    pub hit_planes: [Vec4; 3],
     /// The convex bounding shape rasterised on the GPU.
     pub bounds: BoundingShape,
 }
@@ -187,6 +205,17 @@ impl CausticVolume {
         inside.then_some(lambda)
     }
 
+    /// Whether a local point inside the volume, with barycentric coordinates λ, lies
+    /// in the shadow of the surfaces its vertex rays meet first: behind the hit planes
+    /// of vertices whose weights λᵢ sum past one half. Exact when the three rays meet
+    /// one plane; a volume split by an occluder's edge splits where the weights of its
+    /// two sides are equal, a first-order estimate of the edge within the volume.
+    #[inline]
+    pub fn occluded(&self, local: Vec3, lambda: Vec3) -> bool {
+        let behind = |i: usize| self.hit_planes[i].truncate().dot(local) + self.hit_planes[i].w < 0.0;
+        (0..3).filter(|&i| behind(i)).map(|i| lambda[i]).sum::<f32>() > 0.5
+    }
+
     /// Irradiance on the slicing plane at a point inside, and the interpolated ray
     /// there (§3.4). A point sample: near a fold `E = Φ/A` grows without bound in
     /// ever smaller regions, so averages of point samples there converge slowly (but
@@ -194,6 +223,9 @@ impl CausticVolume {
     pub fn sample(&self, p: Vec3, settings: &VolumeSettings) -> Option<VolumeSample> {
         let local = self.to_local(p);
         let lambda = self.barycentric(local)?;
+        if self.occluded(local, lambda) {
+            return None;
+        }
         let alpha = local.y;
         let max_mag = settings.max_magnification.max(1.0);
         let [a, b, c] = self.triangle_abc.to_array();
