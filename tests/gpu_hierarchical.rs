@@ -343,7 +343,7 @@ fn a_slab_between_the_spot_and_the_ball_keeps_the_light_off_the_ball() {
     let slab = TriMesh::cuboid(V3::new(-1.5, 3.0, -1.5), V3::new(-0.1, 3.1, 1.5));
     let white = renderer.world_mut().resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
     let slab_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&slab));
-    renderer.world_mut().spawn((Mesh3d(slab_mesh), MeshMaterial3d(white)));
+    let slab_entity = renderer.world_mut().spawn((Mesh3d(slab_mesh), MeshMaterial3d(white))).id();
     render(&mut renderer, 3);
     let photons = gpu_photons(&mut renderer);
     let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
@@ -358,4 +358,18 @@ fn a_slab_between_the_spot_and_the_ball_keeps_the_light_off_the_ball() {
     assert!(gpu_valid.abs_diff(cpu_valid) < cpu_valid / 25, "GPU {gpu_valid} against CPU {cpu_valid}");
     let on_both = photons.photons.iter().zip(&twin.photons.photons).filter(|(g, c)| g.is_valid() && c.is_valid()).count();
     assert!(on_both > cpu_valid - cpu_valid / 25, "{on_both} of {cpu_valid} photons on both sides");
+    // The slab across the whole cone: the ball in full shadow makes no map work at all.
+    let wide = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&TriMesh::cuboid(V3::new(-3.0, 3.0, -3.0), V3::new(3.0, 3.1, 3.0))));
+    renderer.world_mut().entity_mut(slab_entity).insert(Mesh3d(wide));
+    render(&mut renderer, 3);
+    let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
+    assert_eq!((plan.generators.len(), plan.shadowed, plan.views.len()), (0, 1, 0), "{plan:?}");
+    let report = renderer.pass_report();
+    assert_eq!((report.views("caustic map"), report.views("caustic map projection")), (0, 0), "{report:?}");
+    // The slab gone, the ball casts again.
+    renderer.world_mut().despawn(slab_entity);
+    render(&mut renderer, 3);
+    let report = renderer.pass_report();
+    assert!(report.views("caustic map projection") > 0, "{report:?}");
+    assert_eq!(valid(&gpu_photons(&mut renderer)), open);
 }

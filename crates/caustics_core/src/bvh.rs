@@ -1,7 +1,7 @@
 //! Closest-hit ray queries over every triangle of a [`Scene`], on a compressed wide
 //! BVH (CWBVH, Ylitie et al. 2017) built by `obvhs`.
 
-use crate::scene::Scene;
+use crate::scene::{Light, LightKind, Scene};
 use glam::{Vec2, Vec3};
 use glam_bvh::Vec3A as BvhVec3;
 use obvhs::{
@@ -109,6 +109,21 @@ impl SceneBvh {
             })
             .unzip();
         Self { bvh, triangles, owners }
+    }
+
+    /// Whether a surface in this BVH hides `p` from `light`: the shadow ray starts at
+    /// `p` itself (a hair along, for rounding), so the surface `p` lies on must not be
+    /// in the BVH — as for generators, which their occluders' BVH leaves out.
+    pub fn hides(&self, light: &Light, p: Vec3) -> bool {
+        let (to_light, distance) = match light.kind {
+            LightKind::Directional { direction, .. } => (-direction.normalize_or_zero(), f32::INFINITY),
+            LightKind::Point { position, .. } | LightKind::Spot { position, .. } => {
+                let d = position - p;
+                (d.normalize_or_zero(), d.length())
+            }
+        };
+        let hair = 1e-5 * (1.0 + p.abs().max_element());
+        self.intersect(p, to_light, hair, distance).is_some()
     }
 
     /// The closest hit along `origin + t·dir`, `t ∈ (tmin, tmax)`.

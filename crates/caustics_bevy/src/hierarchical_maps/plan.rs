@@ -6,12 +6,17 @@ use super::HierarchicalMapsSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, to_core, world_aabb};
+use crate::reference::{
+    AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb,
+};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
+use caustics_core::bvh::SceneBvh;
 use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
+use caustics_core::scene::{Light, Receiver, Scene};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
+use rayon::prelude::*;
 
 /// One light view to make a caustic map for, with the light it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -40,6 +45,9 @@ pub struct CausticMapPlan {
     pub views: Vec<PlannedLightView>,
     pub generators: Vec<CausticMapInstance>,
     pub occluders: Vec<CausticMapInstance>,
+    /// Generators left out because the occluders hide every vertex of theirs from
+    /// every light: a generator in full shadow costs no map work.
+    pub shadowed: usize,
     pub settings: Option<CausticMapSettings>,
     pub generation: u64,
 }
@@ -48,8 +56,40 @@ pub(super) fn build(app: &mut App) {
     app.init_resource::<CausticMapPlan>().add_systems(PostUpdate, plan_caustic_maps.in_set(crate::CausticsSystems::ReadScene));
 }
 
+/// The occluders' BVH, by `occluders` of [`CausticMapPlan`], for the shadow test.
+fn occluder_bvh(occluders: &[CausticMapInstance], meshes: &Assets<Mesh>) -> SceneBvh {
+    let receivers = occluders
+        .iter()
+        .filter_map(|o| meshes.get(o.mesh).and_then(|m| core_mesh(m, &GlobalTransform::from(o.world_from_local)).ok()))
+        .map(|mesh| Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE })
+        .collect();
+    SceneBvh::build(&Scene { receivers, ..Scene::default() })
+}
+
+/// Leaves out the generators whose every vertex the occluders hide from every light
+/// (the CPU rays the volumes use, `SceneBvh::hides`), counting them in `shadowed`; the
+/// photon kernel still drops the shadowed photons of the rest. A generator with
+/// every vertex hidden but light through a gap between them would be lost: an
+/// occluder with holes smaller than the generator's triangles.
+fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Assets<Mesh>) {
+    if plan.generators.is_empty() || plan.occluders.is_empty() {
+        return;
+    }
+    let occluders = occluder_bvh(&plan.occluders, meshes);
+    let lit = |g: &CausticMapInstance| {
+        let Some(Ok(mesh)) = meshes.get(g.mesh).map(|m| core_mesh(m, &GlobalTransform::from(g.world_from_local))) else {
+            return true;
+        };
+        lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p)))
+    };
+    let before = plan.generators.len();
+    plan.generators.retain(|g| lit(g));
+    plan.shadowed = before - plan.generators.len();
+}
+
 /// Main world: plans the caustic maps (light views, instances) and bumps the
-/// generation when the plan, or a mesh it draws, changed.
+/// generation when the plan, or a mesh it draws, changed. The shadow test runs only
+/// then: an unchanged scene casts no rays.
 #[allow(clippy::too_many_arguments)]
 fn plan_caustic_maps(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
@@ -57,7 +97,9 @@ fn plan_caustic_maps(
     lights: Query<LightComponents, AnyLight>,
     settings: Res<HierarchicalMapsSettings>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    meshes: Res<Assets<Mesh>>,
     mut plan: ResMut<CausticMapPlan>,
+    mut planned: Local<CausticMapPlan>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut warned: Local<bool>,
     mut warned_generators: Local<HashSet<Entity>>,
@@ -76,7 +118,8 @@ fn plan_caustic_maps(
             false
         }
     };
-    let mut next = CausticMapPlan { settings: Some(core_settings), generation: plan.generation, ..default() };
+    // Generation 0 until it is planned: `planned` keeps what the last plan was made of.
+    let mut next = CausticMapPlan { settings: Some(core_settings), ..default() };
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
     for (entity, generator, choice, (mesh, transform, visible, aabb)) in &generators {
         if choice.technique() != Technique::HierarchicalMaps || !visible.get() || !valid {
@@ -110,6 +153,7 @@ fn plan_caustic_maps(
             next.occluders.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior: 0.0 });
         }
     }
+    let mut core_lights = Vec::new();
     if let (Some(generators), Some(receivers)) = (generator_bounds, receiver_bounds) {
         let core_bounds = |(lo, hi): (Vec3, Vec3)| (to_core(lo), to_core(hi));
         for (d, p, s, t, visible) in &lights {
@@ -122,18 +166,24 @@ fn plan_caustic_maps(
             for view in LightView::for_light(&light, core_bounds(generators), core_bounds(receivers)) {
                 next.views.push(PlannedLightView { view, color, cone });
             }
+            core_lights.push(light);
         }
-    }
-    if next.views.is_empty() {
-        next.generators.clear();
-        next.occluders.clear();
     }
     let used: HashSet<AssetId<Mesh>> = next.generators.iter().chain(&next.occluders).map(|i| i.mesh).collect();
     let mesh_changed = mesh_events.read().any(|e| match e {
         AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
         _ => false,
     });
-    if mesh_changed || next != *plan {
+    if mesh_changed || next != *planned {
+        *planned = next.clone();
+        leave_out_shadowed(&mut next, &core_lights, &meshes);
+        if next.generators.is_empty() {
+            next.views.clear();
+        }
+        if next.views.is_empty() {
+            next.generators.clear();
+            next.occluders.clear();
+        }
         next.generation = plan.generation + 1;
         *plan = next;
     }

@@ -103,20 +103,6 @@ fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
     }
 }
 
-/// Whether a surface of `occluders` hides `p` from `light`. The generators are not
-/// among them, so the shadow ray may start at `p` itself (a hair along, for rounding).
-fn in_shadow(occluders: &SceneBvh, light: &Light, p: Vec3) -> bool {
-    let (to_light, distance) = match light.kind {
-        LightKind::Directional { direction, .. } => (-direction.normalize_or_zero(), f32::INFINITY),
-        LightKind::Point { position, .. } | LightKind::Spot { position, .. } => {
-            let d = position - p;
-            (d.normalize_or_zero(), d.length())
-        }
-    };
-    let hair = 1e-5 * (1.0 + p.abs().max_element());
-    occluders.intersect(p, to_light, hair, distance).is_some()
-}
-
 /// Where a vertex ray first meets a surface of `occluders`: the point and the
 /// surface's geometric normal.
 fn first_hit(occluders: &SceneBvh, p: Vec3, ray: &VertexRay) -> Option<(Vec3, Vec3)> {
@@ -267,7 +253,7 @@ pub fn build_generator_volumes(
         .map(|(&p, &n)| vertex_ray(light, interaction, ior, p, n))
         .collect();
     let shadowed: Vec<bool> = match occluders {
-        Some(occluders) => mesh.positions().par_iter().map(|&p| in_shadow(occluders, light, p)).collect(),
+        Some(occluders) => mesh.positions().par_iter().map(|&p| occluders.hides(light, p)).collect(),
         None => Vec::new(),
     };
     let rays: Vec<VertexRay> =
