@@ -96,7 +96,7 @@ fn cpu_scene(interaction: SpecularInteraction) -> Scene {
     let light = core_light(None, None, Some(&light), &GlobalTransform::from(transform)).unwrap();
     Scene {
         lights: vec![light],
-        generators: vec![Generator { mesh: ball(), interaction }],
+        generators: vec![Generator::new(ball(), interaction)],
         receivers: vec![Receiver { mesh: floor(), albedo: V3::ONE }, Receiver { mesh: block(), albedo: V3::ONE }],
     }
 }

@@ -63,7 +63,7 @@ fn cpu_volumes(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, sett
     use caustics_core::glam::Vec3 as V;
     let scene = Scene {
         lights: vec![Light::white(LightKind::Directional { direction: to_core(sun.normalize()), irradiance: ILLUMINANCE })],
-        generators: vec![Generator { mesh: mesh.clone(), interaction }],
+        generators: vec![Generator::new(mesh.clone(), interaction)],
         receivers: vec![Receiver { mesh: TriMesh::quad(V::ZERO, V::Z * 2.0, V::X * 2.0), albedo: V::ONE }],
     };
     build_scene_volumes(&scene, &settings.core())

@@ -44,17 +44,27 @@ pub enum GeneratorInteraction {
 pub struct CausticGenerator {
     pub interaction: GeneratorInteraction,
     pub technique: CausticTechnique,
+    /// Whether an open surface reflects or refracts on its back too, like
+    /// `StandardMaterial::double_sided` and glTF's `doubleSided` (which the glTF
+    /// tagging copies here). `false`, the default, absorbs the light that reaches its
+    /// back: a one-sided mirror is dark from behind. A closed mesh ignores it: light
+    /// leaves a glass ball through its faces' backs ([`caustics_core::scene::Sides`]).
+    pub double_sided: bool,
 }
 
 impl CausticGenerator {
-    /// A mirror.
+    /// A one-sided mirror.
     pub fn mirror() -> Self {
-        Self { interaction: GeneratorInteraction::Reflect, technique: CausticTechnique::Auto }
+        Self { interaction: GeneratorInteraction::Reflect, technique: CausticTechnique::Auto, double_sided: false }
     }
 
-    /// A refracting surface of index `ior`, without dispersion.
+    /// A one-sided refracting surface of index `ior`, without dispersion.
     pub fn refractive(ior: f32) -> Self {
-        Self { interaction: GeneratorInteraction::Refract { ior, dispersion: None }, technique: CausticTechnique::Auto }
+        Self {
+            interaction: GeneratorInteraction::Refract { ior, dispersion: None },
+            technique: CausticTechnique::Auto,
+            double_sided: false,
+        }
     }
 
     /// The interaction as the core algorithms see it.

@@ -51,7 +51,7 @@ pub fn tag_from_materials(
                     SpecularInteraction::Refract { ior, .. } => GeneratorInteraction::Refract { ior, dispersion: None },
                     SpecularInteraction::Reflect => GeneratorInteraction::Reflect,
                 };
-                e.insert(CausticGenerator { interaction, technique: CausticTechnique::Auto });
+                e.insert(CausticGenerator { interaction, technique: CausticTechnique::Auto, double_sided: material.double_sided });
             }
             Err(err) => {
                 let label = name.map_or_else(|| entity.to_string(), |n| n.to_string());

@@ -242,10 +242,12 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, technique: Option<C
                 },
             ),
         };
+        let double_sided = generator.double_sided;
+        let material = StandardMaterial { double_sided, cull_mode: (!double_sided).then_some(bevy::render::render_resource::Face::Back), ..material };
         let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
         let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
         if let Some(technique) = technique {
-            entity.insert(CausticGenerator { technique, ..component });
+            entity.insert(CausticGenerator { technique, double_sided, ..component });
         }
     }
     for light in &scene.lights {

@@ -12,6 +12,7 @@ use bevy::camera::primitives::Aabb;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::Sides;
 use caustics_core::technique::{GeneratorFacts, GeneratorShape, choose};
 pub use caustics_core::technique::{Technique, TechniqueChoice};
 
@@ -146,31 +147,33 @@ pub fn choose_techniques(
             }
             continue;
         }
+        let is_closed = if pool || ocean {
+            false
+        } else {
+            let id = mesh3d.id();
+            match closed.get(&id) {
+                Some(&c) => c,
+                None => {
+                    // Not loaded yet: no choice, no work, until it is.
+                    let Some(mesh) = meshes.get(id) else { continue };
+                    // A malformed mesh counts as open: the volumes then report it.
+                    let c = core_mesh(mesh, &GlobalTransform::IDENTITY).is_ok_and(|m| m.is_closed());
+                    closed.insert(id, c);
+                    c
+                }
+            }
+        };
         let shape = match generator.specular_interaction() {
             SpecularInteraction::Reflect => GeneratorShape::Mirror,
             _ if pool => GeneratorShape::Pool,
-            _ if ocean => GeneratorShape::OpenRefractor,
-            _ => {
-                let id = mesh3d.id();
-                let is_closed = match closed.get(&id) {
-                    Some(&c) => c,
-                    None => {
-                        // Not loaded yet: no choice, no work, until it is.
-                        let Some(mesh) = meshes.get(id) else { continue };
-                        // A malformed mesh counts as open: the volumes then report it.
-                        let c = core_mesh(mesh, &GlobalTransform::IDENTITY).is_ok_and(|m| m.is_closed());
-                        closed.insert(id, c);
-                        c
-                    }
-                };
-                if is_closed { GeneratorShape::ClosedRefractor } else { GeneratorShape::OpenRefractor }
-            }
+            _ if is_closed => GeneratorShape::ClosedRefractor,
+            _ => GeneratorShape::OpenRefractor,
         };
         let in_medium = aabb.is_some_and(|aabb| {
             let (lo, hi) = world_aabb(transform, aabb);
             media.iter().any(|&(mlo, mhi)| lo.cmple(mhi).all() && mlo.cmple(hi).all())
         });
-        let facts = GeneratorFacts { shape, in_medium };
+        let facts = GeneratorFacts { shape, in_medium, sides: Sides::of(is_closed, generator.double_sided) };
         let requested = generator.technique.requested();
         match choose(requested, facts, |t| available.0.contains(&t)) {
             Some(choice) => {

@@ -231,7 +231,8 @@ impl BenchMethod for Auto {
         let own = tessellated(name, scene, tessellation)?;
         let mut groups: Vec<(Technique, Scene)> = Vec::new();
         for generator in &own.scene.generators {
-            let facts = GeneratorFacts { shape: GeneratorShape::of(&generator.mesh, &generator.interaction), in_medium: false };
+            let shape = GeneratorShape::of(&generator.mesh, &generator.interaction);
+            let facts = GeneratorFacts { shape, in_medium: false, sides: generator.sides() };
             let choice = choose(None, facts, |_| true).ok_or("auto: no technique draws a generator")?;
             match groups.iter_mut().find(|(t, _)| *t == choice.technique) {
                 Some((_, group)) => group.generators.push(generator.clone()),

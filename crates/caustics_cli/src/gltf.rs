@@ -103,7 +103,9 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
         )
         .map_err(|e| format!("{name}: {label}: {e}"))?;
         match role {
-            SurfaceRole::Generator(interaction) => scene.generators.push(Generator { mesh, interaction }),
+            SurfaceRole::Generator(interaction) => {
+                scene.generators.push(Generator { mesh, interaction, double_sided: material.double_sided })
+            }
             SurfaceRole::Receiver => {
                 let c = material.base_color.to_linear();
                 scene.receivers.push(Receiver { mesh, albedo: glam::Vec3::new(c.red, c.green, c.blue) });

@@ -53,10 +53,10 @@ fn ball_beside_pool(cells: usize) -> BenchScene {
     let mut bench = wave_pool(cells + 1, 128);
     bench.scene.generators[0].mesh = wave_heightfield(cells + 1, 2.0, 0.8, &POOL_WAVES)
         .transformed(&Affine3A::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
-    bench.scene.generators.push(Generator {
-        mesh: TriMesh::uv_sphere(Vec3::new(0.55, 0.45, 0.0), 0.3, 32, 64),
-        interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
-    });
+    bench.scene.generators.push(Generator::new(
+        TriMesh::uv_sphere(Vec3::new(0.55, 0.45, 0.0), 0.3, 32, 64),
+        SpecularInteraction::Refract { ior: 1.5, dispersion: None },
+    ));
     bench.name = "ball_pool".into();
     bench
 }
@@ -70,10 +70,7 @@ fn ring_beside_bunny(segments: usize) -> BenchScene {
     bench.scene.generators[0].mesh = TriMesh::solid_ring(Vec3::new(0.5, 0.0, 0.0), 0.35, 0.38, 0.2, segments);
     let bunny = TriMesh::from_obj(include_str!("../../../assets/models/bunny.obj")).expect("the bunny asset parses (tested)");
     let place = Affine3A::from_translation(Vec3::new(-0.5, 0.3, 0.0)) * Affine3A::from_scale(Vec3::splat(0.06));
-    bench.scene.generators.push(Generator {
-        mesh: bunny.transformed(&place),
-        interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
-    });
+    bench.scene.generators.push(Generator::new(bunny.transformed(&place), SpecularInteraction::Refract { ior: 1.5, dispersion: None }));
     bench.name = "mirror_bunny".into();
     bench
 }

@@ -212,79 +212,90 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
     assert_clean_failure(&out, "does not apply");
 }
 
-/// Writes a glTF scene no test has seen before: a glass box (KHR_materials_transmission,
-/// KHR_materials_ior 1.5, a closed mesh with its own vertices per face) 0.5 m over a
-/// grey floor, under a sun slanting 10° off zenith (KHR_lights_punctual), the vertex data
-/// in a `.bin` beside it.
-fn write_glass_box_gltf(dir: &std::path::Path) -> PathBuf {
+/// Quads as glTF mesh data: four vertices of their own and two triangles each,
+/// counter-clockwise about `u × v`.
+#[derive(Default)]
+struct Quads {
+    positions: Vec<caustics_core::glam::Vec3>,
+    normals: Vec<caustics_core::glam::Vec3>,
+    indices: Vec<u32>,
+}
+
+impl Quads {
+    fn quad(mut self, centre: caustics_core::glam::Vec3, u: caustics_core::glam::Vec3, v: caustics_core::glam::Vec3) -> Self {
+        let first = self.positions.len() as u32;
+        self.positions.extend([centre - u - v, centre + u - v, centre + u + v, centre - u + v]);
+        self.normals.extend([u.cross(v).normalize(); 4]);
+        self.indices.extend([0, 1, 2, 0, 2, 3].map(|i| first + i));
+        self
+    }
+
+    fn floor() -> Self {
+        use caustics_core::glam::Vec3;
+        Self::default().quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0)
+    }
+}
+
+/// Writes `name.gltf` (and its `.bin`): one node per mesh, each with its own material
+/// (a glTF material object), under a directional light (KHR_lights_punctual) shining
+/// along `sun`.
+fn write_gltf(dir: &std::path::Path, name: &str, meshes: &[(&str, Quads, &str)], sun: caustics_core::glam::Vec3) -> PathBuf {
     use caustics_core::glam::{Quat, Vec3};
-    let (mut positions, mut normals, mut indices) = (Vec::<Vec3>::new(), Vec::<Vec3>::new(), Vec::<u32>::new());
-    let mut quad = |centre: Vec3, u: Vec3, v: Vec3| {
-        let first = positions.len() as u32;
-        positions.extend([centre - u - v, centre + u - v, centre + u + v, centre - u + v]);
-        normals.extend([u.cross(v).normalize(); 4]);
-        indices.extend([0, 1, 2, 0, 2, 3].map(|i| first + i));
-    };
-    let (centre, h) = (Vec3::new(0.0, 0.75, 0.0), 0.25);
-    for (n, u, v) in [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::Z, Vec3::X, Vec3::Y)] {
-        quad(centre + n * h, u * h, v * h);
-        quad(centre - n * h, v * h, u * h);
+    let (mut bin, mut views, mut accessors, mut nodes, mut primitives, mut materials) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (k, (node, quads, material)) in meshes.iter().enumerate() {
+        let (lo, hi) = quads.positions.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), &p| (a.min(p), b.max(p)));
+        for (list, bounds) in [(&quads.positions, Some((lo, hi))), (&quads.normals, None)] {
+            let bounds = bounds.map_or(String::new(), |(lo, hi)| format!(r#", "min": {:?}, "max": {:?}"#, lo.to_array(), hi.to_array()));
+            accessors.push(format!(r#"{{"bufferView": {}, "componentType": 5126, "count": {}, "type": "VEC3"{bounds}}}"#, views.len(), list.len()));
+            views.push(format!(r#"{{"buffer": 0, "byteOffset": {}, "byteLength": {}}}"#, bin.len(), 12 * list.len()));
+            bin.extend(list.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
+        }
+        accessors.push(format!(r#"{{"bufferView": {}, "componentType": 5125, "count": {}, "type": "SCALAR"}}"#, views.len(), quads.indices.len()));
+        views.push(format!(r#"{{"buffer": 0, "byteOffset": {}, "byteLength": {}}}"#, bin.len(), 4 * quads.indices.len()));
+        bin.extend(quads.indices.iter().flat_map(|i| i.to_le_bytes()));
+        nodes.push(format!(r#"{{"name": "{node}", "mesh": {k}}}"#));
+        primitives.push(format!(r#"{{"primitives": [{{"attributes": {{"POSITION": {}, "NORMAL": {}}}, "indices": {}, "material": {k}}}]}}"#, 3 * k, 3 * k + 1, 3 * k + 2));
+        materials.push(material.to_string());
     }
-    quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0);
-    // Six faces of four vertices and two triangles, then the floor, whose indices
-    // count from its own first vertex.
-    let box_counts = (24, 36);
-    indices[box_counts.1..].iter_mut().for_each(|i| *i -= box_counts.0 as u32);
-    let mut bin = Vec::new();
-    for list in [&positions, &normals] {
-        bin.extend(list.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes));
-    }
-    bin.extend(indices.iter().flat_map(|i| i.to_le_bytes()));
-    std::fs::write(dir.join("glass_box.bin"), &bin).unwrap();
-    let (v, i) = (positions.len(), indices.len());
-    let view = |offset: usize, length: usize| format!(r#"{{"buffer": 0, "byteOffset": {offset}, "byteLength": {length}}}"#);
-    let vec3 = |view: usize, offset: usize, count: usize, bounds: Option<(Vec3, Vec3)>| {
-        let bounds = bounds.map_or(String::new(), |(lo, hi)| format!(r#", "min": {:?}, "max": {:?}"#, lo.to_array(), hi.to_array()));
-        format!(r#"{{"bufferView": {view}, "byteOffset": {}, "componentType": 5126, "count": {count}, "type": "VEC3"{bounds}}}"#, 12 * offset)
-    };
-    let bounds = |range: std::ops::Range<usize>| {
-        let p = &positions[range];
-        (p.iter().copied().reduce(Vec3::min).unwrap(), p.iter().copied().reduce(Vec3::max).unwrap())
-    };
-    let sun = Quat::from_rotation_arc(Vec3::NEG_Z, Vec3::new(0.15, -1.0, 0.1).normalize());
+    let rotation = Quat::from_rotation_arc(Vec3::NEG_Z, sun.normalize());
+    nodes.push(format!(r#"{{"name": "sun", "rotation": {:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}"#, rotation.to_array()));
+    std::fs::write(dir.join(format!("{name}.bin")), &bin).unwrap();
     let gltf = format!(
         r#"{{"asset": {{"version": "2.0"}},
  "extensionsUsed": ["KHR_materials_transmission", "KHR_materials_ior", "KHR_lights_punctual"],
  "extensions": {{"KHR_lights_punctual": {{"lights": [{{"type": "directional", "intensity": 2.0}}]}}}},
- "scene": 0, "scenes": [{{"nodes": [0, 1, 2]}}],
- "nodes": [{{"name": "glass box", "mesh": 0}}, {{"name": "floor", "mesh": 1}},
-           {{"name": "sun", "rotation": {:?}, "extensions": {{"KHR_lights_punctual": {{"light": 0}}}}}}],
- "materials": [
-   {{"name": "glass", "pbrMetallicRoughness": {{"metallicFactor": 0.0, "roughnessFactor": 0.0}},
-     "extensions": {{"KHR_materials_transmission": {{"transmissionFactor": 1.0}}, "KHR_materials_ior": {{"ior": 1.5}}}}}},
-   {{"name": "stone", "pbrMetallicRoughness": {{"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}}}}],
- "meshes": [
-   {{"primitives": [{{"attributes": {{"POSITION": 0, "NORMAL": 1}}, "indices": 2, "material": 0}}]}},
-   {{"primitives": [{{"attributes": {{"POSITION": 3, "NORMAL": 4}}, "indices": 5, "material": 1}}]}}],
- "accessors": [{}, {}, {{"bufferView": 2, "componentType": 5125, "count": {}, "type": "SCALAR"}},
-               {}, {}, {{"bufferView": 2, "byteOffset": {}, "componentType": 5125, "count": 6, "type": "SCALAR"}}],
- "bufferViews": [{}, {}, {}],
- "buffers": [{{"uri": "glass_box.bin", "byteLength": {}}}]}}"#,
-        sun.to_array(),
-        vec3(0, 0, box_counts.0, Some(bounds(0..box_counts.0))),
-        vec3(1, 0, box_counts.0, None),
-        box_counts.1,
-        vec3(0, box_counts.0, 4, Some(bounds(box_counts.0..v))),
-        vec3(1, box_counts.0, 4, None),
-        4 * box_counts.1,
-        view(0, 12 * v),
-        view(12 * v, 12 * v),
-        view(24 * v, 4 * i),
+ "scene": 0, "scenes": [{{"nodes": {:?}}}],
+ "nodes": [{}], "materials": [{}], "meshes": [{}], "accessors": [{}], "bufferViews": [{}],
+ "buffers": [{{"uri": "{name}.bin", "byteLength": {}}}]}}"#,
+        (0..nodes.len()).collect::<Vec<_>>(),
+        nodes.join(", "),
+        materials.join(", "),
+        primitives.join(", "),
+        accessors.join(", "),
+        views.join(", "),
         bin.len(),
     );
-    let path = dir.join("glass_box.gltf");
+    let path = dir.join(format!("{name}.gltf"));
     std::fs::write(&path, gltf).unwrap();
     path
+}
+
+const STONE: &str = r#"{"name": "stone", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}}"#;
+
+/// Writes a glTF scene no test has seen before: a glass box (KHR_materials_transmission,
+/// KHR_materials_ior 1.5, a closed mesh with its own vertices per face) 0.5 m over a
+/// grey floor, under a sun slanting 10° off zenith.
+fn write_glass_box_gltf(dir: &std::path::Path) -> PathBuf {
+    use caustics_core::glam::Vec3;
+    let (centre, h) = (Vec3::new(0.0, 0.75, 0.0), 0.25);
+    let mut glass_box = Quads::default();
+    for (n, u, v) in [(Vec3::X, Vec3::Y, Vec3::Z), (Vec3::Y, Vec3::Z, Vec3::X), (Vec3::Z, Vec3::X, Vec3::Y)] {
+        glass_box = glass_box.quad(centre + n * h, u * h, v * h).quad(centre - n * h, v * h, u * h);
+    }
+    let glass = r#"{"name": "glass", "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.0},
+     "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.5}}}"#;
+    write_gltf(dir, "glass_box", &[("glass box", glass_box, glass), ("floor", Quads::floor(), STONE)], Vec3::new(0.15, -1.0, 0.1))
 }
 
 #[test]
@@ -327,5 +338,50 @@ fn a_gltf_scene_of_ones_own_goes_through_the_gpu_passes_and_the_bench() {
         let fields: Vec<&str> = row.split(',').collect();
         let gpu_ms: f64 = fields[fields.len() - from_end].parse().unwrap_or_else(|_| panic!("{timed}: no GPU time in {row}"));
         assert!(gpu_ms > 0.0, "{timed}: {row}");
+    }
+}
+
+/// glTF's `doubleSided` on a mirror lit from behind (issue 10 §5): a 1 m square polished
+/// metal sheet leaning over a floor, its back to a sun slanting 45° (the front would
+/// throw the light back down beside it). One-sided, its back absorbs — in the tracer,
+/// and in the GPU passes of the volumes and the maps; double-sided, both techniques
+/// cast its caustic on the GPU.
+#[test]
+fn a_one_sided_mirror_is_dark_from_behind_and_a_double_sided_one_is_not() {
+    use caustics_core::glam::Vec3;
+    let dir = out_dir("double_sided");
+    std::fs::create_dir_all(&dir).unwrap();
+    let sun = Vec3::new(1.0, -1.0, 0.0);
+    let (u, v) = (Vec3::Z * 0.5, Vec3::new(-0.235, 0.972, 0.0).normalize() * 0.5);
+    for double_sided in [false, true] {
+        // Wound so that its normal (v × u) faces away from the sun.
+        let sheet = Quads::default().quad(Vec3::new(0.5, 1.0, 0.0), v, u);
+        assert!(sheet.normals[0].dot(sun) > 0.0);
+        let metal = format!(
+            r#"{{"name": "mirror", "doubleSided": {double_sided}, "pbrMetallicRoughness": {{"metallicFactor": 1.0, "roughnessFactor": 0.0}}}}"#
+        );
+        let name = format!("mirror_double_sided_{double_sided}");
+        let scene = write_gltf(&dir, &name, &[("mirror", sheet, &metal), ("floor", Quads::floor(), STONE)], sun);
+        let plane = |method: &str| {
+            let exr = dir.join(format!("{name}-{method}.exr"));
+            let (png, exr_arg) = (dir.join("plane.png").display().to_string(), exr.display().to_string());
+            let args = ["render", scene.to_str().unwrap(), "--method", method, "--irradiance-plane", "--size", "32x32"];
+            let out = caustics(&[&args[..], &["--region", "-1,-1,2", "--photons", "1000000", "--out", &png, "--exr", &exr_arg]].concat());
+            assert!(out.status.success(), "{name} {method}: {}", String::from_utf8_lossy(&out.stderr));
+            plane(&exr)
+        };
+        let truth = plane("reference");
+        let total = |p: &[f64]| p.iter().sum::<f64>();
+        for method in ["volumes", "maps"] {
+            let gpu = plane(method);
+            if double_sided {
+                let error = relative_l2(&gpu, &truth);
+                eprintln!("double-sided mirror from behind, {method}: GPU vs reference relative L2 {error:.3}, flux {:.3} of the reference's", total(&gpu) / total(&truth));
+                assert!(error < 0.5 && (total(&gpu) / total(&truth) - 1.0).abs() < 0.1, "{method}: L2 {error}");
+            } else {
+                assert_eq!(total(&gpu), 0.0, "{method}: a one-sided mirror reflects from its back");
+            }
+        }
+        assert_eq!(total(&truth) > 0.0, double_sided, "the tracer's mirror back, double-sided: {double_sided}");
     }
 }

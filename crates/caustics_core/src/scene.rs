@@ -94,6 +94,60 @@ fn nonzero(v: Vec3) -> Result<(), ParamError> {
 pub struct Generator {
     pub mesh: TriMesh,
     pub interaction: SpecularInteraction,
+    /// glTF's `doubleSided`: whether an open surface reflects or refracts on its back
+    /// too ([`Sides`]). The front is the side its vertex normals face and its
+    /// triangles wind counter-clockwise on.
+    pub double_sided: bool,
+}
+
+impl Generator {
+    /// A one-sided generator (glTF's default).
+    pub fn new(mesh: TriMesh, interaction: SpecularInteraction) -> Self {
+        Self { mesh, interaction, double_sided: false }
+    }
+
+    /// Which sides of its faces take part in caustics (welds the mesh to tell).
+    pub fn sides(&self) -> Sides {
+        Sides::of(self.mesh.is_closed(), self.double_sided)
+    }
+}
+
+/// Which sides of a generator's faces take part in caustics: glTF's `doubleSided` read
+/// as offline renderers read a one-sided surface (a one-sided conductor is black from
+/// behind), on the surfaces where a back can be lit from outside.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Sides {
+    /// A watertight mesh ([`TriMesh::is_closed`]), whatever `doubleSided` says: its
+    /// back faces lie inside it. A refractor's are where light leaves it (glTF's
+    /// default `doubleSided: false` is on most closed glass); a mirror's are never lit.
+    Closed,
+    /// An open surface with `doubleSided: false` (glTF's default): light reaching its
+    /// back is absorbed.
+    #[default]
+    Front,
+    /// An open surface with `doubleSided: true`: both sides reflect or refract.
+    Both,
+}
+
+impl Sides {
+    pub fn of(closed: bool, double_sided: bool) -> Self {
+        match (closed, double_sided) {
+            (true, _) => Sides::Closed,
+            (false, false) => Sides::Front,
+            (false, true) => Sides::Both,
+        }
+    }
+
+    /// Whether a face lit from behind (the light arriving against its normal's side)
+    /// casts caustics: both sides of an open double-sided surface, and a closed
+    /// refractor's faces, which light crosses from inside.
+    pub fn lit_from_behind(self, interaction: &SpecularInteraction) -> bool {
+        match self {
+            Sides::Closed => matches!(interaction, SpecularInteraction::Refract { .. }),
+            Sides::Front => false,
+            Sides::Both => true,
+        }
+    }
 }
 
 /// A diffuse surface on which caustics land (and which blocks light).

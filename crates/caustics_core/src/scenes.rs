@@ -64,6 +64,7 @@ pub fn wave_pool(n: usize, cells: usize) -> BenchScene {
             size: 4.0,
             height: 0.8,
             waves: waves.iter().map(|w| [w.kx, w.kz, w.amplitude, w.phase]).collect(),
+            double_sided: false,
         }],
         receiver: ReceiverDescription { y: 0.0, size: 2.0 },
         max_depth: 3,
@@ -76,10 +77,10 @@ pub fn wave_pool(n: usize, cells: usize) -> BenchScene {
 pub fn glass_sphere(segments: usize) -> BenchScene {
     let scene = Scene {
         lights: vec![Light::white(LightKind::Point { position: Vec3::new(0.0, 4.0, 0.0), intensity: 10.0 })],
-        generators: vec![Generator {
-            mesh: TriMesh::uv_sphere(Vec3::new(0.0, 1.0, 0.0), 0.5, segments / 2, segments),
-            interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None },
-        }],
+        generators: vec![Generator::new(
+            TriMesh::uv_sphere(Vec3::new(0.0, 1.0, 0.0), 0.5, segments / 2, segments),
+            SpecularInteraction::Refract { ior: 1.5, dispersion: None },
+        )],
         receivers: vec![floor(4.0)],
     };
     BenchScene { name: "glass_sphere".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
@@ -90,10 +91,7 @@ pub fn glass_sphere(segments: usize) -> BenchScene {
 pub fn metal_ring(segments: usize) -> BenchScene {
     let scene = Scene {
         lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(1.0, -0.45, 0.0), irradiance: 1.0 })],
-        generators: vec![Generator {
-            mesh: TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, segments),
-            interaction: SpecularInteraction::Reflect,
-        }],
+        generators: vec![Generator::new(TriMesh::solid_ring(Vec3::ZERO, 1.0, 1.05, 0.3, segments), SpecularInteraction::Reflect)],
         receivers: vec![floor(4.0)],
     };
     BenchScene { name: "metal_ring".into(), scene, region: GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 128) }
@@ -155,6 +153,9 @@ pub struct GeneratorDescription {
     pub height: f32,
     /// `[kx, kz, amplitude, phase]` per wave.
     pub waves: Vec<[f32; 4]>,
+    /// glTF's `doubleSided` ([`crate::scene::Sides`]); one-sided when left out.
+    #[serde(default)]
+    pub double_sided: bool,
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -193,7 +194,7 @@ impl SceneDescription {
                 };
                 let waves: Vec<Wave> =
                     g.waves.iter().map(|&[kx, kz, amplitude, phase]| Wave { kx, kz, amplitude, phase }).collect();
-                Ok(Generator { mesh: wave_heightfield(g.n, g.size, g.height, &waves), interaction })
+                Ok(Generator { mesh: wave_heightfield(g.n, g.size, g.height, &waves), interaction, double_sided: g.double_sided })
             })
             .collect::<Result<Vec<_>, _>>()?;
         let half = 0.5 * self.receiver.size;

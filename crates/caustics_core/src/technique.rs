@@ -17,6 +17,7 @@
 
 use crate::mesh::TriMesh;
 use crate::params::SpecularInteraction;
+use crate::scene::Sides;
 use std::fmt;
 
 /// The four published techniques.
@@ -98,6 +99,9 @@ pub struct GeneratorFacts {
     pub shape: GeneratorShape,
     /// Whether a participating medium overlaps the generator's bounds.
     pub in_medium: bool,
+    /// Which sides of its faces take part (glTF's `doubleSided`); no bearing on the
+    /// choice, kept for the techniques.
+    pub sides: Sides,
 }
 
 impl GeneratorFacts {
@@ -203,13 +207,13 @@ mod tests {
         [GeneratorShape::ClosedRefractor, GeneratorShape::OpenRefractor, GeneratorShape::Pool, GeneratorShape::Mirror];
 
     fn facts(shape: GeneratorShape) -> GeneratorFacts {
-        GeneratorFacts { shape, in_medium: false }
+        GeneratorFacts { shape, in_medium: false, sides: Sides::Front }
     }
 
     #[test]
     fn auto_follows_the_table_and_says_why() {
         let all = |_| true;
-        let pick = |shape, in_medium| choose(None, GeneratorFacts { shape, in_medium }, all).unwrap();
+        let pick = |shape, in_medium| choose(None, GeneratorFacts { shape, in_medium, sides: Sides::Front }, all).unwrap();
         assert_eq!(pick(GeneratorShape::ClosedRefractor, false).technique, Technique::HierarchicalMaps);
         assert_eq!(pick(GeneratorShape::OpenRefractor, false).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::Pool, false).technique, Technique::WarpedVolumes);

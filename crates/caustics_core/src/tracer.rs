@@ -15,7 +15,7 @@ use crate::bvh::{SceneBvh, Surface};
 use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_reflectance, reflect, refract};
 use crate::params::SpecularInteraction;
 use crate::rng::Pcg32;
-use crate::scene::{Light, LightKind, Scene, SceneError};
+use crate::scene::{Generator, Light, LightKind, Scene, SceneError, Sides};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::TAU;
@@ -79,6 +79,8 @@ pub struct TraceStats {
     pub escaped: DVec3,
     /// Flux of branches cut by `max_depth` or `min_weight`.
     pub dropped: DVec3,
+    /// Flux absorbed by the back of a one-sided generator ([`crate::scene::Sides::Front`]).
+    pub absorbed: DVec3,
 }
 
 impl TraceStats {
@@ -89,6 +91,7 @@ impl TraceStats {
         self.direct += o.direct;
         self.escaped += o.escaped;
         self.dropped += o.dropped;
+        self.absorbed += o.absorbed;
     }
 }
 
@@ -259,6 +262,8 @@ pub struct PhotonTracer<'a> {
     dispersive: bool,
     /// Offset used to leave a surface without hitting it again.
     epsilon: f32,
+    /// Per generator, which sides of its faces reflect or refract.
+    sides: Vec<Sides>,
 }
 
 impl<'a> PhotonTracer<'a> {
@@ -279,7 +284,8 @@ impl<'a> PhotonTracer<'a> {
                 (hi - lo).max_element().max(lo.abs().max_element()).max(hi.abs().max_element())
             })
             .fold(1.0f32, f32::max);
-        Ok(Self { scene, bvh, dispersive, epsilon: 2e-5 * extent })
+        let sides = scene.generators.iter().map(Generator::sides).collect();
+        Ok(Self { scene, bvh, dispersive, epsilon: 2e-5 * extent, sides })
     }
 
     /// The scene's BVH, for callers that cast their own rays (view rendering).
@@ -386,6 +392,11 @@ impl<'a> PhotonTracer<'a> {
                     }
                 }
                 Surface::Generator(g) => {
+                    // The back of a one-sided surface, reached from outside, absorbs.
+                    if self.sides[g as usize] == Sides::Front && b.dir.dot(ng) > 0.0 {
+                        stats.absorbed += b.flux.as_dvec3();
+                        continue;
+                    }
                     let generator = &self.scene.generators[g as usize];
                     let ns = generator.mesh.shading_normal(hit.triangle as usize, hit.uv);
                     let mut children = [(Vec3::ZERO, 0.0f32); 2];

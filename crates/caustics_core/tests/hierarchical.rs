@@ -40,7 +40,7 @@ fn sun(direction: Vec3) -> Light {
 }
 
 fn glass(mesh: TriMesh, ior: f32) -> Generator {
-    Generator { mesh, interaction: SpecularInteraction::Refract { ior, dispersion: None } }
+    Generator::new(mesh, SpecularInteraction::Refract { ior, dispersion: None })
 }
 
 /// The only view of the scene's only light.
@@ -396,7 +396,7 @@ fn photons_that_leave_the_map_are_counted_and_nothing_breaks() {
     let mirror = TriMesh::quad(Vec3::Y, Vec3::X * 0.5, Vec3::new(0.0, 0.3, -1.0).normalize() * 0.5);
     let scene = Scene {
         lights: vec![sun(Vec3::NEG_Y)],
-        generators: vec![Generator { mesh: mirror, interaction: SpecularInteraction::Reflect }],
+        generators: vec![Generator::new(mirror, SpecularInteraction::Reflect)],
         receivers: vec![floor(4.0, 0.0)],
     };
     let view = only_view(&scene, &settings(64, 64, CLUSTERED, VARIABLE));

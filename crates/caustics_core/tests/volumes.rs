@@ -31,7 +31,7 @@ fn sun(direction: Vec3) -> Light {
 }
 
 fn water(mesh: TriMesh, ior: f32) -> Generator {
-    Generator { mesh, interaction: SpecularInteraction::Refract { ior, dispersion: None } }
+    Generator::new(mesh, SpecularInteraction::Refract { ior, dispersion: None })
 }
 
 fn flat(n: usize, size: f32, height: f32) -> TriMesh {
@@ -159,7 +159,7 @@ fn focusing_mirror(focus: Vec3, l: Vec3) -> Scene {
     let far_tile = TriMesh::quad(Vec3::new(20.0, 3.0, 0.0), Vec3::Z, Vec3::X);
     Scene {
         lights: vec![sun(l)],
-        generators: vec![Generator { mesh, interaction: SpecularInteraction::Reflect }],
+        generators: vec![Generator::new(mesh, SpecularInteraction::Reflect)],
         receivers: vec![Receiver { mesh: far_tile, albedo: Vec3::ONE }, floor(8.0, 0.0)],
     }
 }
@@ -196,9 +196,11 @@ fn a_focal_point_gives_finite_energy_conserving_irradiance() {
 
 #[test]
 fn total_internal_reflection_drops_the_volume_and_counts_its_flux() {
-    // Light from under the water, past the critical angle (48.6°): Snell's window.
+    // Light from under the water, past the critical angle (48.6°): Snell's window. The
+    // surface is lit from behind, so it is double-sided.
     let l = Vec3::new(1.0, 0.6, 0.0).normalize();
-    let scene = Scene { lights: vec![sun(l)], generators: vec![water(flat(5, 2.0, 0.0), 1.333)], receivers: vec![floor(4.0, 3.0)] };
+    let water = Generator { double_sided: true, ..water(flat(5, 2.0, 0.0), 1.333) };
+    let scene = Scene { lights: vec![sun(l)], generators: vec![water], receivers: vec![floor(4.0, 3.0)] };
     let set = build_scene_volumes(&scene, &INTERPOLATED);
     assert_eq!(set.stats.volumes, 0);
     assert_eq!(set.stats.total_internal_reflection, 2 * 4 * 4);
@@ -225,7 +227,7 @@ fn grazing_light_and_degenerate_triangles_give_finite_output() {
         for interaction in [SpecularInteraction::Reflect, SpecularInteraction::Refract { ior: 1.5, dispersion: None }] {
             let scene = Scene {
                 lights: vec![sun(direction.normalize())],
-                generators: vec![Generator { mesh: mesh.clone(), interaction }],
+                generators: vec![Generator::new(mesh.clone(), interaction)],
                 receivers: vec![floor(10.0, 0.0), floor(10.0, 2.0)],
             };
             let set = build_scene_volumes(&scene, &INTERPOLATED);
@@ -259,10 +261,7 @@ fn large_ior_and_dispersion_stay_finite_and_split_the_channels() {
     let dispersion = caustics_core::optics::CauchyDispersion { a: 1.30, b: 0.05 };
     let scene = Scene {
         lights: vec![sun(l)],
-        generators: vec![Generator {
-            mesh,
-            interaction: SpecularInteraction::Refract { ior: 1.33, dispersion: Some(dispersion) },
-        }],
+        generators: vec![Generator::new(mesh, SpecularInteraction::Refract { ior: 1.33, dispersion: Some(dispersion) })],
         receivers: vec![floor(4.0, 0.0)],
     };
     let set = build_scene_volumes(&scene, &INTERPOLATED);
@@ -289,7 +288,7 @@ proptest! {
         let mesh = TriMesh::new(positions, normals, vec![[0, 2, 1]]).unwrap();
         let scene = Scene {
             lights: vec![sun(Vec3::NEG_Y)],
-            generators: vec![Generator { mesh, interaction: SpecularInteraction::Reflect }],
+            generators: vec![Generator::new(mesh, SpecularInteraction::Reflect)],
             receivers: vec![floor(1.0, 1.0 + depth_y)],
         };
         let set = build_scene_volumes(&scene, &INTERPOLATED);
@@ -326,7 +325,7 @@ fn in_scattering_matches_a_numerical_integral_along_the_eye_ray() {
     let mesh = flat(2, 1.0, 2.0);
     let scene = Scene {
         lights: vec![sun(l)],
-        generators: vec![Generator { mesh, interaction: SpecularInteraction::Refract { ior: 1.0, dispersion: None } }],
+        generators: vec![Generator::new(mesh, SpecularInteraction::Refract { ior: 1.0, dispersion: None })],
         receivers: vec![floor(4.0, 0.0)],
     };
     let set = build_scene_volumes(&scene, &INTERPOLATED);
@@ -399,7 +398,7 @@ fn point_and_spot_lights_reflect_as_their_mirror_images() {
     for light in [Light::white(LightKind::Point { position, intensity: 3.0 }), spot] {
         let scene = Scene {
             lights: vec![light],
-            generators: vec![Generator { mesh: mirror.clone(), interaction: SpecularInteraction::Reflect }],
+            generators: vec![Generator::new(mirror.clone(), SpecularInteraction::Reflect)],
             receivers: vec![floor(6.0, 0.0)],
         };
         for settings in ALL_MODES {
@@ -544,7 +543,7 @@ fn light_shafts_stop_at_an_occluder() {
     let slab = Receiver { mesh: TriMesh::quad(Vec3::new(1.025, 1.5, 0.0), Vec3::Z * 2.0, Vec3::X), albedo: Vec3::ONE };
     let scene = Scene {
         lights: vec![sun(Vec3::NEG_Y)],
-        generators: vec![Generator { mesh, interaction: SpecularInteraction::Refract { ior: 1.0, dispersion: None } }],
+        generators: vec![Generator::new(mesh, SpecularInteraction::Refract { ior: 1.0, dispersion: None })],
         receivers: vec![floor(4.0, 0.0), slab],
     };
     let set = build_scene_volumes(&scene, &CONSERVING);

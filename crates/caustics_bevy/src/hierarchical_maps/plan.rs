@@ -13,7 +13,7 @@ use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::bvh::SceneBvh;
 use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
-use caustics_core::scene::{Light, Receiver, Scene};
+use caustics_core::scene::{Light, Receiver, Scene, Sides};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
 use rayon::prelude::*;
@@ -37,6 +37,9 @@ pub struct CausticMapInstance {
     /// A generator's index of refraction (the green channel's for a dispersive one),
     /// 0 for a mirror; unused for occluders.
     pub ior: f32,
+    /// An open double-sided generator (`Sides::Both`): the front light map keeps its
+    /// back faces. Unused for occluders, drawn from both sides.
+    pub both_sides: bool,
 }
 
 /// What the caustic maps are made of. A new `generation` means new contents.
@@ -138,7 +141,8 @@ fn plan_caustic_maps(
             SpecularInteraction::Reflect => 0.0,
             interaction => caustics_core::hierarchical::photons::photon_ior(&interaction).unwrap_or(1.0),
         };
-        next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior });
+        let both_sides = choice.facts.sides == Sides::Both;
+        next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior, both_sides });
     }
     let mut receiver_bounds: Option<(Vec3, Vec3)> = None;
     if generator_bounds.is_some() {
@@ -150,7 +154,8 @@ fn plan_caustic_maps(
                 let bounds = world_aabb(transform, aabb);
                 receiver_bounds = Some(receiver_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
             }
-            next.occluders.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior: 0.0 });
+            let occluder = CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior: 0.0, both_sides: false };
+            next.occluders.push(occluder);
         }
     }
     let mut core_lights = Vec::new();

@@ -177,7 +177,12 @@ struct ExtractedPlan(CausticMapPlan);
 /// Which light map a mesh is drawn into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub(super) enum LightMapPass {
+    /// The nearest front faces.
     Front,
+    /// The nearest faces of either side: an open double-sided generator's back
+    /// reflects and refracts too (`Sides::Both`).
+    FrontAndBack,
+    /// The farthest back faces.
     Back,
     Receivers,
 }
@@ -205,6 +210,7 @@ impl SpecializedMeshPipeline for LightMapPipeline {
         let buffer = layout.0.get_layout(&attributes)?;
         let (cull_mode, depth_compare) = match pass {
             LightMapPass::Front => (Some(Face::Back), CompareFunction::Less),
+            LightMapPass::FrontAndBack => (None, CompareFunction::Less),
             LightMapPass::Back => (Some(Face::Front), CompareFunction::Greater),
             LightMapPass::Receivers => (None, CompareFunction::Less),
         };
@@ -695,7 +701,7 @@ fn prepare_maps(
         let normal = Mat3::from_mat4(i.world_from_local).inverse().transpose();
         GpuInstance { world_from_local: i.world_from_local, normal_from_local: Mat4::from_mat3(normal), material: UVec4::new(material, 0, 0, 0) }
     };
-    let mut draws = |list: &[CausticMapInstance], passes: [LightMapPass; 2], ready: &mut bool| -> Vec<MeshDraw> {
+    let mut draws = |list: &[CausticMapInstance], passes: &dyn Fn(&CausticMapInstance) -> [LightMapPass; 2], ready: &mut bool| -> Vec<MeshDraw> {
         let mut out = Vec::new();
         for (index, i) in list.iter().enumerate() {
             let Some(mesh) = meshes.get(i.mesh) else {
@@ -706,7 +712,7 @@ fn prepare_maps(
             if !matches!(topology, PrimitiveTopology::TriangleList | PrimitiveTopology::TriangleStrip) {
                 continue;
             }
-            let ids = passes.map(|pass| specialized.specialize(&cache, &map_pipeline, (pass, topology), &mesh.layout));
+            let ids = passes(i).map(|pass| specialized.specialize(&cache, &map_pipeline, (pass, topology), &mesh.layout));
             if let [Ok(a), Ok(b)] = ids {
                 out.push(MeshDraw { instance: index as u32, mesh: i.mesh, pipelines: [a, b] });
             }
@@ -714,8 +720,9 @@ fn prepare_maps(
         out
     };
     let mut ready = true;
-    gpu.generator_draws = draws(&plan.generators, [LightMapPass::Front, LightMapPass::Back], &mut ready);
-    gpu.occluder_draws = draws(&plan.occluders, [LightMapPass::Receivers; 2], &mut ready);
+    let front = |i: &CausticMapInstance| if i.both_sides { LightMapPass::FrontAndBack } else { LightMapPass::Front };
+    gpu.generator_draws = draws(&plan.generators, &|i| [front(i), LightMapPass::Back], &mut ready);
+    gpu.occluder_draws = draws(&plan.occluders, &|_| [LightMapPass::Receivers; 2], &mut ready);
     if !ready {
         gpu.generation = None;
     }

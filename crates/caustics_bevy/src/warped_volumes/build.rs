@@ -9,7 +9,7 @@ use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_cau
 use bevy::camera::primitives::Aabb;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
-use caustics_core::scene::Light;
+use caustics_core::scene::{Light, Sides};
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
 use caustics_core::bvh::SceneBvh;
 use caustics_core::mesh::TriMesh;
@@ -57,11 +57,12 @@ type Generators<'w, 's> = Query<
     Without<InvalidCausticParams>,
 >;
 
-/// One generator's input to a build: its world-space mesh and interaction.
+/// One generator's input to a build: its world-space mesh, interaction and sides.
 struct GeneratorInput {
     entity: Entity,
     mesh: TriMesh,
     interaction: SpecularInteraction,
+    sides: Sides,
 }
 
 /// What a build produced: the volumes, their stats and the fans it kept.
@@ -173,7 +174,8 @@ fn build_volumes(
         match core_mesh(mesh, transform) {
             Ok(mesh) => {
                 state.warned.remove(&entity);
-                inputs.push(GeneratorInput { entity, mesh, interaction: generator.specular_interaction() });
+                let sides = choice.facts.sides;
+                inputs.push(GeneratorInput { entity, mesh, interaction: generator.specular_interaction(), sides });
             }
             Err(e) => {
                 if state.warned.insert(entity) {
@@ -202,6 +204,7 @@ fn build_volumes(
                         &input.mesh,
                         &fan,
                         &input.interaction,
+                        input.sides,
                         ior,
                         light,
                         color,

@@ -13,7 +13,7 @@
 
 use super::light_view::LightView;
 use crate::bvh::SceneBvh;
-use crate::scene::Scene;
+use crate::scene::{Scene, Sides};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -61,12 +61,16 @@ impl LightMaps {
     /// the CPU twin of the GPU's light-space passes.
     pub fn ray_cast(scene: &Scene, view: &LightView, photon_resolution: u32, map_resolution: u32) -> Self {
         let generators = SceneBvh::build(&Scene { generators: scene.generators.clone(), ..Scene::default() });
+        // The front map keeps the back faces of open double-sided generators (the GPU
+        // draws them without culling): their backs reflect and refract too.
+        let both_sides: Vec<bool> = scene.generators.iter().map(|g| g.sides() == Sides::Both).collect();
+        let no_generator = vec![false; scene.generators.len()];
         let receivers = SceneBvh::build(&Scene { receivers: scene.receivers.clone(), ..Scene::default() });
         let texels = |resolution: u32| (0..resolution * resolution).into_par_iter().map(move |i| (i % resolution, i / resolution));
         let front = texels(photon_resolution)
             .map(|(x, y)| {
                 let (origin, dir) = view.ray(LightView::texel_center(x, y, photon_resolution));
-                first_facing(scene, &generators, view, origin, dir, false)
+                first_facing(scene, &generators, view, (origin, dir), false, &both_sides)
             })
             .collect();
         let back = texels(photon_resolution)
@@ -75,7 +79,7 @@ impl LightMaps {
                 // From the far plane back towards the light: the first surface met that
                 // faces away from the light is the farthest one.
                 let t_far = (view.far - view.depth(origin)) / dir.dot(view.forward).max(1e-6);
-                first_facing(scene, &generators, view, origin + dir * t_far, -dir, true)
+                first_facing(scene, &generators, view, (origin + dir * t_far, -dir), true, &no_generator)
             })
             .collect();
         let receivers = texels(map_resolution)
@@ -108,15 +112,23 @@ impl LightMaps {
 
 /// The first generator surface along the ray whose geometric normal faces against the
 /// light (`away_from_light = false`: a front face) or with it (`true`: a back face),
-/// skipping the others as face culling does.
-fn first_facing(scene: &Scene, bvh: &SceneBvh, view: &LightView, origin: Vec3, dir: Vec3, away_from_light: bool) -> SurfaceSample {
+/// skipping the others as face culling does — except on the generators `unculled`
+/// lists (true per generator), which any face stops.
+fn first_facing(
+    scene: &Scene,
+    bvh: &SceneBvh,
+    view: &LightView,
+    (origin, dir): (Vec3, Vec3),
+    away_from_light: bool,
+    unculled: &[bool],
+) -> SurfaceSample {
     let light_dir = if away_from_light { -dir } else { dir };
     let mut t_min = 0.0;
     for _ in 0..MAX_SKIPPED {
         let Some(hit) = bvh.intersect(origin, dir, t_min, f32::INFINITY) else { break };
         let p = origin + dir * hit.t;
-        if (hit.geometric_normal.dot(light_dir) > 0.0) == away_from_light {
-            let crate::bvh::Surface::Generator(g) = hit.surface else { break };
+        let crate::bvh::Surface::Generator(g) = hit.surface else { break };
+        if (hit.geometric_normal.dot(light_dir) > 0.0) == away_from_light || unculled[g as usize] {
             let normal = scene.generators[g as usize].mesh.shading_normal(hit.triangle as usize, hit.uv);
             return SurfaceSample { depth: view.depth(p), normal, material: g };
         }

@@ -5,7 +5,7 @@ use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
 use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
 use crate::params::SpecularInteraction;
-use crate::scene::{Light, LightKind, Scene};
+use crate::scene::{Light, LightKind, Scene, Sides};
 use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -216,7 +216,8 @@ fn flattened(frame: &Frame, p: Vec3, ray: Vec3, min_cos: f32) -> Option<(Vec3, V
 }
 
 /// Builds the caustic volumes of one generator mesh under one light, for one colour
-/// channel (`ior` overrides a refractor's index, for dispersion). `depth_bounds` are
+/// channel (`ior` overrides a refractor's index, for dispersion). Triangles lit from
+/// behind cast only where `sides` lets them ([`Sides::lit_from_behind`]). `depth_bounds` are
 /// the world bounds of the receivers: every volume ends beyond them. A vertex that
 /// `occluders` (the scene's surfaces other than generators) hide from the light
 /// carries no irradiance — past the paper, whose §3.1 lights every generator — so a
@@ -230,6 +231,7 @@ pub fn build_generator_volumes(
     mesh: &TriMesh,
     fans: &VertexFans,
     interaction: &SpecularInteraction,
+    sides: Sides,
     ior: Option<f32>,
     light: &Light,
     color: Vec3,
@@ -245,7 +247,7 @@ pub fn build_generator_volumes(
         own_fans = VertexFans::new(mesh);
         &own_fans
     };
-    let two_sided = matches!(interaction, SpecularInteraction::Refract { .. });
+    let two_sided = sides.lit_from_behind(interaction);
     let rays: Vec<VertexRay> = mesh
         .positions()
         .par_iter()
@@ -317,8 +319,7 @@ impl TriangleContext<'_> {
             return (None, stats);
         }
         let geometric = cross.normalize();
-        // A mirror is lit on its front, the side its vertex normals face; an interface
-        // between two media transmits light from either side.
+        // The front is the side the vertex normals face.
         let front = tri.iter().map(|&i| mesh.normals()[i as usize]).sum::<Vec3>();
         let mut unit = [Vec3::ZERO; 3];
         let mut weight = Vec3::ZERO;
@@ -487,6 +488,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
     let mut stats = BuildStats::default();
     for generator in &scene.generators {
         let fans = VertexFans::new(&generator.mesh);
+        let sides = generator.sides();
         for light in &scene.lights {
             for (ior, color) in channels(&generator.interaction, light.color) {
                 stats = stats
@@ -494,6 +496,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
                         &generator.mesh,
                         &fans,
                         &generator.interaction,
+                        sides,
                         ior,
                         light,
                         color,

@@ -1,0 +1,93 @@
+//! glTF's `doubleSided` on generators (`Generator::double_sided`, `Sides`): an open
+//! mirror lit from behind casts nothing when one-sided and, when double-sided, exactly
+//! what it casts lit from the front — in the tracer, the warped volumes and the
+//! hierarchical maps alike.
+
+use caustics_core::estimate::{GridRegion, IrradianceGrid};
+use caustics_core::hierarchical::{CausticMapSettings, scene_caustics};
+use caustics_core::mesh::TriMesh;
+use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene, Sides};
+use caustics_core::tracer::{PhotonTracer, TraceSettings, TraceStats};
+use caustics_core::volumes::{VolumeSettings, build_scene_volumes};
+use glam::Vec3;
+
+/// The sun slanting 45° towards +x onto a 1 m square mirror that leans over the floor
+/// (its normal 14° below the horizontal) and throws the light back down beside it;
+/// the mirror faces the sun (`front`) or turns its back to it.
+fn mirror_scene(front: bool, double_sided: bool) -> Scene {
+    let (u, v) = (Vec3::Z * 0.5, Vec3::new(-0.235, 0.972, 0.0).normalize() * 0.5);
+    let centre = Vec3::new(0.5, 1.0, 0.0);
+    let mesh = if front { TriMesh::quad(centre, u, v) } else { TriMesh::quad(centre, v, u) };
+    assert_eq!(mesh.normals()[0].dot(SUN) < 0.0, front, "the quad faces the sun when `front`");
+    let floor = TriMesh::quad(Vec3::ZERO, Vec3::Z * 10.0, Vec3::X * 10.0);
+    Scene {
+        lights: vec![Light::white(LightKind::Directional { direction: SUN, irradiance: 1.0 })],
+        generators: vec![Generator { mesh, interaction: SpecularInteraction::Reflect, double_sided }],
+        receivers: vec![Receiver { mesh: floor, albedo: Vec3::ONE }],
+    }
+}
+
+const SUN: Vec3 = Vec3::new(std::f32::consts::FRAC_1_SQRT_2, -std::f32::consts::FRAC_1_SQRT_2, 0.0);
+
+fn traced(scene: &Scene) -> TraceStats {
+    let region = GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 8);
+    let mut grid = IrradianceGrid::new(region);
+    let settings = TraceSettings { photons_per_light: 1 << 20, seed: 3, ..Default::default() };
+    PhotonTracer::new(scene).unwrap().trace(&settings, &mut grid, &|_, _| {})
+}
+
+fn volume_flux(scene: &Scene) -> f32 {
+    build_scene_volumes(scene, &VolumeSettings::default()).flux().x
+}
+
+fn map_flux(scene: &Scene) -> f64 {
+    let settings = CausticMapSettings { photon_resolution: 128, map_resolution: 128, ..Default::default() };
+    scene_caustics(scene, &settings).iter().map(|view| view.map.total_flux()).sum()
+}
+
+#[test]
+fn an_open_mirror_lit_from_behind_reflects_only_when_double_sided() {
+    assert_eq!(mirror_scene(false, false).generators[0].sides(), Sides::Front);
+    assert_eq!(mirror_scene(false, true).generators[0].sides(), Sides::Both);
+    let front = mirror_scene(true, false);
+    let (behind_one, behind_both) = (mirror_scene(false, false), mirror_scene(false, true));
+
+    let (t_front, t_one, t_both) = (traced(&front), traced(&behind_one), traced(&behind_both));
+    assert!(t_front.deposited.x > 0.1 * t_front.emitted.x, "{t_front:?}");
+    assert_eq!(t_one.deposited.x, 0.0, "a one-sided mirror's back reflects: {t_one:?}");
+    // Its back absorbs all it meets: E·A·|cos θ| of the 1 m² square.
+    let met = f64::from(behind_one.generators[0].mesh.normals()[0].dot(SUN).abs());
+    assert!((t_one.absorbed.x - met).abs() < 5e-3 * met, "its back absorbs what it meets: {t_one:?}");
+    // The same photons (same seed) meet the same mirror, turned over.
+    assert!((t_both.deposited.x - t_front.deposited.x).abs() < 1e-4 * t_front.deposited.x, "{t_both:?} vs {t_front:?}");
+
+    let (v_front, v_one, v_both) = (volume_flux(&front), volume_flux(&behind_one), volume_flux(&behind_both));
+    assert!(v_front > 0.0);
+    assert_eq!(v_one, 0.0);
+    assert!((v_both - v_front).abs() < 1e-4 * v_front, "volumes: {v_both} vs {v_front}");
+
+    let (m_front, m_one, m_both) = (map_flux(&front), map_flux(&behind_one), map_flux(&behind_both));
+    assert!(m_front > 0.0);
+    assert_eq!(m_one, 0.0);
+    assert!((m_both - m_front).abs() < 1e-4 * m_front, "maps: {m_both} vs {m_front}");
+    eprintln!("mirror lit from the front / behind, double-sided: tracer {:.4} / {:.4}, volumes {v_front:.4} / {v_both:.4}, maps {m_front:.4} / {m_both:.4}", t_front.deposited.x, t_both.deposited.x);
+}
+
+#[test]
+fn closed_generators_ignore_double_sided() {
+    // A glass ball's faces are crossed from inside whatever glTF says.
+    let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 16, 32);
+    let scene = |double_sided| Scene {
+        lights: vec![Light::white(LightKind::Point { position: Vec3::Y * 4.0, intensity: 10.0 })],
+        generators: vec![Generator { mesh: ball.clone(), interaction: SpecularInteraction::Refract { ior: 1.5, dispersion: None }, double_sided }],
+        receivers: vec![Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 4.0, Vec3::X * 4.0), albedo: Vec3::ONE }],
+    };
+    let (one, both) = (scene(false), scene(true));
+    assert_eq!((one.generators[0].sides(), both.generators[0].sides()), (Sides::Closed, Sides::Closed));
+    let (t_one, t_both) = (traced(&one), traced(&both));
+    assert_eq!(t_one.absorbed.x, 0.0);
+    assert_eq!(t_one.deposited, t_both.deposited);
+    assert_eq!(volume_flux(&one), volume_flux(&both));
+    assert_eq!(map_flux(&one), map_flux(&both));
+}
