@@ -105,9 +105,10 @@ pub trait BenchMethod {
     /// Quality settings for a built-in scene, cheapest first; none where the method
     /// does not apply.
     fn qualities(&self, scene: &str, quick: bool) -> Vec<u64>;
-    /// Irradiance per cell of the built-in scene `name` (mean of RGB, row-major) and
+    /// Irradiance per cell of the built-in scene `name` (mean of RGB, row-major), each
+    /// cell the mean of `samples`² points where the method is evaluated at points, and
     /// the work done.
-    fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String>;
+    fn run(&self, name: &str, scene: &BenchScene, quality: u64, samples: usize) -> Result<(Vec<f32>, u64), String>;
     /// How `quality` reads in the tables.
     fn quality_label(&self, quality: u64) -> String {
         quality.to_string()
@@ -130,7 +131,7 @@ impl BenchMethod for ReferenceTracer {
         let top = if quick { 18 } else { 22 };
         (12..=top).step_by(2).map(|k| 1u64 << k).collect()
     }
-    fn run(&self, _name: &str, scene: &BenchScene, photons: u64) -> Result<(Vec<f32>, u64), String> {
+    fn run(&self, _name: &str, scene: &BenchScene, photons: u64, _samples: usize) -> Result<(Vec<f32>, u64), String> {
         trace_grid(scene, photons, 2, &|_, _| {})
     }
 }
@@ -143,8 +144,16 @@ pub struct WarpedVolumes {
     pub intensity: IntensityMode,
 }
 
-/// Points per cell side at which the volumes are evaluated: the tracer bins flux per
-/// cell, so both estimate the cell means.
+/// Points per cell side at which the methods' CPU twins are evaluated in the bench:
+/// the tracer bins flux per cell, so both estimate cell means. The volumes' point
+/// samples need this many at their focal lines (on the pool at 256² water cells their
+/// L2 against the tracer reads 0.239 from 4² samples a cell, 0.152 from 8², 0.086 from
+/// 16²; the maps' 0.211, 0.214, 0.215: their splats are already smooth); every
+/// reading is an upper bound of the method's error in the cell means.
+pub const BENCH_SAMPLES: usize = 8;
+
+/// Points per cell side of the GPU irradiance plane (pixels), of its twin and of a
+/// quick bench.
 pub const SUPERSAMPLE: usize = 4;
 
 /// The three intensity modes: the plugin's default, the paper's, and constant.
@@ -171,8 +180,8 @@ impl BenchMethod for WarpedVolumes {
             _ => vec![0],
         }
     }
-    fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
-        Ok(volumes_irradiance(&tessellated(name, scene, quality as usize)?.scene, &scene.region, self.intensity))
+    fn run(&self, name: &str, scene: &BenchScene, quality: u64, samples: usize) -> Result<(Vec<f32>, u64), String> {
+        Ok(volumes_irradiance(&tessellated(name, scene, quality as usize)?.scene, &scene.region, self.intensity, samples))
     }
 }
 
@@ -187,17 +196,17 @@ fn tessellated(name: &str, scene: &BenchScene, cells: usize) -> Result<BenchScen
     }
 }
 
-/// The caustic irradiance per cell of `region` from every generator of `scene` by the
-/// volumes' CPU twin, and the number of volumes.
-pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode) -> (Vec<f32>, u64) {
+/// The caustic irradiance per cell of `region` (the mean of `samples`² points) from
+/// every generator of `scene` by the volumes' CPU twin, and the number of volumes.
+pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode, samples: usize) -> (Vec<f32>, u64) {
     let settings = VolumeSettings { intensity, ..VolumeSettings::default() };
     let set = build_scene_volumes(scene, &settings);
-    let points = cell_sample_points(region);
+    let points = cell_sample_points(region, samples);
     // The floor faces up (the region's `edge_u × edge_v` may point either way).
     let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
     let normals = vec![up; points.len()];
     let irradiance: Vec<f32> = set.irradiance_at(&points, &normals, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
-    (cell_means(&irradiance), set.volumes.len() as u64)
+    (cell_means(&irradiance, samples), set.volumes.len() as u64)
 }
 
 /// What a game gets by default: each generator drawn by the technique `Auto` picks for
@@ -226,7 +235,7 @@ impl BenchMethod for Auto {
     fn qualities(&self, _scene: &str, quick: bool) -> Vec<u64> {
         if quick { vec![0, 2] } else { vec![0, 1, 2, 3] }
     }
-    fn run(&self, name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
+    fn run(&self, name: &str, scene: &BenchScene, quality: u64, samples: usize) -> Result<(Vec<f32>, u64), String> {
         let (tessellation, photons) = Self::steps(name)[quality as usize];
         let own = tessellated(name, scene, tessellation)?;
         let mut groups: Vec<(Technique, Scene)> = Vec::new();
@@ -243,9 +252,10 @@ impl BenchMethod for Auto {
         let mut work = 0;
         for (technique, group) in groups {
             let (image, done) = match technique {
-                Technique::WarpedVolumes => volumes_irradiance(&group, &scene.region, IntensityMode::Conserving),
+                Technique::WarpedVolumes => volumes_irradiance(&group, &scene.region, IntensityMode::Conserving, samples),
                 Technique::HierarchicalMaps => {
-                    crate::hierarchical::irradiance(&BenchScene { scene: group, ..scene.clone() }, photons, &crate::hierarchical::VARIANTS[4])?
+                    let group = BenchScene { scene: group, ..scene.clone() };
+                    crate::hierarchical::irradiance(&group, photons, &crate::hierarchical::VARIANTS[4], samples)?
                 }
                 other => return Err(format!("auto: the bench does not run {other}")),
             };
@@ -259,24 +269,24 @@ impl BenchMethod for Auto {
     }
 }
 
-/// `SUPERSAMPLE`² points spread evenly over each cell of the region, cell by cell.
-pub fn cell_sample_points(region: &GridRegion) -> Vec<Vec3> {
+/// `samples`² points spread evenly over each cell of the region, cell by cell.
+pub fn cell_sample_points(region: &GridRegion, samples: usize) -> Vec<Vec3> {
     let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
     (0..region.nv)
         .flat_map(|r| (0..region.nu).map(move |c| (r, c)))
         .flat_map(|(r, c)| {
             let corner = region.cell_center(r, c) - 0.5 * (du + dv);
-            (0..SUPERSAMPLE * SUPERSAMPLE).map(move |k| {
-                let (i, j) = ((k % SUPERSAMPLE) as f32 + 0.5, (k / SUPERSAMPLE) as f32 + 0.5);
-                corner + du * (i / SUPERSAMPLE as f32) + dv * (j / SUPERSAMPLE as f32)
+            (0..samples * samples).map(move |k| {
+                let (i, j) = ((k % samples) as f32 + 0.5, (k / samples) as f32 + 0.5);
+                corner + du * (i / samples as f32) + dv * (j / samples as f32)
             })
         })
         .collect()
 }
 
-/// The mean of each cell's values at [`cell_sample_points`].
-pub fn cell_means(samples: &[f32]) -> Vec<f32> {
-    samples.chunks(SUPERSAMPLE * SUPERSAMPLE).map(|cell| cell.iter().sum::<f32>() / cell.len() as f32).collect()
+/// The mean of each cell's values at [`cell_sample_points`] (`per_side`² a cell).
+pub fn cell_means(values: &[f32], per_side: usize) -> Vec<f32> {
+    values.chunks(per_side * per_side).map(|cell| cell.iter().sum::<f32>() / cell.len() as f32).collect()
 }
 
 /// Pool caustics by convolution (Trendall & Stewart 2000 §4.1): the core's FFT form of
@@ -329,7 +339,7 @@ impl BenchMethod for Convolution {
             _ => vec![],
         }
     }
-    fn run(&self, _name: &str, scene: &BenchScene, quality: u64) -> Result<(Vec<f32>, u64), String> {
+    fn run(&self, _name: &str, scene: &BenchScene, quality: u64, _samples: usize) -> Result<(Vec<f32>, u64), String> {
         let (texels, radius) = convolution_grid(quality)?;
         let water = PoolWater::new(scene, texels)?;
         let cell = water.heightfield.cell_size();
@@ -417,7 +427,7 @@ impl PoolWater {
     fn on_region(&self, floor: &[f32], region: &GridRegion) -> Vec<f32> {
         let (texels, cell) = (self.heightfield.columns(), self.heightfield.cell_size());
         let last = (texels - 1) as f32;
-        let samples: Vec<f32> = cell_sample_points(region)
+        let samples: Vec<f32> = cell_sample_points(region, SUPERSAMPLE)
             .iter()
             .map(|p| {
                 let u = ((p.x - self.origin.x) / cell - 0.5).clamp(0.0, last);
@@ -430,7 +440,7 @@ impl PoolWater {
                 near + fv * (far - near)
             })
             .collect();
-        cell_means(&samples)
+        cell_means(&samples, SUPERSAMPLE)
     }
 }
 
@@ -521,6 +531,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     methods.push(&Auto);
     let mut notes = String::new();
     let reference_photons: u64 = if args.quick { 1 << 21 } else { 1 << 26 };
+    let samples = if args.quick { SUPERSAMPLE } else { BENCH_SAMPLES };
     let mut rows = Vec::new();
     let mut scenes = Vec::new();
     for name in args.scenes.iter().filter(|n| !n.is_empty()) {
@@ -545,13 +556,13 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         let label = format!("{name}: reference with {reference_photons} photons");
         let (truth, _) = trace_grid(scene, reference_photons, 1, &progress(&label))?;
         let volumes_limit = match VOLUME_METHODS[2].qualities(name, args.quick).last() {
-            Some(&finest) if finest > 0 => Some(VOLUME_METHODS[2].run(name, scene, 4 * finest)?.0),
+            Some(&finest) if finest > 0 => Some(VOLUME_METHODS[2].run(name, scene, 4 * finest, samples)?.0),
             _ => None,
         };
         for method in &methods {
             for quality in method.qualities(name, args.quick) {
                 let start = Instant::now();
-                let (image, work) = method.run(name, scene, quality)?;
+                let (image, work) = method.run(name, scene, quality, samples)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let error = Errors::between(&image, &truth);
                 let label = method.quality_label(quality);
@@ -586,7 +597,8 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
             }
         }
         // Caustic maps run on the scene's own tessellation, measured on its region.
-        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, (args.quick, args.cpu_only), &args.out, &mut rows)?);
+        let modes = (args.quick, args.cpu_only, samples);
+        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, modes, &args.out, &mut rows)?);
         if name == "pool" {
             let start = Instant::now();
             notes.push_str(&convolution_vs_direct(scene)?);

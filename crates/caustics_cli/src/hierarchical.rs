@@ -113,11 +113,11 @@ pub fn bench_scene(
     name: &str,
     scene: &BenchScene,
     truth: &[f32],
-    (quick, cpu_only): (bool, bool),
+    (quick, cpu_only, samples): (bool, bool, usize),
     out: &Path,
     rows: &mut Vec<Measurement>,
 ) -> Result<String, String> {
-    let points = cell_sample_points(&scene.region);
+    let points = cell_sample_points(&scene.region, samples);
     let up = up(scene);
     let mut stages = Vec::new();
     for p in photon_resolutions(quick) {
@@ -157,7 +157,7 @@ pub fn bench_scene(
                 flux_capped += g.splat_stats.flux_dropped_by_cap;
             }
             row.capped = if flux_in > 0.0 { flux_capped / flux_in } else { 0.0 };
-            let image = cell_means(&irradiance);
+            let image = cell_means(&irradiance, samples);
             row.errors = Errors::between(&image, truth);
             let seconds = row.maps + row.tracing + row.pyramid + row.gather + row.splat;
             eprintln!(
@@ -191,14 +191,15 @@ fn up(scene: &BenchScene) -> Vec3 {
     if n.y < 0.0 { -n } else { n }
 }
 
-/// Caustic irradiance per cell of the region from `scene`'s generators by `variant`
-/// at `photons`² photons per light view, and the photons processed.
-pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant) -> Result<(Vec<f32>, u64), String> {
-    let points = cell_sample_points(&scene.region);
+/// Caustic irradiance per cell of the region (the mean of `samples`² points) from
+/// `scene`'s generators by `variant` at `photons`² photons per light view, and the
+/// photons processed.
+pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant, samples: usize) -> Result<(Vec<f32>, u64), String> {
+    let points = cell_sample_points(&scene.region, samples);
     let (traced, ..) = trace_light_views(&scene.scene, photons)?;
     let mut irradiance = vec![0.0f32; points.len()];
     let processed = traced.iter().map(|t| gather_view(t, variant, photons, &points, up(scene), &mut irradiance).stats.total_processed()).sum();
-    Ok((cell_means(&irradiance), processed))
+    Ok((cell_means(&irradiance, samples), processed))
 }
 
 /// Every light view of `scene` with its light maps (ray cast) and photon buffer at

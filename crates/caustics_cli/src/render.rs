@@ -194,22 +194,22 @@ fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>
     let (image, _) = match method {
         Method::Reference => return Err("the reference is traced, not twinned".into()),
         Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => {
-            volumes_irradiance(&bench.scene, &bench.region, method.settings().0.core().intensity)
+            volumes_irradiance(&bench.scene, &bench.region, method.settings().0.core().intensity, SUPERSAMPLE)
         }
         Method::Convolution => {
             // The finest grid whose texel centres fall on the water's vertices.
             let mut run = Err(String::new());
             for grid in (0..CONVOLUTION_GRIDS.len() as u64).rev() {
-                run = CONVOLUTION_METHODS[0].run(name, bench, grid);
+                run = CONVOLUTION_METHODS[0].run(name, bench, grid, SUPERSAMPLE);
                 if run.is_ok() {
                     break;
                 }
             }
             run.map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
         }
-        Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4])?,
-        Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0])?,
-        Method::Auto => Auto.run(name, bench, 2)?,
+        Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4], SUPERSAMPLE)?,
+        Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0], SUPERSAMPLE)?,
+        Method::Auto => Auto.run(name, bench, 2, SUPERSAMPLE)?,
     };
     Ok(image)
 }

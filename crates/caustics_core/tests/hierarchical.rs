@@ -373,6 +373,63 @@ fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
 }
 
 #[test]
+fn a_glass_balls_caustic_falling_partly_on_a_block_matches_the_tracer() {
+    // The scene of the test above, against the ground-truth tracer: the light the block's
+    // top takes, and the floor cells its shadow leaves dark.
+    let spot = Light::white(LightKind::Spot {
+        position: Vec3::new(-1.5, 4.0, 0.0),
+        direction: Vec3::new(1.5, -3.0, 0.0).normalize(),
+        intensity: 10.0,
+        inner_angle: 0.2,
+        outer_angle: 0.3,
+    });
+    let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 32, 64);
+    let (lo, hi) = (Vec3::new(0.2, 0.0, -0.5), Vec3::new(0.5, 0.4, 0.5));
+    let block = Receiver { mesh: TriMesh::cuboid(lo, hi), albedo: Vec3::ONE };
+    let scene = Scene { lights: vec![spot], generators: vec![glass(ball, 1.5)], receivers: vec![floor(6.0, 0.0), block] };
+    let region = GridRegion::horizontal(-0.5, -1.0, 0.0, 2.0, 40);
+    let mut photons = caustics_core::estimate::PhotonList::default();
+    let tracer = PhotonTracer::new(&scene).unwrap();
+    tracer.trace(&TraceSettings { photons_per_light: 1 << 22, seed: 9, ..Default::default() }, &mut photons, &|_, _| {});
+    let on_top = |p: Vec3| (p.y - hi.y).abs() < 1e-3 && p.x > lo.x && p.x < hi.x && p.z > lo.z && p.z < hi.z;
+    let traced_top: f64 = photons.0.iter().filter(|h| on_top(h.position)).map(|h| h.flux.x as f64).sum();
+    let mut grid = IrradianceGrid::new(region);
+    photons.0.iter().for_each(|h| caustics_core::tracer::PhotonSink::deposit(&mut grid, h));
+    let truth = grid.irradiance_mean();
+
+    let view = only_view(&scene, &settings(1024, 1024, CLUSTERED, VARIABLE));
+    let n = 60;
+    let maps_top: f64 = (0..n * n)
+        .map(|i| {
+            let (u, v) = ((i % n) as f32 + 0.5, (i / n) as f32 + 0.5);
+            view.irradiance_at(Vec3::new(lo.x + (hi.x - lo.x) * u / n as f32, hi.y, lo.z + (hi.z - lo.z) * v / n as f32), Vec3::Y) as f64
+        })
+        .sum::<f64>()
+        * f64::from((hi.x - lo.x) * (hi.z - lo.z))
+        / (n * n) as f64;
+    eprintln!("flux on the block's top: maps {maps_top:.4}, tracer {traced_top:.4}");
+    assert!(traced_top > 0.01 && (maps_top / traced_top - 1.0).abs() < 0.1, "block top: maps {maps_top} vs tracer {traced_top}");
+    // Floor cells beside the block that the tracer leaves dark with their neighbours
+    // and that the ball lights without the block: its shadow (the floor under the block
+    // is no receiver point: the maps are not asked there).
+    let open = only_view(&Scene { receivers: vec![floor(6.0, 0.0)], ..scene.clone() }, &settings(1024, 1024, CLUSTERED, VARIABLE));
+    let cells = region.nu;
+    let dark = |r: usize, c: usize| {
+        (r.saturating_sub(1)..=(r + 1).min(cells - 1)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(cells - 1)).all(|cc| truth[rr * cells + cc] == 0.0))
+    };
+    let beside = |p: Vec3| !(p.x > lo.x - 0.05 && p.x < hi.x + 0.05 && p.z > lo.z - 0.05 && p.z < hi.z + 0.05);
+    let shadow: Vec<Vec3> = (0..cells * cells)
+        .filter(|&i| dark(i / cells, i % cells))
+        .map(|i| region.cell_center(i / cells, i % cells))
+        .filter(|&p| beside(p) && open.irradiance_at(p, Vec3::Y) > 0.0)
+        .collect();
+    assert!(shadow.len() >= 5, "the block's shadow on the floor: {} cells", shadow.len());
+    let lit = shadow.iter().map(|&p| view.irradiance_at(p, Vec3::Y)).fold(0.0, f32::max);
+    assert_eq!(lit, 0.0, "caustic light on the floor in the block's shadow ({} cells)", shadow.len());
+    eprintln!("{} floor cells in the block's shadow, dark in both", shadow.len());
+}
+
+#[test]
 fn total_internal_reflection_inside_the_refractor_is_dropped_and_counted() {
     // A diamond bar with a square cross-section standing on its edge, under an overhead
     // sun: light that enters an upper face near the side corners meets the lower face
