@@ -138,6 +138,30 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_convolution_pool.png");
     render(&mut renderer, 1).save_png(&path, 0.5).unwrap();
 
+    // A narrow lobe (n = 1000, the sliders' range) on steep ripples: the signed
+    // kernels undershoot, and the GPU lifts the floor to non-negative like the twin.
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(20)));
+    for (x, z) in [(0.2, 0.1), (-0.3, -0.4)] {
+        renderer.world_mut().write_message(DropPebble { position: Vec3::new(x, 0.0, z), strength: 0.05 });
+        render(&mut renderer, 6);
+    }
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::ZERO));
+    renderer.world_mut().get_mut::<PoolRipples>(pool).unwrap().exponent = 1000.0;
+    let narrow = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let cpu = cpu_twin(&mut renderer, pool);
+    let signed = {
+        let world = renderer.world_mut();
+        let settings = world.get::<PoolRipples>(pool).unwrap().light(IOR, SUN.normalize(), ILLUMINANCE);
+        let heightfield = world.get::<PoolSurface>(pool).unwrap().heightfield().clone();
+        ConvolutionCaustics::new(&settings, 48, 48, heightfield.cell_size()).unwrap().signed_irradiance(&heightfield).unwrap()
+    };
+    let lowest = signed.iter().copied().fold(f32::INFINITY, f32::min);
+    let error = relative_l2(&narrow, &cpu);
+    eprintln!("n = 1000: the signed sum reaches {lowest:.3} lux; GPU vs CPU twin relative L2 {error:.2e}, lowest GPU pixel {:.3}", narrow.iter().copied().fold(f32::INFINITY, f32::min));
+    assert!(lowest < 0.0, "the narrow lobe's signed sum stays positive: the case tests nothing");
+    assert!(error < 0.01, "narrow lobe: relative L2 {error}");
+    assert!(narrow.iter().all(|&e| e > -1e-3 * ILLUMINANCE), "the GPU subtracts light");
+
     // Stiff cases, each leaving every pixel finite: a kernel wider than the pool, three
     // hundred impulses at once, a grazing sun, extinction that absorbs everything and
     // a lobe at the largest exponent.

@@ -1,8 +1,9 @@
 // Pool caustics by convolution (Trendall & Stewart 2000, §4): the GPU twin of
 // `caustics_core::convolution`. Three compute entry points run in order over the
 // pool's texels: `ripple_heights` (the rippling surface of §4.3 from its impulses and
-// their wall images), `convolution_terms` (normals, Snell, Fresnel: §4.2 passes 1–5)
-// and `convolve` (the three kernels of §4.1, pass 6).
+// their wall images), `convolution_terms` (normals, Snell, Fresnel: §4.2 passes 1–5),
+// `convolve` (the three kernels of §4.1, pass 6), then `deficit_ratios` and `lift`
+// (`lift_negative_irradiance`: no texel below zero, the flux kept).
 
 #import bevy_caustics::convolution::Pool
 
@@ -10,7 +11,7 @@
 @group(0) @binding(1) var<storage, read> images: array<vec4<f32>>;  // x, z, strength, drop time
 @group(0) @binding(2) var<storage, read> taps: array<vec4<f32>>;    // k₁, k₂, k₀ over −r..=r², per mirror parity
 @group(0) @binding(3) var<storage, read_write> heights: array<f32>;
-@group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;
+@group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;  // w: the lift's deficit ratio
 @group(0) @binding(5) var<storage, read_write> irradiance: array<f32>;
 
 // `caustics_core::convolution::MIN_DOWNWARD_COSINE`.
@@ -128,4 +129,55 @@ fn convolve(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     irradiance[texel_index(id.x, id.y)] = e;
+}
+
+// `caustics_core::convolution::LIFT_RADIUS`.
+const LIFT_RADIUS: u32 = 5u;
+
+// The texels within `LIFT_RADIUS` of (c, r), clipped to the pool: (first, last) corners.
+fn lift_window(c: u32, r: u32) -> vec4<u32> {
+    let first = vec2(max(c, LIFT_RADIUS) - LIFT_RADIUS, max(r, LIFT_RADIUS) - LIFT_RADIUS);
+    let last = vec2(min(c + LIFT_RADIUS, pool.columns - 1u), min(r + LIFT_RADIUS, pool.rows - 1u));
+    return vec4(first, last);
+}
+
+// `lift_negative_irradiance`, first gather: a texel's deficit over the positive
+// irradiance around it, R(x) = D(x)/S(x), into `terms[x].w`.
+@compute @workgroup_size(8, 8, 1)
+fn deficit_ratios(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let deficit = max(-irradiance[texel_index(id.x, id.y)], 0.0);
+    var ratio = 0.0;
+    if deficit > 0.0 {
+        let w = lift_window(id.x, id.y);
+        var supply = 0.0;
+        for (var r = w.y; r <= w.w; r++) {
+            for (var c = w.x; c <= w.z; c++) {
+                supply += max(irradiance[texel_index(c, r)], 0.0);
+            }
+        }
+        if supply > 0.0 {
+            ratio = deficit / supply;
+        }
+    }
+    terms[texel_index(id.x, id.y)].w = ratio;
+}
+
+// `lift_negative_irradiance`, second gather: E′ = max(E, 0)·max(0, 1 − Σ R around).
+@compute @workgroup_size(8, 8, 1)
+fn lift(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let w = lift_window(id.x, id.y);
+    var taken = 0.0;
+    for (var r = w.y; r <= w.w; r++) {
+        for (var c = w.x; c <= w.z; c++) {
+            taken += terms[texel_index(c, r)].w;
+        }
+    }
+    let i = texel_index(id.x, id.y);
+    irradiance[i] = max(irradiance[i], 0.0) * max(0.0, 1.0 - taken);
 }

@@ -111,7 +111,7 @@ impl PoolGpu {
 pub(super) struct ConvolutionPipelines {
     compute_layout: BindGroupLayoutDescriptor,
     /// `[heights, terms, convolve]`.
-    compute: [CachedComputePipelineId; 3],
+    compute: [CachedComputePipelineId; 5],
     project_layouts: [BindGroupLayoutDescriptor; 2],
     project_shader: Handle<Shader>,
     fullscreen: FullscreenShader,
@@ -351,7 +351,7 @@ fn init_pipelines(
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
-    let compute = ["ripple_heights", "convolution_terms", "convolve"].map(|entry| {
+    let compute = ["ripple_heights", "convolution_terms", "convolve", "deficit_ratios", "lift"].map(|entry| {
         cache.queue_compute_pipeline(ComputePipelineDescriptor {
             label: Some(format!("pool_{entry}").into()),
             layout: vec![compute_layout.clone()],
@@ -410,7 +410,8 @@ fn prepare_view_pipelines(
     }
 }
 
-/// Once per frame: every pool's heights, per-texel terms and floor irradiance.
+/// Once per frame: every pool's heights, per-texel terms and floor irradiance, lifted
+/// to non-negative (`lift_negative_irradiance`).
 fn compute_floor_irradiance(
     mut ctx: RenderContext,
     gpu: Res<PoolGpu>,
@@ -418,7 +419,7 @@ fn compute_floor_irradiance(
     cache: Res<PipelineCache>,
     recorder: Res<PassRecorder>,
 ) {
-    let [Some(heights), Some(terms), Some(convolve)] = pipelines.compute.map(|id| cache.get_compute_pipeline(id)) else {
+    let Some(kernels) = pipelines.compute.map(|id| cache.get_compute_pipeline(id)).into_iter().collect::<Option<Vec<_>>>() else {
         return;
     };
     let diagnostics = ctx.diagnostic_recorder();
@@ -429,7 +430,7 @@ fn compute_floor_irradiance(
         let Some(bind_group) = &buffers.compute else { continue };
         let uniform = buffers.uniform.get();
         pass.set_bind_group(0, bind_group, &[]);
-        for pipeline in [heights, terms, convolve] {
+        for pipeline in &kernels {
             pass.set_pipeline(pipeline);
             pass.dispatch_workgroups(uniform.columns.div_ceil(8), uniform.rows.div_ceil(8), 1);
         }

@@ -194,9 +194,19 @@ impl ConvolutionCaustics {
         &self.kernels
     }
 
-    /// The floor irradiance below every texel centre, row-major. Errors: a heightfield
-    /// of another size or cell size than planned, or a height at or below the floor.
+    /// The floor irradiance below every texel centre, row-major, never negative
+    /// ([`lift_negative_irradiance`] of [`Self::signed_irradiance`]). Errors: a
+    /// heightfield of another size or cell size than planned, or a height at or below
+    /// the floor.
     pub fn irradiance(&mut self, heightfield: &Heightfield) -> Result<Vec<f32>, ParamError> {
+        let mut irradiance = self.signed_irradiance(heightfield)?;
+        lift_negative_irradiance(&mut irradiance, self.columns, self.rows);
+        Ok(irradiance)
+    }
+
+    /// The three convolutions of §4.1 summed as they are: negative below zero where a
+    /// narrow lobe's signed tilt kernels undershoot.
+    pub fn signed_irradiance(&mut self, heightfield: &Heightfield) -> Result<Vec<f32>, ParamError> {
         let planned = "the size the convolution was planned for";
         if heightfield.columns() != self.columns || heightfield.rows() != self.rows {
             let value = (heightfield.columns() * heightfield.rows()) as f32;
@@ -229,6 +239,49 @@ impl ConvolutionCaustics {
         let irradiance = (0..self.rows).flat_map(|row| (0..self.columns).map(move |column| row * width + column));
         Ok(irradiance.map(|index| (self.spectrum[index].re * scale) as f32).collect())
     }
+}
+
+/// Half-width, in texels, of the square around a texel of negative irradiance from
+/// which [`lift_negative_irradiance`] takes the flux to lift it to zero.
+pub const LIFT_RADIUS: usize = 5;
+
+/// Makes floor irradiance non-negative without changing its flux. The tilt kernels of
+/// §4.1 are signed, so a narrow lobe (a large `n`) undershoots below zero beside a
+/// bright focus; clamping alone would add that light. Instead each texel x with a
+/// deficit D(x) = max(−E(x), 0) takes it from the positive texels y around it (within
+/// [`LIFT_RADIUS`]) in proportion to their irradiance: with S(x) = Σ_y max(E(y), 0)
+/// and R(x) = D(x)/S(x), E′(y) = max(E(y), 0)·max(0, 1 − Σ_x R(x)). The neighbourhoods
+/// are symmetric, so Σ E′ = Σ E exactly unless a deficit finds no positive neighbour
+/// or the deficits round a texel exceed its irradiance; returns the flux (per texel
+/// area) so lost. Two gathers: the GPU's `deficit_ratios` and `lift` kernels are this.
+pub fn lift_negative_irradiance(irradiance: &mut [f32], columns: usize, rows: usize) -> f64 {
+    let window = |c: usize, r: usize| {
+        let (c0, c1) = (c.saturating_sub(LIFT_RADIUS), (c + LIFT_RADIUS).min(columns - 1));
+        let (r0, r1) = (r.saturating_sub(LIFT_RADIUS), (r + LIFT_RADIUS).min(rows - 1));
+        (r0..=r1).flat_map(move |rr| (c0..=c1).map(move |cc| rr * columns + cc))
+    };
+    let before: f64 = irradiance.iter().map(|&e| e as f64).sum();
+    let ratios: Vec<f32> = (0..rows * columns)
+        .map(|i| {
+            let deficit = (-irradiance[i]).max(0.0);
+            if deficit == 0.0 {
+                return 0.0;
+            }
+            let supply: f32 = window(i % columns, i / columns).map(|j| irradiance[j].max(0.0)).sum();
+            if supply > 0.0 { deficit / supply } else { 0.0 }
+        })
+        .collect();
+    if ratios.iter().all(|&r| r == 0.0) && irradiance.iter().all(|&e| e >= 0.0) {
+        return 0.0;
+    }
+    let lifted: Vec<f32> = (0..rows * columns)
+        .map(|i| {
+            let taken: f32 = window(i % columns, i / columns).map(|j| ratios[j]).sum();
+            irradiance[i].max(0.0) * (1.0 - taken).max(0.0)
+        })
+        .collect();
+    irradiance.copy_from_slice(&lifted);
+    before - irradiance.iter().map(|&e| e as f64).sum::<f64>()
 }
 
 /// The floor irradiance by the convolution form; [`ConvolutionCaustics`] plans once

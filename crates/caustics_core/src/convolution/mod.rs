@@ -48,7 +48,7 @@ mod direct;
 mod heightfield;
 pub mod ripples;
 
-pub use convolve::{ConvolutionCaustics, ConvolutionKernels, convolution_irradiance};
+pub use convolve::{ConvolutionCaustics, ConvolutionKernels, LIFT_RADIUS, convolution_irradiance, lift_negative_irradiance};
 pub use direct::direct_irradiance;
 pub use heightfield::{Heightfield, MAX_HEIGHTFIELD_SIDE};
 
