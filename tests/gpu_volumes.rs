@@ -12,6 +12,7 @@ use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::reference::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, WarpedVolumesSettings};
+use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
@@ -197,12 +198,63 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         }
     }
 
+    // Physical light: a 100 000 lux sun seen with Bevy's default exposure (EV100 9.7),
+    // through lenses focusing 0.6 m below the floor (about 7-fold on it, under the cap)
+    // and 0.15 m below it (about 56-fold: more than half floats hold as E·exposure).
+    // The buffer holds E·exposure exactly up to MAX_EXPOSED_IRRADIANCE, the cap past it.
+    let mut lights = renderer.world_mut().query::<(&mut Transform, &mut DirectionalLight)>();
+    for (mut t, mut light) in lights.iter_mut(renderer.world_mut()) {
+        *t = Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z);
+        light.illuminance = bevy::light::light_consts::lux::DIRECT_SUNLIGHT;
+    }
+    let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
+    renderer.world_mut().entity_mut(camera).insert(bevy::camera::Exposure::default());
+    let cap = MAX_EXPOSED_IRRADIANCE / bevy::camera::Exposure::default().exposure();
+    let scale = bevy::light::light_consts::lux::DIRECT_SUNLIGHT / ILLUMINANCE;
+    for depth in [0.6, 0.15] {
+        // Off the pixel grid's symmetry: a pixel centre exactly on the shared side of two
+        // volumes converging on a focus is a rounding tie between them.
+        let focus = caustics_core::glam::Vec3::new(0.013, -depth, 0.007);
+        let lens = TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
+            let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
+            (down - 1.5 * to_focus).normalize()
+        })
+        .unwrap();
+        let lens_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&lens));
+        renderer.world_mut().entity_mut(generator).insert(Mesh3d(lens_mesh));
+        let image = render(&mut renderer, 3);
+        let stored: Vec<f32> = renderer.caustic_irradiance(camera).unwrap().iter().map(|e| e.x).collect();
+        let twin: Vec<f32> = cpu_twin(&lens, SpecularInteraction::Refract { ior: 1.5, dispersion: None }, Vec3::NEG_Y, &settings)
+            .iter()
+            .map(|e| e * scale)
+            .collect();
+        assert!(image.pixels.iter().all(|p| p.is_finite()) && stored.iter().all(|e| e.is_finite()), "100 000 lux: a value is not finite");
+        let peak = twin.iter().copied().fold(0.0, f32::max);
+        if depth > 0.5 {
+            let error = relative_l2(&stored, &twin);
+            eprintln!("100 000 lux, 7-fold: peak {peak:.3e} lux under the cap {cap:.3e}; GPU vs twin relative L2 {error:.2e}");
+            assert!(peak > 0.2 * cap && peak < cap, "the weak lens's peak {peak} against the cap {cap}");
+            assert!(error < 5e-3, "under the cap the buffer holds E: relative L2 {error}");
+        } else {
+            // Inside the clipped spot: a pixel and its four neighbours past the cap in the twin.
+            let past = |x: u32, y: u32| twin[(y * SIZE + x) as usize] > cap;
+            let inside: Vec<usize> = (SIZE + 1..SIZE * (SIZE - 1) - 1)
+                .filter(|&i| {
+                    let (x, y) = (i % SIZE, i / SIZE);
+                    past(x, y) && past(x - 1, y) && past(x + 1, y) && past(x, y - 1) && past(x, y + 1)
+                })
+                .map(|i| i as usize)
+                .collect();
+            let held = inside.iter().map(|&i| stored[i]).fold(f32::INFINITY, f32::min);
+            let most = stored.iter().copied().fold(0.0, f32::max);
+            eprintln!("100 000 lux, 56-fold: peak {peak:.3e} lux; the buffer holds {held:.4e} to {most:.4e} inside the spot ({} pixels)", inside.len());
+            assert!(!inside.is_empty() && held >= 0.99 * cap, "past the cap the buffer holds the cap: {held} of {cap}");
+            assert!(most <= 1.001 * cap, "the buffer holds {most} lux, past the cap {cap}");
+        }
+    }
+
     // A roof over the lens (any mesh that casts shadows) hides every vertex from the
     // sun: no volumes, no volume pass; the roof gone, the lens casts again.
-    let mut lights = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
-    for mut t in lights.iter_mut(renderer.world_mut()) {
-        *t = Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z);
-    }
     let slab = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Cuboid::new(3.0, 0.1, 3.0));
     let roof = renderer.world_mut().spawn((Mesh3d(slab), Transform::from_xyz(0.0, 2.0, 0.0))).id();
     render(&mut renderer, 3);

@@ -5,7 +5,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::convolution::Pool
-#import bevy_caustics::receiver::world_at
+#import bevy_caustics::receiver::{exposed, world_at}
 
 @group(0) @binding(0) var<uniform> view: View;
 #ifdef MULTISAMPLED
@@ -29,10 +29,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     if depth <= 0.0 {
         discard;
     }
-    // World position at the pixel (reverse Z).
-    let uv = (in.position.xy - view.viewport.xy) / view.viewport.zw;
-    let clip = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
-    let p = (pool.pool_from_world * vec4(clip.xyz / clip.w, 1.0)).xyz;
+    let p = (pool.pool_from_world * vec4(world_at(view, in.position.xy, depth), 1.0)).xyz;
     let size = vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
     if abs(p.y + pool.depth) > pool.floor_tolerance || any(p.xz < vec2(0.0)) || any(p.xz > size) {
         discard;
@@ -43,5 +40,5 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let c = i32(base.x);
     let r = i32(base.y);
     let e = mix(mix(floor_at(c, r), floor_at(c + 1, r), f.x), mix(floor_at(c, r + 1), floor_at(c + 1, r + 1), f.x), f.y);
-    return vec4(pool.color.rgb * (e * view.exposure), 0.0);
+    return exposed(pool.color.rgb * e, view.exposure);
 }

@@ -6,7 +6,7 @@
 
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::world_at
+#import bevy_caustics::receiver::{exposed, world_at}
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, bilinear_taps,
     bilinear_mix,
@@ -59,5 +59,5 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let c = bilinear_mix(b, resolved_at(b.low.x, b.low.y), resolved_at(b.high.x, b.low.y), resolved_at(b.low.x, b.high.y), resolved_at(b.high.x, b.high.y));
     let ratio = f32(m) / f32(light.photon_resolution);
     let e = c * ratio * ratio * receiver_jacobian(light, p, n);
-    return vec4(light.color.rgb * (e * view.exposure), 0.0);
+    return exposed(light.color.rgb * e, view.exposure);
 }

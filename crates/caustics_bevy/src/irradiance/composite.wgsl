@@ -1,10 +1,12 @@
 // Adds caustic light to the receivers: each `CausticReceiver` mesh is drawn again
 // after the opaque pass, depth-tested against the scene (so only where it is visible),
 // with additive blending of the Lambertian radiance (albedo / π) · E · exposure. The
-// buffer already holds E · exposure.
+// buffer already holds E · exposure, each pass's share capped; their sum is capped
+// again here.
 
 #import bevy_pbr::mesh_functions::{get_world_from_local, mesh_position_local_to_clip}
 #import bevy_render::maths::PI
+#import bevy_caustics::receiver::MAX_EXPOSED_IRRADIANCE
 
 struct ReceiverMaterial {
     base_color: vec4<f32>,
@@ -44,7 +46,8 @@ fn vertex(vertex: Vertex) -> VertexOutput {
 
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
-    let exposed_irradiance = textureLoad(caustic_irradiance, vec2<i32>(floor(in.clip_position.xy)), 0).rgb;
+    let stored = textureLoad(caustic_irradiance, vec2<i32>(floor(in.clip_position.xy)), 0).rgb;
+    let exposed_irradiance = min(stored, vec3(MAX_EXPOSED_IRRADIANCE));
     let uv = (material.uv_transform * vec3(in.uv, 1.0)).xy;
     let albedo = material.base_color.rgb * textureSample(base_color_texture, base_color_sampler, uv).rgb;
     return vec4(albedo / PI * exposed_irradiance, 0.0);

@@ -3,8 +3,9 @@
 //! Every technique accumulates caustic irradiance `E` (the light's units per m², lux
 //! for Bevy's lights) into an HDR buffer the size of the view, at the surface each
 //! pixel sees. It is stored as `E · exposure` (the view's exposure, as `bevy_pbr`
-//! applies it to lights) so that sunlight focused a hundredfold still fits in half
-//! floats. The composite then draws the [`CausticReceiver`] meshes once more, after the
+//! applies it to lights), each pass's share capped at [`MAX_EXPOSED_IRRADIANCE`], so
+//! that a 100 000 lux sun focused a thousandfold under Bevy's default exposure stays
+//! finite in half floats. The composite then draws the [`CausticReceiver`] meshes once more, after the
 //! opaque pass and depth-tested against it, adding the Lambertian radiance
 //! `albedo/π · E · exposure` — what `bevy_pbr` adds for the same irradiance from a
 //! light — so caustics land on receivers only, with their unmodified
@@ -44,6 +45,15 @@ pub use composite::CausticCompositePipeline;
 /// Format of the caustic irradiance buffer: HDR float, blendable so that passes can
 /// accumulate with additive blending.
 pub const CAUSTIC_IRRADIANCE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
+
+/// The most a pass adds to, and the composite reads from, a texel of the buffer, as
+/// `E · exposure`: 2048 times what shows a white surface at mid grey, far past what
+/// tone mapping tells apart (only bloom sees the clipped part), while 32 such shares
+/// still sum within half-float range (65 504). Under Bevy's default exposure (EV100
+/// 9.7) it is 2·10⁶ lux, twenty direct suns. Below it the buffer holds `E · exposure`
+/// exactly (to half-float precision); a `Rgba32Float` buffer would hold more at twice
+/// the bandwidth of every caustics pass and the composite, for light nobody can see.
+pub const MAX_EXPOSED_IRRADIANCE: f32 = 2048.0;
 
 /// Caustic irradiance supplied by the application for a camera's view: a float image
 /// (`Rgba32Float` or `Rgba16Float`), linear, in the light's units per m² (lux for Bevy

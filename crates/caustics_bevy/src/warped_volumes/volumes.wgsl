@@ -5,7 +5,7 @@
 // (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
 
 #import bevy_render::view::View
-#import bevy_caustics::receiver::world_at
+#import bevy_caustics::receiver::{exposed, world_at}
 
 struct CausticVolume {
     origin: vec4<f32>,          // xyz: origin (a generator vertex), w: depth
@@ -193,7 +193,7 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
     let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
-    return vec4(v.color.rgb * (e * view.exposure), 0.0);
+    return exposed(v.color.rgb * e, view.exposure);
 }
 
 // Where the segment o + t·d, t ∈ [0, len], is inside a medium's unit box.
@@ -338,5 +338,5 @@ fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
             radiance += scatter(v, m, eye, dir, t.x, t.y);
         }
     }
-    return vec4(radiance * view.exposure, 0.0);
+    return exposed(radiance, view.exposure);
 }
