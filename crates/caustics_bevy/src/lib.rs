@@ -17,6 +17,7 @@ pub mod headless;
 #[cfg(feature = "hierarchical-maps")]
 pub mod hierarchical_maps;
 pub mod irradiance;
+pub mod lights;
 #[cfg(feature = "ocean")]
 pub mod ocean;
 pub mod reference;
@@ -61,7 +62,7 @@ impl Plugin for CausticsPlugin {
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
             .add_systems(Update, gltf_tagging::tag_from_materials)
-            .add_systems(PostUpdate, components::validate_caustic_params)
+            .add_systems(PostUpdate, (components::validate_caustic_params, lights::warn_unsupported_lights))
             .configure_sets(
                 PostUpdate,
                 CausticsSystems::ReadScene

@@ -54,9 +54,9 @@ pub fn blocks_caustic_light(visible: &InheritedVisibility, receiver: bool, no_sh
 /// Any of Bevy's lights.
 pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 
-/// A Bevy light placed by `transform` as the core crate's light. Bevy's point and spot
-/// intensities are luminous power (lm); the core wants intensity per steradian, Φ/4π
-/// (Bevy's own convention, spots included).
+/// A Bevy light placed by `transform` as the core crate's light, with a point or spot
+/// light's `range`. Bevy's point and spot intensities are luminous power (lm); the core
+/// wants intensity per steradian, Φ/4π (Bevy's own convention, spots included).
 pub fn core_light(
     directional: Option<&DirectionalLight>,
     point: Option<&PointLight>,
@@ -70,10 +70,16 @@ pub fn core_light(
     let position = to_core(transform.translation());
     let forward = to_core(transform.forward().as_vec3());
     Some(match (directional, point, spot) {
-        (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color) },
-        (_, Some(p), _) => {
-            Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color) }
-        }
+        (Some(d), ..) => Light {
+            kind: LightKind::Directional { direction: forward, irradiance: d.illuminance },
+            color: color(d.color),
+            range: f32::INFINITY,
+        },
+        (_, Some(p), _) => Light {
+            kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) },
+            color: color(p.color),
+            range: p.range,
+        },
         (_, _, Some(s)) => Light {
             kind: LightKind::Spot {
                 position,
@@ -83,6 +89,7 @@ pub fn core_light(
                 outer_angle: s.outer_angle,
             },
             color: color(s.color),
+            range: s.range,
         },
         _ => return None,
     })
@@ -252,20 +259,23 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, technique: Option<C
     }
     for light in &scene.lights {
         let color = Color::linear_rgb(light.color.x, light.color.y, light.color.z);
+        // Bevy's lights end somewhere: a core light without a range gets 100 m, whose
+        // window is within 2·10⁻⁶ of one inside 10 m.
+        let range = if light.range.is_finite() { light.range } else { 100.0 };
         match light.kind {
             LightKind::Directional { direction, irradiance } => world.spawn((
                 DirectionalLight { illuminance: irradiance, color, shadow_maps_enabled: true, ..default() },
                 Transform::default().looking_to(to_bevy(direction), Vec3::Y),
             )),
             LightKind::Point { position, intensity } => world.spawn((
-                PointLight { intensity: 4.0 * PI * intensity, color, range: 100.0, shadow_maps_enabled: true, ..default() },
+                PointLight { intensity: 4.0 * PI * intensity, color, range, shadow_maps_enabled: true, ..default() },
                 Transform::from_translation(to_bevy(position)),
             )),
             LightKind::Spot { position, direction, intensity, inner_angle, outer_angle } => world.spawn((
                 SpotLight {
                     intensity: 4.0 * PI * intensity,
                     color,
-                    range: 100.0,
+                    range,
                     inner_angle,
                     outer_angle,
                     shadow_maps_enabled: true,

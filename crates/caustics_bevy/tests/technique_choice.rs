@@ -1,12 +1,16 @@
 //! The technique each generator gets, without a renderer: `Auto`'s table on Bevy's own
 //! meshes (a UV sphere welded at its seam is closed, a plane is open), a mirror inside
 //! a participating medium, and every technique requested while it is unavailable — the
-//! generator warns once, names what it asked for and falls back to `Auto`'s choice.
+//! generator warns once, names what it asked for and falls back to `Auto`'s choice —
+//! and the lights whose RectLight or RenderLayers the caustics do not follow say so.
 
 use bevy::log::tracing_subscriber::{self, Layer, layer::Context, prelude::*};
 use bevy::camera::primitives::MeshAabb;
 use bevy::prelude::*;
+use bevy::camera::visibility::RenderLayers;
+use bevy::light::RectLight;
 use caustics_bevy::components::validate_caustic_params;
+use caustics_bevy::lights::warn_unsupported_lights;
 use caustics_bevy::technique::{AvailableCausticTechniques, Technique, choose_techniques};
 use caustics_bevy::{CausticGenerator, CausticTechnique, CausticTechniqueChoice, ParticipatingMedium};
 use std::sync::{Arc, Mutex};
@@ -140,4 +144,21 @@ fn no_technique_choice_is_silently_dark() {
     assert!(app.world().get::<CausticTechniqueChoice>(glass).is_none());
     let logged = warnings.0.lock().unwrap().clone();
     assert_eq!(logged.iter().filter(|w| w.contains("casts no caustics")).count(), 1, "{logged:?}");
+
+    // What the caustics do not follow of Bevy's lights says so, once per light: a
+    // RectLight, and a light limited to some RenderLayers.
+    let mut app = self::app();
+    app.add_systems(PostUpdate, warn_unsupported_lights);
+    let rect = app.world_mut().spawn(RectLight::default()).id();
+    let layered = app.world_mut().spawn((PointLight::default(), RenderLayers::layer(1))).id();
+    app.world_mut().spawn((PointLight::default(), RenderLayers::default()));
+    app.world_mut().spawn(SpotLight::default());
+    warnings.0.lock().unwrap().clear();
+    for _ in 0..3 {
+        app.update();
+    }
+    let logged = warnings.0.lock().unwrap().clone();
+    assert_eq!(logged.len(), 2, "{logged:?}");
+    assert!(logged.iter().any(|w| w.contains(&format!("RectLight {rect}"))), "{logged:?}");
+    assert!(logged.iter().any(|w| w.contains(&format!("light {layered}")) && w.contains("RenderLayers")), "{logged:?}");
 }

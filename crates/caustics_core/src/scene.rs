@@ -27,12 +27,15 @@ pub enum LightKind {
 pub struct Light {
     pub kind: LightKind,
     pub color: Vec3,
+    /// A point or spot light's range (m), as Bevy's `PointLight::range`: its light
+    /// fades out towards it ([`Self::range_attenuation`]). Infinite: no end.
+    pub range: f32,
 }
 
 impl Light {
-    /// A white light.
+    /// A white light without a range.
     pub fn white(kind: LightKind) -> Self {
-        Self { kind, color: Vec3::ONE }
+        Self { kind, color: Vec3::ONE, range: f32::INFINITY }
     }
 
     /// Checks that directions are non-zero and every number finite and non-negative.
@@ -43,6 +46,9 @@ impl Light {
             check_finite(name, v.z)
         };
         finite("light colour", self.color)?;
+        if self.range.is_nan() || self.range <= 0.0 {
+            return Err(ParamError::OutOfRange { name: "light range", value: self.range, expected: "positive (infinite: no range)" });
+        }
         match self.kind {
             LightKind::Directional { direction, irradiance } => {
                 finite("light direction", direction)?;
@@ -74,6 +80,21 @@ impl Light {
                 let scale = 1.0 / (cos_inner - cos_outer).max(1e-4);
                 let cd = dir_from_light.dot(direction.normalize_or(Vec3::NEG_Y));
                 let s = ((cd - cos_outer) * scale).clamp(0.0, 1.0);
+                s * s
+            }
+            _ => 1.0,
+        }
+    }
+
+    /// Bevy's window on a point or spot light's inverse-square falloff at `p`:
+    /// `saturate(1 − (d/range)⁴)²` (`bevy_pbr` `getDistanceAttenuation` in
+    /// `lighting.wgsl`), so its light ends at `range`. One for a directional light or
+    /// an infinite range.
+    pub fn range_attenuation(&self, p: Vec3) -> f32 {
+        match self.kind {
+            LightKind::Point { position, .. } | LightKind::Spot { position, .. } if self.range.is_finite() => {
+                let f = (p - position).length_squared() / (self.range * self.range);
+                let s = (1.0 - f * f).clamp(0.0, 1.0);
                 s * s
             }
             _ => 1.0,

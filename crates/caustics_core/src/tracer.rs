@@ -79,7 +79,8 @@ pub struct TraceStats {
     pub escaped: DVec3,
     /// Flux of branches cut by `max_depth` or `min_weight`.
     pub dropped: DVec3,
-    /// Flux absorbed by the back of a one-sided generator ([`crate::scene::Sides::Front`]).
+    /// Flux absorbed by the back of a one-sided generator ([`crate::scene::Sides::Front`]),
+    /// or cut off by a point or spot light's range before its first surface.
     pub absorbed: DVec3,
 }
 
@@ -381,6 +382,14 @@ impl<'a> PhotonTracer<'a> {
             };
             let p = b.origin + b.dir * hit.t;
             let ng = hit.geometric_normal;
+            // Light from the source fades out within a point or spot light's range.
+            let b = if b.depth == 0 && light.range.is_finite() {
+                let window = light.range_attenuation(p);
+                stats.absorbed += (b.flux * (1.0 - window)).as_dvec3();
+                Branch { flux: b.flux * window, ..b }
+            } else {
+                b
+            };
             match hit.surface {
                 Surface::Receiver(r) => {
                     if b.depth == 0 {

@@ -27,8 +27,9 @@ use caustics_core::convolution::ripples::RippleSettings;
 /// reported once and the pool stands still.
 ///
 /// With a `CausticGenerator` that refracts and asks for `CausticTechnique::Convolution`,
-/// the brightest `DirectionalLight` makes caustics on the pool floor: irradiance at
-/// `y = −depth` under the pool, shown by the `CausticReceiver` lying there.
+/// the brightest visible `DirectionalLight` that shines down on the water makes caustics
+/// on the pool floor: irradiance at `y = −depth` under the pool, shown by the
+/// `CausticReceiver` lying there.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 #[require(Transform, Visibility)]

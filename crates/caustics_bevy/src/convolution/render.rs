@@ -174,8 +174,9 @@ type AimedPools<'w, 's> = Query<
     Without<InvalidCausticParams>,
 >;
 
-/// The sunlight a pool sees: the brightest directional light.
-type Suns = Query<'static, 'static, (&'static DirectionalLight, &'static GlobalTransform)>;
+/// The directional lights a pool may refract.
+type Suns = Query<'static, 'static, SunComponents>;
+type SunComponents = (&'static DirectionalLight, &'static GlobalTransform, &'static InheritedVisibility);
 
 fn uses_convolution((generator, choice): (&CausticGenerator, &CausticTechniqueChoice)) -> Option<f32> {
     match (choice.technique(), generator.interaction) {
@@ -191,24 +192,29 @@ fn pool_from_world(pool: &PoolRipples, transform: &GlobalTransform) -> Mat4 {
     Mat4::from_translation(Vec3::new(0.5 * size.x, 0.0, 0.5 * size.y)) * transform.to_matrix().inverse()
 }
 
-/// The brightest directional light and its direction of travel in world space.
-fn brightest_sun<'a>(suns: impl Iterator<Item = (&'a DirectionalLight, &'a GlobalTransform)>) -> Option<(&'a DirectionalLight, Vec3)> {
-    suns.max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance)).map(|(sun, t)| (sun, t.forward().as_vec3()))
+/// The sunlight a pool refracts: the brightest visible directional light that shines
+/// down onto its water, and its direction of travel in pool space. A sun below the
+/// horizon or hidden lights nothing, however bright.
+fn pool_sun<'a>(
+    pool_from_world: &Mat4,
+    suns: impl Iterator<Item = (&'a DirectionalLight, &'a GlobalTransform, &'a InheritedVisibility)>,
+) -> Option<(&'a DirectionalLight, Vec3)> {
+    suns.filter(|(.., visible)| visible.get())
+        .map(|(sun, t, _)| (sun, pool_from_world.transform_vector3(t.forward().as_vec3()).normalize_or_zero()))
+        .filter(|(_, direction)| direction.y < 0.0)
+        .max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance))
 }
 
 /// Main world: aims each pool's kernels at the sunlight it refracts (the lobe is
 /// expanded about it); only a change of light, index or pool orientation redraws them.
 fn aim_kernels(
     mut pools: AimedPools,
-    suns: Query<(&DirectionalLight, &GlobalTransform)>,
+    suns: Query<SunComponents>,
 ) {
-    let Some((_, sun)) = brightest_sun(suns.iter()) else { return };
     for (entity, pool, mut surface, generator, transform) in &mut pools {
         let Some(ior) = uses_convolution(generator) else { continue };
-        let direction = pool_from_world(pool, transform).transform_vector3(sun).normalize_or_zero();
-        if direction.y < 0.0
-            && let Err(e) = surface.bypass_change_detection().aim_kernels(pool, ior, direction)
-        {
+        let Some((_, direction)) = pool_sun(&pool_from_world(pool, transform), suns.iter()) else { continue };
+        if let Err(e) = surface.bypass_change_detection().aim_kernels(pool, ior, direction) {
             warn!("bevy_caustics: the pool {entity} keeps its kernels: {e}");
         }
     }
@@ -226,15 +232,12 @@ fn mark_active(
 
 fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<ConvolutionPools>, suns: Extract<Suns>, time: Extract<Res<Time>>) {
     extracted.0.clear();
-    let Some((sun, sun_direction)) = brightest_sun(suns.iter()) else {
-        return;
-    };
     for (entity, pool, surface, generator, transform) in &pools {
         let Some(ior) = uses_convolution(generator) else { continue };
         let pool_from_world = pool_from_world(pool, transform);
-        let direction = pool_from_world.transform_vector3(sun_direction).normalize_or_zero();
+        let Some((sun, direction)) = pool_sun(&pool_from_world, suns.iter()) else { continue };
         // Kernels aimed at other light (the frame before the light moved) wait a frame.
-        if direction.y >= 0.0 || surface.kernels().aimed != (ior, direction) {
+        if surface.kernels().aimed != (ior, direction) {
             continue;
         }
         let ripples = surface.ripples();
@@ -482,4 +485,31 @@ fn project_floor_irradiance(
     }
     span.end(&mut pass);
     recorder.record("pool floor");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pool_refracts_the_brightest_sun_that_shines_down_on_it() {
+        let sun = |illuminance: f32, direction: Vec3, visible: bool| {
+            let transform = GlobalTransform::from(Transform::default().looking_to(direction, Vec3::Y));
+            let visibility = if visible { InheritedVisibility::VISIBLE } else { InheritedVisibility::HIDDEN };
+            (DirectionalLight { illuminance, ..default() }, transform, visibility)
+        };
+        let suns = [
+            sun(100_000.0, Vec3::new(0.2, 1.0, 0.0), true), // brightest, below the horizon
+            sun(50_000.0, Vec3::new(0.0, -1.0, 0.3), false), // hidden
+            sun(2_000.0, Vec3::new(0.3, -1.0, 0.0), true),
+            sun(1_000.0, Vec3::NEG_Y, true),
+        ];
+        let lit = |pool_from_world: Mat4| pool_sun(&pool_from_world, suns.iter().map(|(l, t, v)| (l, t, v))).map(|(l, d)| (l.illuminance, d));
+        let (illuminance, direction) = lit(Mat4::IDENTITY).unwrap();
+        assert_eq!(illuminance, 2_000.0);
+        assert!(direction.abs_diff_eq(Vec3::new(0.3, -1.0, 0.0).normalize(), 1e-5));
+        // A pool turned upside down sees the first sun from above.
+        assert_eq!(lit(Mat4::from_rotation_x(std::f32::consts::PI)).unwrap().0, 100_000.0);
+        assert!(pool_sun(&Mat4::IDENTITY, std::iter::empty()).is_none());
+    }
 }

@@ -16,7 +16,7 @@
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, EMPTY, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
     SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
-    map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, texel_of, reflect_about,
+    map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, range_attenuation, texel_of, reflect_about,
     refract_through, fresnel_transmittance, oct_decode, bilinear_taps, bilinear_mix,
 }
 
@@ -277,13 +277,14 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let ray = light_ray(view, uv0);
     let beam = relative_beam(view, uv0);
-    let weight = beam * cone_attenuation(view, ray.direction);
-    if weight <= 0.0 {
+    let in_cone = beam * cone_attenuation(view, ray.direction);
+    if in_cone <= 0.0 {
         return;
     }
     let forward = view.forward.xyz;
     let dir = ray.direction;
     let p1 = ray.origin + dir * ((front.depth - dot(ray.origin - view.origin.xyz, forward)) / dot(dir, forward));
+    let weight = in_cone * range_attenuation(view, p1);
     var n1 = front.normal;
     if dot(n1, dir) > 0.0 {
         n1 = -n1;

@@ -51,6 +51,8 @@ pub(super) struct GpuLightView {
     level_offsets: [UVec4; 3],
     materials: [Vec4; 16],
     material_count: u32,
+    /// 1/range² of a point or spot light, 0 without a range.
+    inverse_range_squared: f32,
 }
 
 /// The most generators the caustic maps draw (their indices of refraction live in the
@@ -165,6 +167,7 @@ impl GpuLightView {
             level_offsets,
             materials: std::array::from_fn(|i| Vec4::from_array(std::array::from_fn(|c| iors.get(4 * i + c).copied().unwrap_or(0.0)))),
             material_count: iors.len().min(MAX_GENERATORS) as u32,
+            inverse_range_squared: if planned.range.is_finite() { 1.0 / (planned.range * planned.range) } else { 0.0 },
         };
         (gpu, pyramid_nodes, map_texels)
     }

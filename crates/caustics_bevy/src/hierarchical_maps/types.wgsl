@@ -51,6 +51,7 @@ struct LightView {
     // Each generator's index of refraction, 0 for a mirror, four to a vector.
     materials: array<vec4<f32>, 16>,
     material_count: u32,
+    inverse_range_squared: f32,  // 1/range² of a point or spot light, 0 without
 }
 
 fn pyramid_offset(view: LightView, level: u32) -> u32 {
@@ -140,6 +141,17 @@ fn cone_attenuation(view: LightView, direction: vec3<f32>) -> f32 {
         return 1.0;
     }
     let s = clamp((dot(direction, view.spot.xyz) - view.spot.w) * view.spot_scale, 0.0, 1.0);
+    return s * s;
+}
+
+// `Light::range_attenuation` at `p` (the light sits at a perspective view's origin).
+fn range_attenuation(view: LightView, p: vec3<f32>) -> f32 {
+    if view.inverse_range_squared <= 0.0 {
+        return 1.0;
+    }
+    let d = p - view.origin.xyz;
+    let f = dot(d, d) * view.inverse_range_squared;
+    let s = clamp(1.0 - f * f, 0.0, 1.0);
     return s * s;
 }
 

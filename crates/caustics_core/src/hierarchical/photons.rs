@@ -222,6 +222,7 @@ pub fn trace_photon(
     }
     let forward = view.forward;
     let p1 = ray_origin + dir * ((front.depth - view.depth(ray_origin)) / dir.dot(forward));
+    let weight = weight * light.range_attenuation(p1);
     let n1 = if front.normal.dot(dir) > 0.0 { -front.normal } else { front.normal };
     let Some(&ior) = iors.get(front.material as usize) else {
         return TracedPhoton::lost(PhotonFate::NoGenerator, 0.0, 0.0);

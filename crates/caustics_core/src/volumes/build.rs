@@ -98,7 +98,7 @@ fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
             let d = p - position;
             let r2 = d.length_squared().max(1e-12);
             let dir = d / r2.sqrt();
-            (dir, intensity / r2 * light.cone_attenuation(dir))
+            (dir, intensity / r2 * light.cone_attenuation(dir) * light.range_attenuation(p))
         }
     }
 }
