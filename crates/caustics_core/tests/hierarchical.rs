@@ -338,12 +338,9 @@ fn the_paper_level_cap_drops_energy_clamping_keeps_it() {
     assert!((map.total_flux() + clamped.flux_off_map) / clamped.flux_in > 0.999);
 }
 
-#[test]
-fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
-    // A ball under a spot focuses onto the floor; an opaque box (a receiver that does
-    // not show caustics) stands in part of the light. Photons land on its top, which the
-    // light sees; the floor in its shadow gets none of them, though it projects to the
-    // same caustic-map texels.
+/// A glass ball under a spot that focuses it onto the floor, and an opaque box (a
+/// receiver, with its corners) standing in part of the focused light.
+fn ball_and_block() -> (Scene, (Vec3, Vec3)) {
     let spot = Light::white(LightKind::Spot {
         position: Vec3::new(-1.5, 4.0, 0.0),
         direction: Vec3::new(1.5, -3.0, 0.0).normalize(),
@@ -352,8 +349,19 @@ fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
         outer_angle: 0.3,
     });
     let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 32, 64);
-    let block = Receiver { mesh: TriMesh::cuboid(Vec3::new(0.2, 0.0, -0.5), Vec3::new(0.5, 0.4, 0.5)), albedo: Vec3::ONE };
+    let (lo, hi) = (Vec3::new(0.2, 0.0, -0.5), Vec3::new(0.5, 0.4, 0.5));
+    let block = Receiver { mesh: TriMesh::cuboid(lo, hi), albedo: Vec3::ONE };
     let scene = Scene { lights: vec![spot], generators: vec![glass(ball, 1.5)], receivers: vec![floor(6.0, 0.0), block] };
+    (scene, (lo, hi))
+}
+
+#[test]
+fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
+    // A ball under a spot focuses onto the floor; an opaque box (a receiver that does
+    // not show caustics) stands in part of the light. Photons land on its top, which the
+    // light sees; the floor in its shadow gets none of them, though it projects to the
+    // same caustic-map texels.
+    let (scene, _) = ball_and_block();
     let view = only_view(&scene, &settings(256, 256, CLUSTERED, VARIABLE));
     assert_all_finite(&view);
     let top: f32 = (0..20).map(|i| view.irradiance_at(Vec3::new(0.25 + 0.2 * i as f32 / 20.0, 0.4, 0.0), Vec3::Y)).sum();
@@ -376,17 +384,7 @@ fn caustic_light_never_lands_where_the_receiver_is_hidden_from_the_light() {
 fn a_glass_balls_caustic_falling_partly_on_a_block_matches_the_tracer() {
     // The scene of the test above, against the ground-truth tracer: the light the block's
     // top takes, and the floor cells its shadow leaves dark.
-    let spot = Light::white(LightKind::Spot {
-        position: Vec3::new(-1.5, 4.0, 0.0),
-        direction: Vec3::new(1.5, -3.0, 0.0).normalize(),
-        intensity: 10.0,
-        inner_angle: 0.2,
-        outer_angle: 0.3,
-    });
-    let ball = TriMesh::uv_sphere(Vec3::Y, 0.5, 32, 64);
-    let (lo, hi) = (Vec3::new(0.2, 0.0, -0.5), Vec3::new(0.5, 0.4, 0.5));
-    let block = Receiver { mesh: TriMesh::cuboid(lo, hi), albedo: Vec3::ONE };
-    let scene = Scene { lights: vec![spot], generators: vec![glass(ball, 1.5)], receivers: vec![floor(6.0, 0.0), block] };
+    let (scene, (lo, hi)) = ball_and_block();
     let region = GridRegion::horizontal(-0.5, -1.0, 0.0, 2.0, 40);
     let mut photons = caustics_core::estimate::PhotonList::default();
     let tracer = PhotonTracer::new(&scene).unwrap();

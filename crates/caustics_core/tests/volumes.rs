@@ -444,26 +444,34 @@ fn the_test_settings_are_the_defaults() {
     assert_eq!(d.intensity, IntensityMode::Conserving);
 }
 
-#[test]
-fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
+/// The tracer's cell means of the floor region (`photons` from `seed`), and the cells
+/// it leaves dark together with all their neighbours.
+fn traced_with_dark_cells(scene: &Scene, region: &GridRegion, photons: u64, seed: u64) -> (Vec<f32>, Vec<usize>) {
     use caustics_core::estimate::IrradianceGrid;
     use caustics_core::tracer::{PhotonTracer, TraceSettings};
-    let bench = caustics_core::scenes::roofed_pool(129, 64);
-    let region = bench.region;
-    let tracer = PhotonTracer::new(&bench.scene).unwrap();
-    let mut grid = IrradianceGrid::new(region);
-    tracer.trace(&TraceSettings { photons_per_light: 1 << 21, seed: 7, ..Default::default() }, &mut grid, &|_, _| {});
+    let tracer = PhotonTracer::new(scene).unwrap();
+    let mut grid = IrradianceGrid::new(*region);
+    tracer.trace(&TraceSettings { photons_per_light: photons, seed, ..Default::default() }, &mut grid, &|_, _| {});
     let truth = grid.irradiance_mean();
-    let set = build_scene_volumes(&bench.scene, &CONSERVING);
-    assert!(set.stats.shadowed > 1000, "half the water is in the roof's shadow: {:?}", set.stats);
-    let volumes: Vec<f32> = floor_irradiance(&set, &region, &CONSERVING).iter().map(|e| e.x).collect();
-    // Cells the tracer leaves dark with all their neighbours: the roof's shadow, less
-    // one cell at its edge (where a generator triangle half in shadow fades out).
     let n = region.nu;
     let dark = |r: usize, c: usize| {
         (r.saturating_sub(1)..=(r + 1).min(n - 1)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(n - 1)).all(|cc| truth[rr * n + cc] == 0.0))
     };
-    let shadow: Vec<usize> = (0..n * n).filter(|&i| dark(i / n, i % n)).collect();
+    let cells = (0..n * n).filter(|&i| dark(i / n, i % n)).collect();
+    (truth, cells)
+}
+
+#[test]
+fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
+    let bench = caustics_core::scenes::roofed_pool(129, 64);
+    let region = bench.region;
+    // Cells the tracer leaves dark with all their neighbours: the roof's shadow, less
+    // one cell at its edge (where a generator triangle half in shadow fades out).
+    let (truth, shadow) = traced_with_dark_cells(&bench.scene, &region, 1 << 21, 7);
+    let set = build_scene_volumes(&bench.scene, &CONSERVING);
+    assert!(set.stats.shadowed > 1000, "half the water is in the roof's shadow: {:?}", set.stats);
+    let volumes: Vec<f32> = floor_irradiance(&set, &region, &CONSERVING).iter().map(|e| e.x).collect();
+    let n = region.nu;
     assert!(shadow.len() > n * n / 3, "the roof shadows a third of the floor or more: {} cells", shadow.len());
     let lit_mean = truth.iter().sum::<f32>() / (n * n - shadow.len()) as f32;
     let under_roof = shadow.iter().map(|&i| volumes[i]).fold(0.0, f32::max);
@@ -483,16 +491,13 @@ fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
 
 #[test]
 fn a_box_standing_in_the_pool_casts_its_caustic_shadow() {
-    use caustics_core::estimate::IrradianceGrid;
     use caustics_core::metrics::{relative_l1, relative_l2};
-    use caustics_core::tracer::{PhotonTracer, TraceSettings};
     use caustics_core::volumes::NO_HIT_PLANE;
     let bench = caustics_core::scenes::boxed_pool(129, 64);
     let region = bench.region;
-    let tracer = PhotonTracer::new(&bench.scene).unwrap();
-    let mut grid = IrradianceGrid::new(region);
-    tracer.trace(&TraceSettings { photons_per_light: 1 << 22, seed: 11, ..Default::default() }, &mut grid, &|_, _| {});
-    let truth = grid.irradiance_mean();
+    // Cells the tracer leaves dark with all their neighbours: under the box, and its
+    // caustic shadow on the floor beside it (x > 0.2 or z < −0.3).
+    let (truth, shadow) = traced_with_dark_cells(&bench.scene, &region, 1 << 22, 11);
     let set = build_scene_volumes(&bench.scene, &CONSERVING);
     let volumes = floor_cell_means(&set, &region, 4, &CONSERVING);
     // The same volumes with their rays running through the box (the paper's §3.1).
@@ -500,13 +505,7 @@ fn a_box_standing_in_the_pool_casts_its_caustic_shadow() {
     through.volumes.iter_mut().for_each(|v| v.hit_planes = [NO_HIT_PLANE; 3]);
     let through = VolumeSet::new(through.volumes, through.stats);
     let unblocked = floor_cell_means(&through, &region, 4, &CONSERVING);
-    // Cells the tracer leaves dark with all their neighbours: under the box, and its
-    // caustic shadow on the floor beside it (x > 0.2 or z < −0.3).
     let n = region.nu;
-    let dark = |r: usize, c: usize| {
-        (r.saturating_sub(1)..=(r + 1).min(n - 1)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(n - 1)).all(|cc| truth[rr * n + cc] == 0.0))
-    };
-    let shadow: Vec<usize> = (0..n * n).filter(|&i| dark(i / n, i % n)).collect();
     let beside = |i: usize| {
         let p = region.cell_center(i / n, i % n);
         p.x > 0.2 || p.z < -0.3
