@@ -171,8 +171,16 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
         assert!(image.pixels.iter().all(|p| p.is_finite()), "{case}: a pixel is not finite");
         assert_eq!(renderer.pass_report().views("pool floor"), 1, "{case}: {:?}", renderer.pass_report());
     };
+    // A kernel wider than the pool, on still time: the same floor as the twin's.
     renderer.world_mut().get_mut::<PoolRipples>(pool).unwrap().kernel_radius = 60;
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::ZERO));
     finite(&mut renderer, "kernel wider than the pool");
+    let wide = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let cpu = cpu_twin(&mut renderer, pool);
+    let error = relative_l2(&wide, &cpu);
+    eprintln!("GPU vs CPU twin, a kernel wider than the pool: relative L2 {error:.2e}");
+    assert!(cpu.iter().sum::<f32>() > 0.0 && error < 0.01, "wide kernel: relative L2 {error}");
+    renderer.world_mut().insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(20)));
     for i in 0..300 {
         let (x, z) = ((i % 17) as f32 / 17.0 - 0.5, (i % 23) as f32 / 23.0 - 0.5);
         renderer.world_mut().write_message(DropPebble { position: Vec3::new(1.9 * x, 0.0, 1.9 * z), strength: 0.01 });

@@ -148,6 +148,23 @@ fn settings(renderer: &mut HeadlessRenderer) -> HierarchicalMapsSettings {
 
 /// Renders (a GPU validation error stops the renderer, and the frame never comes back)
 /// and checks that every pixel and every caustic map texel is finite.
+/// The GPU's floor caustics `image` against the CPU twin's lookups at each pixel's
+/// floor point, for the plan's first light view: relative L2, the twin's peak, the twin.
+fn floor_against_twin(renderer: &mut HeadlessRenderer, scene: &Scene, image: &[f32]) -> (f64, f32, ViewCaustics) {
+    let view = renderer.world_mut().resource::<CausticMapPlan>().views[0].view;
+    let twin = ViewCaustics::compute(scene, &scene.lights[0], &view, &settings(renderer).core());
+    let cpu: Vec<f32> = (0..SIZE * SIZE).map(|i| twin.irradiance_at(world_at(i % SIZE, i / SIZE), V3::Y)).collect();
+    // Pixels that see the block's top show no caustics (it is no receiver); the twin's
+    // floor points under it are hidden from the light.
+    let block_top = |i: u32| {
+        let p = world_at(i % SIZE, i / SIZE);
+        (0.25..=0.55).contains(&p.x) && (-0.6..=0.6).contains(&p.z)
+    };
+    let (gpu_floor, cpu_floor): (Vec<f32>, Vec<f32>) = (0..SIZE * SIZE).filter(|&i| !block_top(i)).map(|i| (image[i as usize], cpu[i as usize])).unzip();
+    let peak = cpu_floor.iter().copied().fold(0.0, f32::max);
+    (relative_l2(&gpu_floor, &cpu_floor) as f64, peak, twin)
+}
+
 fn finite(renderer: &mut HeadlessRenderer, case: &str) {
     let image = render(renderer, 3);
     assert!(image.pixels.iter().all(|p| p.is_finite()), "{case}: a pixel is not finite");
@@ -244,17 +261,7 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     // The caustics on the floor against the CPU twin's lookups at each pixel's floor point.
     set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
     let image = caustic_irradiance(&render(&mut renderer, 3), &without);
-    let twin = ViewCaustics::compute(&scene, &scene.lights[0], &plan.views[0].view, &settings(&mut renderer).core());
-    let cpu: Vec<f32> = (0..SIZE * SIZE).map(|i| twin.irradiance_at(world_at(i % SIZE, i / SIZE), V3::Y)).collect();
-    // Pixels that see the block's top show no caustics (it is no receiver); the twin's
-    // floor points under it are hidden from the light.
-    let block_top = |i: u32| {
-        let p = world_at(i % SIZE, i / SIZE);
-        (0.25..=0.55).contains(&p.x) && (-0.6..=0.6).contains(&p.z)
-    };
-    let (gpu_floor, cpu_floor): (Vec<f32>, Vec<f32>) = (0..SIZE * SIZE).filter(|&i| !block_top(i)).map(|i| (image[i as usize], cpu[i as usize])).unzip();
-    let error = relative_l2(&gpu_floor, &cpu_floor);
-    let peak = cpu_floor.iter().copied().fold(0.0, f32::max);
+    let (error, peak, twin) = floor_against_twin(&mut renderer, &scene, &image);
     eprintln!("floor caustics vs CPU twin: relative L2 {error:.2e} (peak {peak:.1} lux)");
     assert!(peak > 10.0, "the ball focuses the spot: peak {peak}");
     // The twin fades with the range as Bevy's light does (the GPU matches it, above):
@@ -267,15 +274,23 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     assert!(error < 0.05, "floor caustics against the CPU twin: relative L2 {error}");
     let flat = caustic_irradiance(&flat_image, &without);
     assert!(flat.iter().all(|e| e.is_finite()));
-    // Several lights add up: a second spot where the first stands doubles every pixel's
-    // caustics (against the two spots' own direct light).
-    let second = renderer.world_mut().spawn(spot()).id();
+    // Several lights add up: a second, dimmer spot from the other side, alone and then
+    // with the first, against the sum of each one's caustics (each against its own
+    // direct light).
+    let (mut other, _) = spot();
+    other.intensity *= 0.6;
+    let second = renderer.world_mut().spawn((other, Transform::from_xyz(0.4, 3.5, -0.3).looking_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Y))).id();
+    renderer.world_mut().entity_mut(light).insert(Visibility::Hidden);
+    let without_second = render_without_caustics(&mut renderer, 3);
+    let alone = caustic_irradiance(&render(&mut renderer, 3), &without_second);
+    renderer.world_mut().entity_mut(light).insert(Visibility::Inherited);
     let without_both = render_without_caustics(&mut renderer, 3);
-    let doubled = caustic_irradiance(&render(&mut renderer, 3), &without_both);
+    let both = caustic_irradiance(&render(&mut renderer, 3), &without_both);
     assert_eq!(gpu(&mut renderer).view_count(), 2);
-    let twice: Vec<f32> = image.iter().map(|e| 2.0 * e).collect();
-    let error = relative_l2(&doubled, &twice);
-    eprintln!("two equal spots against twice one: relative L2 {error:.1e}");
+    let sum: Vec<f32> = image.iter().zip(&alone).map(|(a, b)| a + b).collect();
+    let (error, overlap) = (relative_l2(&both, &sum), relative_l2(&alone, &image));
+    eprintln!("two different spots against the sum of each: relative L2 {error:.1e} (the two apart: {overlap:.2})");
+    assert!(overlap > 0.5, "the second spot's caustic differs from the first's");
     assert!(error < 2e-3, "two lights: relative L2 {error}");
     renderer.world_mut().despawn(second);
     let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("gpu_hierarchical_ball.png");
@@ -311,6 +326,13 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().entity_mut(ball).insert((Mesh3d(ball_mesh.clone()), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) }));
     renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: 16, gather: CausticMapGather::ClusterAllLevels, ..HierarchicalMapsSettings::FULL });
     finite(&mut renderer, "photons converging on few texels");
+    // The light still reaches the floor, as the twin spreads it over 16² texels (a
+    // zero-filled map would pass the finiteness check).
+    let ball_scene = cpu_scene(SpecularInteraction::Refract { ior: 1.5, dispersion: None });
+    let coarse = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let (error, peak, _) = floor_against_twin(&mut renderer, &ball_scene, &coarse);
+    eprintln!("16² caustic map: GPU vs CPU twin relative L2 {error:.2e} (peak {peak:.1} lux)");
+    assert!(peak > 1.0 && error < 0.05, "16² map: relative L2 {error}, peak {peak}");
     set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
     // A refractor filling the whole light view: a wide slab of water under a narrow spot.
     let slab = TriMesh::cuboid(V3::new(-3.0, 0.8, -3.0), V3::new(3.0, 1.2, 3.0));
@@ -327,6 +349,10 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: 4096, map_resolution: 1024, ..HierarchicalMapsSettings::FULL });
     finite(&mut renderer, "4096² photons");
     assert_eq!(gpu(&mut renderer).resolutions(), Some((4096, 1024)), "this adapter holds 4096² photons");
+    let fine = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let (error, peak, _) = floor_against_twin(&mut renderer, &ball_scene, &fine);
+    eprintln!("4096² photons: GPU vs CPU twin relative L2 {error:.2e} (peak {peak:.1} lux)");
+    assert!(peak > 10.0 && error < 0.05, "4096² photons: relative L2 {error}, peak {peak}");
     let bytes = gpu(&mut renderer).bytes();
     eprintln!("4096² photons into a 1024² map: {:.0} MB of GPU memory", bytes as f64 / 1e6);
     assert!(bytes < 1_500_000_000, "{bytes} bytes");
