@@ -58,8 +58,9 @@ fn floor() -> TriMesh {
 fn spot() -> (SpotLight, Transform) {
     let light = SpotLight {
         intensity: 4.0 * std::f32::consts::PI * 100.0,
-        // Bevy's window on the inverse square: 0.79 on the ball's lit cap, 2.6 m away.
-        range: 4.5,
+        // Bevy's window on the inverse square, along the caustic's whole path (about
+        // 4 m to the floor through the ball): about 0.86.
+        range: 8.0,
         inner_angle: 0.18,
         outer_angle: 0.26,
         shadow_maps_enabled: false,
@@ -265,12 +266,12 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("floor caustics vs CPU twin: relative L2 {error:.2e} (peak {peak:.1} lux)");
     assert!(peak > 10.0, "the ball focuses the spot: peak {peak}");
     // The twin fades with the range as Bevy's light does (the GPU matches it, above):
-    // its photons carry about 0.77 of their flux without one.
+    // its photons carry about 0.86 of their flux without one.
     let unranged = Light { range: f32::INFINITY, ..scene.lights[0] };
     let open = ViewCaustics::compute(&scene, &unranged, &plan.views[0].view, &settings(&mut renderer).core());
     let flux = |v: &ViewCaustics| v.photons.photons.iter().map(|p| p.flux as f64).sum::<f64>();
     let faded = flux(&twin) / flux(&open);
-    assert!((0.7..0.85).contains(&faded), "the spot's range fades the ball's light to {faded}");
+    assert!((0.75..0.95).contains(&faded), "the spot's range fades the ball's light to {faded}");
     assert!(error < 0.05, "floor caustics against the CPU twin: relative L2 {error}");
     let flat = caustic_irradiance(&flat_image, &without);
     assert!(flat.iter().all(|e| e.is_finite()));

@@ -86,20 +86,47 @@ impl Light {
         }
     }
 
-    /// Bevy's window on a point or spot light's inverse-square falloff at `p`:
-    /// `saturate(1 − (d/range)⁴)²` (`bevy_pbr` `getDistanceAttenuation` in
-    /// `lighting.wgsl`), so its light ends at `range`. One for a directional light or
-    /// an infinite range.
-    pub fn range_attenuation(&self, p: Vec3) -> f32 {
+    /// Bevy's window on a point or spot light's inverse-square falloff, for light that
+    /// has travelled `distance` metres from it: `saturate(1 − (d/range)⁴)²` (`bevy_pbr`
+    /// `getRangeFalloff` in `pbr_lighting.wgsl`), so its light ends at `range`. Caustic
+    /// light takes `d` along its whole path, light to generator to receiver, so that a
+    /// surface that bends nothing passes exactly Bevy's direct light. One for a
+    /// directional light or an infinite range.
+    pub fn range_attenuation(&self, distance: f32) -> f32 {
         match self.kind {
-            LightKind::Point { position, .. } | LightKind::Spot { position, .. } if self.range.is_finite() => {
-                let f = (p - position).length_squared() / (self.range * self.range);
-                let s = (1.0 - f * f).clamp(0.0, 1.0);
-                s * s
+            LightKind::Point { .. } | LightKind::Spot { .. } if self.range.is_finite() => {
+                range_window(distance * distance, 1.0 / (self.range * self.range))
             }
             _ => 1.0,
         }
     }
+
+    /// `1/range²` of a point or spot light with a range, 0 otherwise (no window).
+    pub fn inverse_range_squared(&self) -> f32 {
+        match self.kind {
+            LightKind::Point { .. } | LightKind::Spot { .. } if self.range.is_finite() => 1.0 / (self.range * self.range),
+            _ => 0.0,
+        }
+    }
+
+    /// The light's position; `None` for a directional light.
+    pub fn position(&self) -> Option<Vec3> {
+        match self.kind {
+            LightKind::Point { position, .. } | LightKind::Spot { position, .. } => Some(position),
+            LightKind::Directional { .. } => None,
+        }
+    }
+}
+
+/// [`Light::range_attenuation`] from the squared distance and `1/range²` (0: none).
+#[inline]
+pub fn range_window(distance_squared: f32, inverse_range_squared: f32) -> f32 {
+    if inverse_range_squared <= 0.0 {
+        return 1.0;
+    }
+    let f = distance_squared * inverse_range_squared;
+    let s = (1.0 - f * f).clamp(0.0, 1.0);
+    s * s
 }
 
 fn nonzero(v: Vec3) -> Result<(), ParamError> {

@@ -80,7 +80,7 @@ pub struct TraceStats {
     /// Flux of branches cut by `max_depth` or `min_weight`.
     pub dropped: DVec3,
     /// Flux absorbed by the back of a one-sided generator ([`crate::scene::Sides::Front`]),
-    /// or cut off by a point or spot light's range before its first surface.
+    /// or faded by a point or spot light's range along the path to its receiver.
     pub absorbed: DVec3,
 }
 
@@ -253,6 +253,8 @@ struct Branch {
     dir: Vec3,
     flux: Vec3,
     depth: u32,
+    /// Path length from the light to `origin` (for a light's range).
+    travelled: f32,
 }
 
 /// A scene prepared for tracing: validated, with its BVH built once.
@@ -371,7 +373,7 @@ impl<'a> PhotonTracer<'a> {
         }
         let cutoff = settings.min_weight * emitted.max_element();
 
-        let mut stack = [Branch { origin, dir, flux: emitted, depth: 0 }; 16];
+        let mut stack = [Branch { origin, dir, flux: emitted, depth: 0, travelled: 0.0 }; 16];
         let mut len = 1;
         while len > 0 {
             len -= 1;
@@ -382,16 +384,13 @@ impl<'a> PhotonTracer<'a> {
             };
             let p = b.origin + b.dir * hit.t;
             let ng = hit.geometric_normal;
-            // Light from the source fades out within a point or spot light's range.
-            let b = if b.depth == 0 && light.range.is_finite() {
-                let window = light.range_attenuation(p);
-                stats.absorbed += (b.flux * (1.0 - window)).as_dvec3();
-                Branch { flux: b.flux * window, ..b }
-            } else {
-                b
-            };
+            let travelled = b.travelled + hit.t;
             match hit.surface {
                 Surface::Receiver(r) => {
+                    // A point or spot light's range fades the light by the path it took.
+                    let window = light.range_attenuation(travelled);
+                    stats.absorbed += (b.flux * (1.0 - window)).as_dvec3();
+                    let b = Branch { flux: b.flux * window, ..b };
                     if b.depth == 0 {
                         stats.direct += b.flux.as_dvec3();
                     } else {
@@ -434,7 +433,7 @@ impl<'a> PhotonTracer<'a> {
                         }
                         // Leave the surface on the side the new direction goes.
                         let side = if dir.dot(ng) >= 0.0 { ng } else { -ng };
-                        stack[len] = Branch { origin: p + side * self.epsilon, dir, flux, depth: b.depth + 1 };
+                        stack[len] = Branch { origin: p + side * self.epsilon, dir, flux, depth: b.depth + 1, travelled };
                         len += 1;
                     }
                 }

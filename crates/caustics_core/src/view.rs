@@ -122,7 +122,7 @@ fn direct_irradiance(tracer: &PhotonTracer, scene: &Scene, p: Vec3, n: Vec3) -> 
                 LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
                     let v = position - p;
                     let r = v.length();
-                    let att = light.cone_attenuation(-v / r) * light.range_attenuation(p);
+                    let att = light.cone_attenuation(-v / r) * light.range_attenuation(r);
                     (v / r, r, intensity * att / (r * r).max(1e-8))
                 }
             };

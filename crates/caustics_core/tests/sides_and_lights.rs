@@ -96,8 +96,9 @@ fn closed_generators_ignore_double_sided() {
 #[test]
 fn a_point_lights_range_fades_its_caustic_as_bevy_fades_its_light() {
     // A mirror 0.5 m over a point light throws its light back onto the floor; with a
-    // range the light reaching the mirror fades by Bevy's window (1 − (d/range)⁴)², in
-    // the tracer and the volumes alike, and a range short of the mirror casts nothing.
+    // range the caustic fades by Bevy's window (1 − (d/range)⁴)² on its whole path
+    // (about 1.5 m), in the tracer and the volumes alike, and a range short of the
+    // mirror casts nothing.
     // 24² cells, facing down: the volumes sample the window at every vertex.
     let up = TriMesh::heightfield(25, 1.2, |_, _| 1.0, |_, _| Vec3::Y).unwrap();
     let down = |n: &Vec3| -*n;
@@ -112,13 +113,27 @@ fn a_point_lights_range_fades_its_caustic_as_bevy_fades_its_light() {
         generators: vec![Generator::new(mirror.clone(), SpecularInteraction::Reflect)],
         receivers: vec![Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 10.0, Vec3::X * 10.0), albedo: Vec3::ONE }],
     };
-    let light = scene(1.0).lights[0];
-    assert_eq!(light.range_attenuation(Vec3::Y * 1.5), 0.0);
-    assert!((light.range_attenuation(Vec3::Y) - (1.0f32 - 0.5f32.powi(4)).powi(2)).abs() < 1e-6);
-    let (t_open, v_open) = (traced(&scene(f32::INFINITY)).deposited.x, volume_flux(&scene(f32::INFINITY)) as f64);
-    let (t_ranged, v_ranged) = (traced(&scene(1.0)).deposited.x, volume_flux(&scene(1.0)) as f64);
-    eprintln!("range 1 m: tracer {:.4} of its open flux, volumes {:.4}", t_ranged / t_open, v_ranged / v_open);
+    let light = scene(3.0).lights[0];
+    assert_eq!(light.range_attenuation(3.0), 0.0);
+    assert!((light.range_attenuation(1.5) - (1.0f32 - 0.5f32.powi(4)).powi(2)).abs() < 1e-6);
+    // The caustic flux on the floor: the volumes integrated over it (their own flux is
+    // the light crossing the mirror, before the path fades it).
+    let on_floor = |scene: &Scene| {
+        let set = build_scene_volumes(scene, &VolumeSettings::default());
+        let (n, size) = (256, 4.0f32);
+        let cell = size / n as f32;
+        (0..n * n)
+            .map(|i| {
+                let p = Vec3::new(-0.5 * size + cell * ((i % n) as f32 + 0.5), 0.0, -0.5 * size + cell * ((i / n) as f32 + 0.5));
+                set.irradiance(p, Vec3::Y, &VolumeSettings::default()).x as f64
+            })
+            .sum::<f64>()
+            * (cell * cell) as f64
+    };
+    let (t_open, v_open) = (traced(&scene(f32::INFINITY)).deposited.x, on_floor(&scene(f32::INFINITY)));
+    let (t_ranged, v_ranged) = (traced(&scene(3.0)).deposited.x, on_floor(&scene(3.0)));
+    eprintln!("range 3 m: tracer {:.4} of its open flux, volumes {:.4}", t_ranged / t_open, v_ranged / v_open);
     assert!(t_ranged < 0.9 * t_open && t_ranged > 0.3 * t_open, "{t_ranged} of {t_open}");
     assert!((v_ranged / t_ranged - v_open / t_open).abs() < 0.01 * v_open / t_open, "the volumes fade as the tracer does");
-    assert_eq!((traced(&scene(0.45)).deposited.x, volume_flux(&scene(0.45))), (0.0, 0.0), "a range short of the mirror");
+    assert_eq!((traced(&scene(0.45)).deposited.x, on_floor(&scene(0.45))), (0.0, 0.0), "a range short of the mirror");
 }

@@ -277,14 +277,13 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let ray = light_ray(view, uv0);
     let beam = relative_beam(view, uv0);
-    let in_cone = beam * cone_attenuation(view, ray.direction);
-    if in_cone <= 0.0 {
+    let weight = beam * cone_attenuation(view, ray.direction);
+    if weight <= 0.0 {
         return;
     }
     let forward = view.forward.xyz;
     let dir = ray.direction;
     let p1 = ray.origin + dir * ((front.depth - dot(ray.origin - view.origin.xyz, forward)) / dot(dir, forward));
-    let weight = in_cone * range_attenuation(view, p1);
     var n1 = front.normal;
     if dot(n1, dir) > 0.0 {
         n1 = -n1;
@@ -320,8 +319,11 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     if uv.z == 0.0 || uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0 {
         return;
     }
+    // `photons::path_length`: a point or spot light's range fades the photon by its whole
+    // path (the light sits at a perspective view's origin).
+    let path = length(p1 - view.origin.xyz) + length(origin - p1) + length(hit.xyz - origin);
     photon_uv[index] = min(uv.xy, vec2(ONE_BELOW));
-    photon_flux[index] = vec2(flux, beam * texel_measure(view, n));
+    photon_flux[index] = vec2(flux * range_attenuation(view, path), beam * texel_measure(view, n));
 }
 
 // ---------------------------------------------------------------- pyramid

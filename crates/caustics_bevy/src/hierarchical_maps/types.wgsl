@@ -144,13 +144,12 @@ fn cone_attenuation(view: LightView, direction: vec3<f32>) -> f32 {
     return s * s;
 }
 
-// `Light::range_attenuation` at `p` (the light sits at a perspective view's origin).
-fn range_attenuation(view: LightView, p: vec3<f32>) -> f32 {
+// `Light::range_attenuation` for light that has travelled `distance` from the light.
+fn range_attenuation(view: LightView, distance: f32) -> f32 {
     if view.inverse_range_squared <= 0.0 {
         return 1.0;
     }
-    let d = p - view.origin.xyz;
-    let f = dot(d, d) * view.inverse_range_squared;
+    let f = distance * distance * view.inverse_range_squared;
     let s = clamp(1.0 - f * f, 0.0, 1.0);
     return s * s;
 }

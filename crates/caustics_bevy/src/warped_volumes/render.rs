@@ -41,6 +41,8 @@ pub(super) struct GpuCausticVolume {
     triangle_abc: Vec4,
     flux: Vec4,
     color: Vec4,
+    /// xyz: the light's path to each vertex, w: 1/range² (0: no range).
+    light_distance: Vec4,
     hit_planes: [Vec4; 3],
     corners: [Vec4; 8],
 }
@@ -66,6 +68,7 @@ impl From<&CausticVolume> for GpuCausticVolume {
             triangle_abc: p(v.triangle_abc),
             flux: p(v.flux),
             color: p(v.color),
+            light_distance: p(v.light_distance).with_w(v.inverse_range_squared),
             hit_planes: v.hit_planes.map(|h| Vec4::from_array(h.to_array())),
             corners: v.bounds.corners.map(|c| p(c).with_w(1.0)),
         }

@@ -23,6 +23,7 @@ struct CausticVolume {
     triangle_abc: vec4<f32>,    // the triangle's own a, b, c
     flux: vec4<f32>,            // per-vertex irradiance on the slicing plane
     color: vec4<f32>,
+    light_distance: vec4<f32>,  // the light's path to each vertex (in y = 0), w: 1/range² or 0
     hit_planes: array<vec4<f32>, 3>, // per vertex ray: the first surface it meets, n·p + w < 0 behind
     corners: array<vec4<f32>, 8>,
 }
@@ -169,8 +170,16 @@ fn sample_volume(v: CausticVolume, world: vec3<f32>) -> VolumeSample {
         }
     }
     s.inside = true;
-    s.plane_irradiance = e;
     s.ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
+    // `range_window` on the light's whole path to the point.
+    var window = 1.0;
+    if v.light_distance.w > 0.0 {
+        let path = dot(lambda, v.light_distance.xyz) + alpha * length(s.ray);
+        let f = path * path * v.light_distance.w;
+        window = clamp(1.0 - f * f, 0.0, 1.0);
+        window *= window;
+    }
+    s.plane_irradiance = e * window;
     s.depth = alpha;
     return s;
 }

@@ -222,7 +222,6 @@ pub fn trace_photon(
     }
     let forward = view.forward;
     let p1 = ray_origin + dir * ((front.depth - view.depth(ray_origin)) / dir.dot(forward));
-    let weight = weight * light.range_attenuation(p1);
     let n1 = if front.normal.dot(dir) > 0.0 { -front.normal } else { front.normal };
     let Some(&ior) = iors.get(front.material as usize) else {
         return TracedPhoton::lost(PhotonFate::NoGenerator, 0.0, 0.0);
@@ -256,13 +255,20 @@ pub fn trace_photon(
                 hit,
                 uv: uv.min(Vec2::splat(ONE_BELOW)),
                 flux_at_generator: weight,
-                flux,
+                // A point or spot light's range fades the photon by its whole path.
+                flux: flux * light.range_attenuation(path_length(light, p1, origin, hit)),
                 solid_angle: beam * view.texel_measure(resolution),
             },
             _ => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
         },
         None => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
     }
+}
+
+/// The path length from `light` through the generator entry `p1` and exit `p2` (the
+/// same point for one interface) to the receiver `hit`; 0 from a directional light.
+fn path_length(light: &Light, p1: Vec3, p2: Vec3, hit: Vec3) -> f32 {
+    light.position().map_or(0.0, |l| (p1 - l).length() + (p2 - p1).length() + (hit - p2).length())
 }
 
 /// How much nearer the light than a generator a receiver must be to shadow it (view

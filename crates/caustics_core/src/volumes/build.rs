@@ -98,7 +98,7 @@ fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
             let d = p - position;
             let r2 = d.length_squared().max(1e-12);
             let dir = d / r2.sqrt();
-            (dir, intensity / r2 * light.cone_attenuation(dir) * light.range_attenuation(p))
+            (dir, intensity / r2 * light.cone_attenuation(dir))
         }
     }
 }
@@ -274,8 +274,19 @@ pub fn build_generator_volumes(
         })
         .sum::<Vec3>()
         .try_normalize();
-    let context =
-        TriangleContext { mesh, fans, rays: &rays, shadowed: &shadowed, hits: &hits, two_sided, slicing_axis, color, depth_bounds, settings };
+    let context = TriangleContext {
+        mesh,
+        fans,
+        rays: &rays,
+        shadowed: &shadowed,
+        hits: &hits,
+        two_sided,
+        slicing_axis,
+        light,
+        color,
+        depth_bounds,
+        settings,
+    };
     let results: Vec<(Option<CausticVolume>, BuildStats)> =
         (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
     let mut stats = BuildStats::default();
@@ -298,6 +309,7 @@ struct TriangleContext<'a> {
     hits: &'a [Option<(Vec3, Vec3)>],
     two_sided: bool,
     slicing_axis: Option<Vec3>,
+    light: &'a Light,
     color: Vec3,
     depth_bounds: (Vec3, Vec3),
     settings: &'a VolumeSettings,
@@ -306,7 +318,7 @@ struct TriangleContext<'a> {
 impl TriangleContext<'_> {
     /// The caustic volume of triangle `t`, or why there is none.
     fn volume(&self, t: usize) -> (Option<CausticVolume>, BuildStats) {
-        let TriangleContext { mesh, fans, rays, shadowed, hits, two_sided, slicing_axis, color, depth_bounds: (lo, hi), settings } =
+        let TriangleContext { mesh, fans, rays, shadowed, hits, two_sided, slicing_axis, light, color, depth_bounds: (lo, hi), settings } =
             *self;
         let tri = mesh.triangles()[t];
         let p = mesh.corners(t);
@@ -437,6 +449,11 @@ impl TriangleContext<'_> {
                 *coefficients = sum;
             }
         }
+        // The light's path to each vertex, moved along its ray into the plane y = 0.
+        let light_distance = Vec3::from_array(std::array::from_fn(|i| {
+            let to_vertex = light.position().map_or(0.0, |l| (p[i] - l).length());
+            to_vertex - frame.local(p[i]).y * r[i].length()
+        }));
         // Edge i (opposite vertex i) is shared with at most one neighbour; the
         // triangle with the lower index owns the points exactly on it.
         let owned_edges = std::array::from_fn(|i| {
@@ -460,6 +477,8 @@ impl TriangleContext<'_> {
             owned_edges,
             flux: weight,
             color,
+            light_distance,
+            inverse_range_squared: light.inverse_range_squared(),
             depth,
             hit_planes: std::array::from_fn(|i| {
                 hits.get(tri[i] as usize).copied().flatten().map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth))

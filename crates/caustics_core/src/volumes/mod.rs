@@ -41,6 +41,7 @@ pub use build::{BuildStats, VertexFans, build_generator_volumes, build_scene_vol
 pub use medium::{MAX_RAY_PIECES, MediumBox, in_scattered_radiance, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
 
+use crate::scene::range_window;
 use glam::{Vec3, Vec4};
 
 /// Half-width, in barycentric units, of the band along a shared side that only the
@@ -134,6 +135,12 @@ pub struct CausticVolume {
     pub flux: Vec3,
     /// Linear RGB scale of the flux (the light's colour, or one channel of it).
     pub color: Vec3,
+    /// Per vertex, the light's path length to the vertex moved into the plane y = 0
+    /// (0 for a directional light); with `inverse_range_squared` (0: no range) a point
+    /// or spot light's range fades the caustic by its whole path, light to generator
+    /// to receiver ([`crate::scene::Light::range_attenuation`]).
+    pub light_distance: Vec3,
+    pub inverse_range_squared: f32,
     /// Local depth α at which the volume ends (the far side of the receivers).
     pub depth: f32,
     /// Per vertex, the plane tangent to the first surface its ray meets, in the local
@@ -254,6 +261,8 @@ impl CausticVolume {
         let ray_x = lambda.dot(self.ray_x);
         let ray_z = lambda.dot(self.ray_z);
         let ray = self.axes[0] * ray_x + self.axes[1] + self.axes[2] * ray_z;
+        let path = lambda.dot(self.light_distance) + alpha * ray.length();
+        let plane_irradiance = plane_irradiance * range_window(path * path, self.inverse_range_squared);
         Some(VolumeSample { plane_irradiance, ray, depth: alpha })
     }
 
