@@ -10,9 +10,10 @@ use bevy::prelude::*;
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::RectLight;
 use caustics_bevy::components::validate_caustic_params;
+use caustics_bevy::irradiance::warn_receivers_without_standard_material;
 use caustics_bevy::lights::warn_unsupported_lights;
 use caustics_bevy::technique::{AvailableCausticTechniques, Technique, choose_techniques};
-use caustics_bevy::{CausticGenerator, CausticTechnique, CausticTechniqueChoice, ParticipatingMedium};
+use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticTechniqueChoice, ParticipatingMedium};
 use std::sync::{Arc, Mutex};
 
 fn app() -> App {
@@ -161,4 +162,17 @@ fn no_technique_choice_is_silently_dark() {
     assert_eq!(logged.len(), 2, "{logged:?}");
     assert!(logged.iter().any(|w| w.contains(&format!("RectLight {rect}"))), "{logged:?}");
     assert!(logged.iter().any(|w| w.contains(&format!("light {layered}")) && w.contains("RenderLayers")), "{logged:?}");
+
+    // A receiver whose material the composite cannot read says so, once.
+    let mut app = self::app();
+    app.add_systems(PostUpdate, warn_receivers_without_standard_material);
+    let floor = app.world_mut().resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().build());
+    let unread = app.world_mut().spawn((Mesh3d(floor), CausticReceiver)).id();
+    warnings.0.lock().unwrap().clear();
+    for _ in 0..3 {
+        app.update();
+    }
+    let logged = warnings.0.lock().unwrap().clone();
+    assert_eq!(logged.len(), 1, "{logged:?}");
+    assert!(logged[0].contains(&format!("CausticReceiver {unread}")) && logged[0].contains("albedo 1"), "{logged:?}");
 }

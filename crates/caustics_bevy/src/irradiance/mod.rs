@@ -183,6 +183,7 @@ pub(crate) fn build(app: &mut App) {
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
         .add_systems(Last, add_prepasses)
+        .add_systems(PostUpdate, warn_receivers_without_standard_material)
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -204,6 +205,20 @@ pub(crate) fn build(app: &mut App) {
         )
         .add_systems(Core3d, inject_irradiance.after(Core3dSystems::Prepass).before(Core3dSystems::MainPass));
     composite::build(render_app);
+}
+
+/// Warns once per receiver whose mesh has no `StandardMaterial` (an `ExtendedMaterial`
+/// or a material of the game's own): the composite cannot read its albedo and shows
+/// its caustics on white.
+pub fn warn_receivers_without_standard_material(
+    receivers: Query<Entity, (With<CausticReceiver>, With<Mesh3d>, Without<MeshMaterial3d<StandardMaterial>>)>,
+    mut warned: Local<HashSet<Entity>>,
+) {
+    for entity in &receivers {
+        if warned.insert(entity) {
+            warn!("bevy_caustics: CausticReceiver {entity} has no StandardMaterial: its caustics are shown with albedo 1 (other materials, ExtendedMaterial included, are not read)");
+        }
+    }
 }
 
 /// Valid receivers, with their material if they have one.
