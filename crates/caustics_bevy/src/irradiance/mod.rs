@@ -207,11 +207,14 @@ pub(crate) fn build(app: &mut App) {
     composite::build(render_app);
 }
 
+/// A receiver mesh whose albedo the composite cannot read.
+type UnreadReceiver = (With<CausticReceiver>, With<Mesh3d>, Without<MeshMaterial3d<StandardMaterial>>);
+
 /// Warns once per receiver whose mesh has no `StandardMaterial` (an `ExtendedMaterial`
 /// or a material of the game's own): the composite cannot read its albedo and shows
 /// its caustics on white.
 pub fn warn_receivers_without_standard_material(
-    receivers: Query<Entity, (With<CausticReceiver>, With<Mesh3d>, Without<MeshMaterial3d<StandardMaterial>>)>,
+    receivers: Query<Entity, UnreadReceiver>,
     mut warned: Local<HashSet<Entity>>,
 ) {
     for entity in &receivers {
