@@ -93,12 +93,7 @@ impl Light {
     /// surface that bends nothing passes exactly Bevy's direct light. One for a
     /// directional light or an infinite range.
     pub fn range_attenuation(&self, distance: f32) -> f32 {
-        match self.kind {
-            LightKind::Point { .. } | LightKind::Spot { .. } if self.range.is_finite() => {
-                range_window(distance * distance, 1.0 / (self.range * self.range))
-            }
-            _ => 1.0,
-        }
+        range_window(distance * distance, self.inverse_range_squared())
     }
 
     /// `1/range²` of a point or spot light with a range, 0 otherwise (no window).

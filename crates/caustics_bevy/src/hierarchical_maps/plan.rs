@@ -27,8 +27,9 @@ pub struct PlannedLightView {
     pub color: Vec3,
     /// The spot's cone `(axis, cos θₒ, 1 / (cos θᵢ − cos θₒ))`, `None` for other lights.
     pub cone: Option<(Vec3, f32, f32)>,
-    /// A point or spot light's range (`Light::range`), infinite for none.
-    pub range: f32,
+    /// `1/range²` of a point or spot light, 0 without a range
+    /// (`Light::inverse_range_squared`).
+    pub inverse_range_squared: f32,
 }
 
 /// One mesh drawn into the light maps.
@@ -171,7 +172,7 @@ fn plan_caustic_maps(
                 (t.forward().as_vec3(), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
             });
             for view in LightView::for_light(&light, core_bounds(generators), core_bounds(receivers)) {
-                next.views.push(PlannedLightView { view, color, cone, range: light.range });
+                next.views.push(PlannedLightView { view, color, cone, inverse_range_squared: light.inverse_range_squared() });
             }
             core_lights.push(light);
         }

@@ -167,7 +167,7 @@ impl GpuLightView {
             level_offsets,
             materials: std::array::from_fn(|i| Vec4::from_array(std::array::from_fn(|c| iors.get(4 * i + c).copied().unwrap_or(0.0)))),
             material_count: iors.len().min(MAX_GENERATORS) as u32,
-            inverse_range_squared: if planned.range.is_finite() { 1.0 / (planned.range * planned.range) } else { 0.0 },
+            inverse_range_squared: planned.inverse_range_squared,
         };
         (gpu, pyramid_nodes, map_texels)
     }
