@@ -100,7 +100,10 @@ fn bench_writes_csv_table_and_plot() {
 
 #[test]
 fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
-    let scene = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../assets/scenes/pool.gltf");
+    // From cargo's environment at run time: a target directory shared between clones
+    // may hold this binary as another clone built it.
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into());
+    let scene = PathBuf::from(manifest).join("../../assets/scenes/pool.gltf");
     let dir = out_dir("gltf");
     let exr = dir.join("plane.exr");
     let out = caustics(&[

@@ -11,8 +11,12 @@ use caustics_core::scenes::SceneDescription;
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use std::path::PathBuf;
 
+/// The data beside this crate. Read from cargo's environment when the test runs: a
+/// target directory shared between clones keeps the binary built in another clone, with
+/// that clone's path compiled in.
 fn reference_dir() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/reference");
+    let manifest = std::env::var_os("CARGO_MANIFEST_DIR").unwrap_or_else(|| env!("CARGO_MANIFEST_DIR").into());
+    let dir = PathBuf::from(manifest).join("tests/data/reference");
     assert!(dir.join("wave_pool_scene.json").is_file(), "the independent reference is missing from {}", dir.display());
     dir
 }
