@@ -21,7 +21,7 @@ use bevy_caustics::caustics_core::{
 };
 use bevy_caustics::headless::irradiance_image;
 use bevy_caustics::reference::{bevy_mesh, pinhole, view_irradiance};
-use bevy_caustics::{CausticGenerator, InjectedIrradiance};
+use bevy_caustics::{CausticGenerator, CausticsSettings, InjectedIrradiance};
 use std::process::ExitCode;
 
 const WIDTH: u32 = 960;
@@ -108,7 +108,7 @@ fn spawn_pool(world: &mut World, target: RenderTarget, injected: Option<Vec<Vec3
     let mut camera = world.spawn((
         Camera3d::default(),
         // Caustics are added to the linear HDR image, before tonemapping.
-        bevy::camera::Hdr,
+        CausticsSettings::default(),
         target,
         Projection::from(PerspectiveProjection { fov: FOV_Y, ..default() }),
         Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),

@@ -9,7 +9,7 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, Hdr, RenderTarget};
+use bevy::camera::{Exposure, RenderTarget};
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
@@ -120,7 +120,7 @@ fn spawn_room(world: &mut World, target: RenderTarget, facets: usize) {
     ));
     world.spawn((
         Camera3d::default(),
-        Hdr,
+        CausticsSettings::default(),
         target,
         Exposure { ev100: 9.0 },
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),

@@ -13,7 +13,7 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, Hdr, RenderTarget};
+use bevy::camera::{Exposure, RenderTarget};
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
@@ -112,7 +112,7 @@ fn spawn_scene(world: &mut World, target: RenderTarget, settings: HierarchicalMa
     world.spawn((
         sky,
         Camera3d::default(),
-        Hdr,
+        CausticsSettings::default(),
         target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(0.2, 2.2, 2.6).looking_at(Vec3::new(0.05, 0.15, 0.0), Vec3::Y),

@@ -11,7 +11,7 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, Hdr, RenderTarget};
+use bevy::camera::{Exposure, RenderTarget};
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::prelude::*;
@@ -73,7 +73,7 @@ fn spawn_sea(world: &mut World, target: RenderTarget, resolution: u32, wind_spee
     ));
     world.spawn((
         Camera3d::default(),
-        Hdr,
+        CausticsSettings::default(),
         target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(-4.5, 1.6, 4.5).looking_at(Vec3::new(0.5, 0.4, -0.5), Vec3::Y),

@@ -9,7 +9,7 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, Hdr};
+use bevy::camera::Exposure;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
@@ -38,7 +38,7 @@ fn run() -> Result<(), String> {
     // Straight down onto the cusp of the cardioid.
     world.spawn((
         Camera3d::default(),
-        Hdr,
+        CausticsSettings::default(),
         target,
         Exposure { ev100: 12.5 },
         Transform::from_xyz(0.35, 1.3, 0.0).looking_at(Vec3::new(0.35, 0.0, 0.0), Vec3::NEG_Z),

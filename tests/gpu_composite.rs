@@ -6,7 +6,7 @@
 //! One test function: a process holds one Bevy app with a render device at a time.
 
 use bevy::asset::RenderAssetUsages;
-use bevy::camera::{Exposure, Hdr};
+use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::image::{ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
@@ -14,7 +14,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
 use bevy_caustics::{
-    CausticGenerator, CausticReceiver, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
+    CausticGenerator, CausticReceiver, CausticsSettings, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
     TagCausticsFromMaterials,
 };
 use std::f32::consts::PI;
@@ -61,7 +61,7 @@ fn spawn_view(renderer: &mut HeadlessRenderer, inject: bool) {
     let mut camera = world.spawn((
         Camera3d::default(),
         target,
-        Hdr,
+        CausticsSettings::default(),
         Tonemapping::None,
         Exposure { ev100: EV100 },
         Projection::from(OrthographicProjection { scale: 3.0 / SIZE as f32, ..OrthographicProjection::default_3d() }),

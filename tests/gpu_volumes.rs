@@ -84,7 +84,8 @@ fn save(image: &RenderedImage, name: &str) {
 
 #[test]
 fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
-    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    let auto_exposure = bevy::post_process::auto_exposure::AutoExposurePlugin;
+    let mut renderer = HeadlessRenderer::with_plugins(SIZE, SIZE, auto_exposure).unwrap_or_else(|e| panic!("{e}"));
     let mesh = water_mesh();
     let water = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.333) };
     let generator = spawn_scene(&mut renderer, &mesh, water.clone(), SUN);
@@ -171,68 +172,108 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert!(error < 0.01, "GPU and CPU in-scattering differ: relative L2 {error}");
 
     // Stiff: a glass lens 1 m up under an overhead sun, whose normals refract the light
-    // exactly onto one point of the floor (n ∝ η₁ i − η₂ t, Snell's law in vector form);
-    // then grazing light. The caustic triangles at the focus have zero area.
-    let focus = caustics_core::glam::Vec3::ZERO;
+    // exactly onto one point (n ∝ η₁ i − η₂ t, Snell's law in vector form): on the
+    // floor, where the caustic triangles have zero area, and 5 cm under it, a spot
+    // two pixels wide focused about 440-fold (under `max_magnification`, past which
+    // the volumes leave slices out); then grazing light. The
+    // floor is black and the medium still in view, so the surface pass is read from
+    // its own buffer: finite everywhere, and the twin's light, peaking where the
+    // twin's does.
     let down = caustics_core::glam::Vec3::NEG_Y;
-    let lens = TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
-        let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
-        (down - 1.5 * to_focus).normalize()
-    })
-    .unwrap();
-    let lens_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&lens));
+    let lens_focusing_at = |focus: caustics_core::glam::Vec3| {
+        TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
+            let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
+            (down - 1.5 * to_focus).normalize()
+        })
+        .unwrap()
+    };
     let glass = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
-    renderer.world_mut().entity_mut(generator).insert((Mesh3d(lens_mesh), glass));
-    for sun in [Vec3::NEG_Y, Vec3::new(1.0, 1e-3, 0.0)] {
+    renderer.world_mut().entity_mut(generator).insert(glass);
+    let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
+    let cases = [(0.0, Vec3::NEG_Y), (0.05, Vec3::NEG_Y), (0.0, Vec3::new(1.0, 1e-3, 0.0))];
+    for (below, sun) in cases {
+        // Off the pixel grid's symmetry, as below.
+        let lens = lens_focusing_at(caustics_core::glam::Vec3::new(0.013, -below, 0.007));
+        let lens_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&lens));
+        renderer.world_mut().entity_mut(generator).insert(Mesh3d(lens_mesh));
         let mut lights = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
         for mut t in lights.iter_mut(renderer.world_mut()) {
             *t = Transform::default().looking_to(sun, Vec3::Z);
         }
         let image = render(&mut renderer, 3);
-        assert!(image.pixels.iter().all(|p| p.is_finite()), "non-finite pixel with the light along {sun}");
-        if sun == Vec3::NEG_Y {
-            save(&image, "gpu_volumes_focus.png");
-            let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
-            assert_eq!(stats.volumes, 2 * 16 * 16, "{stats:?}");
-            assert!(image.pixels.iter().any(|p| p.x > 0.0), "the focused light reaches the floor somewhere");
+        let stored: Vec<f32> = renderer.caustic_irradiance(camera).unwrap().iter().map(|e| e.x).collect();
+        assert!(image.pixels.iter().chain(&image.pixels).all(|p| p.is_finite()), "non-finite pixel with the light along {sun}");
+        assert!(stored.iter().all(|e| e.is_finite() && *e >= 0.0), "non-finite or negative irradiance with the light along {sun}");
+        if sun != Vec3::NEG_Y {
+            continue;
         }
+        let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
+        assert_eq!(stats.volumes, 2 * 16 * 16, "{stats:?}");
+        let twin = cpu_twin(&lens, SpecularInteraction::Refract { ior: 1.5, dispersion: None }, Vec3::NEG_Y, &settings);
+        if below == 0.0 {
+            save(&image, "gpu_volumes_focus.png");
+            // Zero-area caustic triangles hold no pixel centre: no light, in both.
+            assert!(stored.iter().chain(&twin).all(|e| *e == 0.0), "light off a point focus");
+            continue;
+        }
+        let (gpu_flux, twin_flux) = (stored.iter().sum::<f32>(), twin.iter().sum::<f32>());
+        let brightest = |v: &[f32]| (0..v.len()).max_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap() as u32;
+        let (g, t) = (brightest(&stored), brightest(&twin));
+        let apart = (g % SIZE).abs_diff(t % SIZE).max((g / SIZE).abs_diff(t / SIZE));
+        let peak = twin[t as usize] / ILLUMINANCE;
+        eprintln!("focus 5 cm under the floor: peak {peak:.0}× the sun; the buffer holds {:.4} of the twin's light; brightest pixels {apart} apart", gpu_flux / twin_flux);
+        assert!(peak > 100.0, "the spot is not focused: {peak}×");
+        assert!((gpu_flux / twin_flux - 1.0).abs() < 0.01, "focus: light {gpu_flux} against the twin's {twin_flux}");
+        assert!(apart <= 1, "focus: the brightest pixel is {apart} pixels from the twin's");
     }
 
     // Physical light: a 100 000 lux sun seen with Bevy's default exposure (EV100 9.7),
     // through lenses focusing 0.6 m below the floor (about 7-fold on it, under the cap)
     // and 0.15 m below it (about 56-fold: more than half floats hold as E·exposure).
     // The buffer holds E·exposure exactly up to MAX_EXPOSED_IRRADIANCE, the cap past it.
+    // Then again with Bevy's auto exposure and bloom on the camera: auto exposure
+    // scales the image after the passes (in tonemapping), so the buffer must not change,
+    // and bloom must find nothing but finite light to spread.
     let mut lights = renderer.world_mut().query::<(&mut Transform, &mut DirectionalLight)>();
     for (mut t, mut light) in lights.iter_mut(renderer.world_mut()) {
         *t = Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z);
         light.illuminance = bevy::light::light_consts::lux::DIRECT_SUNLIGHT;
     }
-    let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
     renderer.world_mut().entity_mut(camera).insert(bevy::camera::Exposure::default());
     let cap = MAX_EXPOSED_IRRADIANCE / bevy::camera::Exposure::default().exposure();
     let scale = bevy::light::light_consts::lux::DIRECT_SUNLIGHT / ILLUMINANCE;
-    for depth in [0.6, 0.15] {
+    for (depth, auto) in [(0.6, false), (0.6, true), (0.15, false), (0.15, true)] {
+        use bevy::core_pipeline::tonemapping::Tonemapping;
+        use bevy::post_process::{auto_exposure::AutoExposure, bloom::Bloom};
+        let tonemapping = if auto { Tonemapping::default() } else { Tonemapping::None };
+        renderer.world_mut().entity_mut(camera).remove::<(AutoExposure, Bloom)>().insert(tonemapping);
+        let exposure_name = if auto { "auto exposure and bloom" } else { "default exposure" };
         // Off the pixel grid's symmetry: a pixel centre exactly on the shared side of two
         // volumes converging on a focus is a rounding tie between them.
         let focus = caustics_core::glam::Vec3::new(0.013, -depth, 0.007);
-        let lens = TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
-            let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
-            (down - 1.5 * to_focus).normalize()
-        })
-        .unwrap();
+        let lens = lens_focusing_at(focus);
         let lens_mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&lens));
         renderer.world_mut().entity_mut(generator).insert(Mesh3d(lens_mesh));
-        let image = render(&mut renderer, 3);
+        let mut image = render(&mut renderer, 3);
+        let mean = |image: &RenderedImage| image.pixels.iter().map(|p| p.x).sum::<f32>() / image.pixels.len() as f32;
+        if auto {
+            // Bevy's tonemapping with and without auto exposure (which adapts over frames).
+            let fixed = mean(&image);
+            renderer.world_mut().entity_mut(camera).insert((AutoExposure::default(), Bloom::default()));
+            image = render(&mut renderer, 8);
+            eprintln!("100 000 lux, lens focusing {depth} m below: tonemapped image mean {fixed:.4}, with auto exposure {:.4}", mean(&image));
+            assert!((mean(&image) - fixed).abs() > 0.1 * fixed, "auto exposure changed nothing: it did not run");
+        }
         let stored: Vec<f32> = renderer.caustic_irradiance(camera).unwrap().iter().map(|e| e.x).collect();
         let twin: Vec<f32> = cpu_twin(&lens, SpecularInteraction::Refract { ior: 1.5, dispersion: None }, Vec3::NEG_Y, &settings)
             .iter()
             .map(|e| e * scale)
             .collect();
-        assert!(image.pixels.iter().all(|p| p.is_finite()) && stored.iter().all(|e| e.is_finite()), "100 000 lux: a value is not finite");
+        assert!(image.pixels.iter().all(|p| p.is_finite()) && stored.iter().all(|e| e.is_finite()), "100 000 lux, {exposure_name}: a value is not finite");
         let peak = twin.iter().copied().fold(0.0, f32::max);
         if depth > 0.5 {
             let error = relative_l2(&stored, &twin);
-            eprintln!("100 000 lux, 7-fold: peak {peak:.3e} lux under the cap {cap:.3e}; GPU vs twin relative L2 {error:.2e}");
+            eprintln!("100 000 lux, 7-fold, {exposure_name}: peak {peak:.3e} lux under the cap {cap:.3e}; GPU vs twin relative L2 {error:.2e}");
             assert!(peak > 0.2 * cap && peak < cap, "the weak lens's peak {peak} against the cap {cap}");
             assert!(error < 5e-3, "under the cap the buffer holds E: relative L2 {error}");
         } else {
@@ -247,7 +288,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
                 .collect();
             let held = inside.iter().map(|&i| stored[i]).fold(f32::INFINITY, f32::min);
             let most = stored.iter().copied().fold(0.0, f32::max);
-            eprintln!("100 000 lux, 56-fold: peak {peak:.3e} lux; the buffer holds {held:.4e} to {most:.4e} inside the spot ({} pixels)", inside.len());
+            eprintln!("100 000 lux, 56-fold, {exposure_name}: peak {peak:.3e} lux; the buffer holds {held:.4e} to {most:.4e} inside the spot ({} pixels)", inside.len());
             assert!(!inside.is_empty() && held >= 0.99 * cap, "past the cap the buffer holds the cap: {held} of {cap}");
             assert!(most <= 1.001 * cap, "the buffer holds {most} lux, past the cap {cap}");
         }

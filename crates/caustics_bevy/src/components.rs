@@ -7,6 +7,44 @@ use bevy::prelude::*;
 use caustics_core::optics::CauchyDispersion;
 use caustics_core::params::{MediumCoefficients, ParamError, SpecularInteraction};
 
+/// Caustics in this camera's view: the opt-in, as `Bloom`, `VolumetricFog` and
+/// `ScreenSpaceAmbientOcclusion` are for Bevy's own effects. Only cameras with it get
+/// caustics work; a minimap, portal or render-to-texture camera without it costs
+/// nothing and is left as the game made it. It requires what the passes need: `Hdr`
+/// (caustics are linear light, added before tonemapping) and the depth and normal
+/// prepasses (receiver points and normals are read from them).
+///
+/// Per view is what a view shows of the caustics. How they are made stays shared —
+/// [`crate::warped_volumes::WarpedVolumesSettings`] and
+/// [`crate::hierarchical_maps::HierarchicalMapsSettings`] are resources, `PoolRipples`
+/// a component of the pool — because volumes, photon maps and pool floors are built
+/// once a frame per generator and light, in world space, for every view alike.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default)]
+#[require(bevy::camera::Hdr, bevy::core_pipeline::prepass::DepthPrepass, bevy::core_pipeline::prepass::NormalPrepass)]
+pub struct CausticsSettings {
+    /// Scales the caustic light this view shows, on receivers and in shafts: 1 is
+    /// physical, 0 shows none. Negative or NaN reads as 0.
+    pub intensity: f32,
+    /// Light shafts: the caustic beams scattered towards the eye in a
+    /// [`ParticipatingMedium`] (the volumetric pass, which this view skips when off).
+    pub shafts: bool,
+}
+
+impl Default for CausticsSettings {
+    fn default() -> Self {
+        Self { intensity: 1.0, shafts: true }
+    }
+}
+
+impl CausticsSettings {
+    /// The intensity the passes apply: [`Self::intensity`] where it is a finite
+    /// non-negative number, 0 otherwise.
+    pub fn applied_intensity(&self) -> f32 {
+        if self.intensity.is_finite() && self.intensity > 0.0 { self.intensity } else { 0.0 }
+    }
+}
+
 /// Which published technique renders a generator's caustics.
 #[derive(Reflect, Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum CausticTechnique {

@@ -116,17 +116,25 @@ pub struct HeadlessRenderer {
 impl HeadlessRenderer {
     /// Builds the app, after checking that an adapter exists.
     pub fn new(width: u32, height: u32) -> Result<Self, HeadlessError> {
-        Self::build(width, height, false)
+        Self::build(width, height, false, |_| {})
+    }
+
+    /// [`Self::new`] with more plugins (a game's materials, say), added before the app
+    /// is finished as plugins must be.
+    pub fn with_plugins<M>(width: u32, height: u32, plugins: impl bevy::app::Plugins<M>) -> Result<Self, HeadlessError> {
+        Self::build(width, height, false, |app| {
+            app.add_plugins(plugins);
+        })
     }
 
     /// Builds the app with Bevy's `RenderDiagnosticsPlugin` and whichever timestamp
     /// queries the adapter has, so that [`Self::gpu_pass_times`] reads every timed
     /// pass's GPU time.
     pub fn timed(width: u32, height: u32) -> Result<Self, HeadlessError> {
-        Self::build(width, height, true)
+        Self::build(width, height, true, |_| {})
     }
 
-    fn build(width: u32, height: u32, timed: bool) -> Result<Self, HeadlessError> {
+    fn build(width: u32, height: u32, timed: bool, more: impl FnOnce(&mut App)) -> Result<Self, HeadlessError> {
         use bevy::render::settings::{RenderCreation, WgpuSettings};
         let adapter = probe_adapter()?;
         let features = if timed { adapter.timestamps } else { wgpu::Features::empty() };
@@ -149,6 +157,7 @@ impl HeadlessRenderer {
         if timed {
             app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
         }
+        more(&mut app);
         app.finish();
         app.cleanup();
         let mut image = Image::new_target_texture(width, height, TextureFormat::Rgba16Float, None);

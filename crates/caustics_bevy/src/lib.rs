@@ -27,11 +27,11 @@ pub mod technique;
 pub mod warped_volumes;
 
 pub use components::{
-    CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InvalidCausticParams,
+    CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InvalidCausticParams,
     ParticipatingMedium,
 };
 pub use gltf_tagging::TagCausticsFromMaterials;
-pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, InjectedIrradiance};
+pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, InjectedIrradiance};
 #[cfg(feature = "convolution")]
 pub use convolution::{DropPebble, PoolRipples};
 #[cfg(feature = "ocean")]
@@ -49,9 +49,9 @@ pub enum CausticsSystems {
     ReadScene,
 }
 
-/// Adds caustics to every 3D camera's view. Passes run only for views and scenes that
-/// need them: a scene without generators (and without injected irradiance) does no
-/// caustics work at all — see [`CausticPassReport`].
+/// Adds caustics to the views of cameras with [`CausticsSettings`]. Passes run only for
+/// views and scenes that need them: a scene without generators (and without injected
+/// irradiance) does no caustics work at all — see [`CausticPassReport`].
 #[derive(Default)]
 pub struct CausticsPlugin;
 
@@ -59,6 +59,7 @@ impl Plugin for CausticsPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<CausticGenerator>()
             .register_type::<CausticReceiver>()
+            .register_type::<CausticsSettings>()
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
             .add_systems(Update, gltf_tagging::tag_from_materials)
@@ -96,8 +97,9 @@ pub mod prelude {
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
-        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique,
-        CausticTechniqueChoice, CausticsPlugin,
+        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticReceiverMaterialPlugin,
+        CausticTechnique,
+        CausticTechniqueChoice, CausticsPlugin, CausticsSettings,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };
 }

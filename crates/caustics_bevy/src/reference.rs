@@ -3,10 +3,10 @@
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
-use crate::{CausticGenerator, CausticReceiver, CausticTechnique, GeneratorInteraction, InjectedIrradiance};
+use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Aabb;
-use bevy::camera::{Exposure, Hdr, RenderTarget};
+use bevy::camera::{Exposure, RenderTarget};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use caustics_core::bvh::Surface;
@@ -198,7 +198,7 @@ pub fn spawn_scene(
     spawn_scene_content(world, scene, injected.is_none().then_some(CausticTechnique::Auto));
     let mut camera = world.spawn((
         Camera3d::default(),
-        Hdr,
+        CausticsSettings::default(),
         target,
         exposure_for(typical),
         Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),

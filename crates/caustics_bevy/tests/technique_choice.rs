@@ -10,7 +10,7 @@ use bevy::prelude::*;
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::RectLight;
 use caustics_bevy::components::validate_caustic_params;
-use caustics_bevy::irradiance::warn_receivers_without_standard_material;
+use caustics_bevy::irradiance::{CausticReceiverMaterialPlugin, warn_receivers_with_unread_material};
 use caustics_bevy::lights::warn_unsupported_lights;
 use caustics_bevy::technique::{AvailableCausticTechniques, Technique, choose_techniques};
 use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticTechniqueChoice, ParticipatingMedium};
@@ -165,9 +165,11 @@ fn no_technique_choice_is_silently_dark() {
 
     // A receiver whose material the composite cannot read says so, once.
     let mut app = self::app();
-    app.add_systems(PostUpdate, warn_receivers_without_standard_material);
+    app.add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default());
+    app.add_systems(PostUpdate, warn_receivers_with_unread_material);
     let floor = app.world_mut().resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().build());
-    let unread = app.world_mut().spawn((Mesh3d(floor), CausticReceiver)).id();
+    let unread = app.world_mut().spawn((Mesh3d(floor.clone()), CausticReceiver)).id();
+    app.world_mut().spawn((Mesh3d(floor), MeshMaterial3d::<StandardMaterial>::default(), CausticReceiver));
     warnings.0.lock().unwrap().clear();
     for _ in 0..3 {
         app.update();

@@ -270,7 +270,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, photons: Option<u32>) -> Resu
         .spawn((
             Camera3d::default(),
             target,
-            bevy::camera::Hdr,
+            caustics_bevy::CausticsSettings::default(),
             Tonemapping::None,
             exposure_for(typical_irradiance(&bench.scene, centre)),
             Projection::from(OrthographicProjection { scale: size / pixels as f32, ..OrthographicProjection::default_3d() }),

@@ -2,7 +2,7 @@
 //! every opaque surface, sorted with the transparent ones), depth-tested and
 //! additively blended. See the module docs of [`super`].
 
-use super::{ExtractedReceivers, ViewCausticIrradiance, ViewCausticWork};
+use super::{ExtractedReceivers, GpuViewCaustics, ViewCausticIrradiance, ViewCausticWork};
 use crate::components::CausticReceiver;
 use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::{CORE_3D_DEPTH_FORMAT, Transparent3d, TransparentSortingInfo3d};
@@ -50,7 +50,10 @@ pub(super) fn build(render_app: &mut SubApp) {
 pub(super) fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipeline>, asset_server: Res<AssetServer>) {
     let view_layout = BindGroupLayoutDescriptor::new(
         "caustic_irradiance_layout",
-        &BindGroupLayoutEntries::single(ShaderStages::FRAGMENT, texture_2d(TextureSampleType::Float { filterable: false })),
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (texture_2d(TextureSampleType::Float { filterable: false }), uniform_buffer::<GpuViewCaustics>(false)),
+        ),
     );
     let material_layout = BindGroupLayoutDescriptor::new(
         "caustic_receiver_layout",
@@ -84,6 +87,9 @@ impl SpecializedMeshPipeline for CausticCompositePipeline {
         if layout.0.contains(Mesh::ATTRIBUTE_UV_0) {
             attributes.push(Mesh::ATTRIBUTE_UV_0.at_shader_location(1));
             shader_defs.push("VERTEX_UVS".into());
+        }
+        if key.contains(MeshPipelineKey::DISTANCE_FOG) {
+            shader_defs.push("DISTANCE_FOG".into());
         }
         if let Some(batch) = self.mesh_pipeline.per_object_buffer_batch_size {
             shader_defs.push(bevy::shader::ShaderDefVal::UInt("PER_OBJECT_BUFFER_BATCH_SIZE".into(), batch));
@@ -141,6 +147,7 @@ impl SpecializedMeshPipeline for CausticCompositePipeline {
 struct ReceiverUniform {
     base_color: Vec4,
     uv_transform: Mat3,
+    fog_enabled: u32,
 }
 
 /// Render world: each receiver's albedo bind group, by main-world entity.
@@ -177,6 +184,7 @@ pub(super) fn prepare_receiver_bind_groups(
         let mut uniform = UniformBuffer::from(ReceiverUniform {
             base_color: Vec4::from_array(albedo.base_color.to_f32_array()),
             uv_transform: albedo.uv_transform,
+            fog_enabled: albedo.fog_enabled as u32,
         });
         uniform.write_buffer(&device, &queue);
         let Some(binding) = uniform.binding() else { continue };

@@ -12,17 +12,19 @@
 //! `StandardMaterial` colour and texture, and only where they are visible.
 //!
 //! An application can supply the buffer itself with [`InjectedIrradiance`] (the demo
-//! injects the CPU reference tracer's irradiance this way). Caustics views need
-//! Bevy's `Hdr` camera component: the composite adds linear light before tonemapping.
+//! injects the CPU reference tracer's irradiance this way). A camera opts in with
+//! [`CausticsSettings`], which brings Bevy's `Hdr` (the composite adds linear light
+//! before tonemapping) and the prepasses the techniques read receiver points from.
 
 mod composite;
 
-use crate::components::{CausticReceiver, InvalidCausticParams};
+use crate::components::{CausticReceiver, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
-use bevy::camera::Hdr;
-use bevy::core_pipeline::prepass::{DepthPrepass, NormalPrepass};
+use bevy::camera::{Hdr, Viewport};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
-use bevy::pbr::{MeshMaterial3d, StandardMaterial};
+use bevy::ecs::component::ComponentId;
+use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, StandardMaterial};
+use std::marker::PhantomData;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use bevy::render::{
@@ -34,7 +36,7 @@ use bevy::render::{
         binding_types::{texture_2d, uniform_buffer},
         *,
     },
-    renderer::{RenderContext, RenderDevice, ViewQuery},
+    renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
     sync_world::{MainEntity, RenderEntity},
     texture::{CachedTexture, GpuImage, TextureCache},
     view::{ViewUniform, ViewUniformOffset, ViewUniforms},
@@ -78,49 +80,65 @@ impl ActiveCausticTechniques {
     pub fn any(&self) -> bool {
         self.warped_volumes || self.convolution || self.hierarchical_maps
     }
+}
 
-    /// Whether a technique reads receiver normals (the normal prepass).
-    pub fn needs_normals(&self) -> bool {
-        self.warped_volumes || self.hierarchical_maps
+/// Render world: this view has caustics work this frame, with its camera's settings.
+#[derive(Component, Clone, Copy)]
+pub struct ViewCausticWork(pub CausticsSettings);
+
+/// The most media the passes read (the first visible ones).
+pub const MAX_MEDIA: usize = 4;
+
+/// A [`ParticipatingMedium`] as the shaders read it (`Medium` in `receiver.wgsl`): the
+/// unit cube `[-½, ½]³` of its entity's transform, and (σₛ, σₐ, g).
+#[derive(Clone, Copy, Default, ShaderType)]
+pub struct GpuMedium {
+    local_from_world: Mat4,
+    coefficients: Vec4,
+}
+
+/// Render world: the visible valid media of this frame, at most [`MAX_MEDIA`].
+#[derive(Resource, Default)]
+pub struct ExtractedMedia(pub Vec<GpuMedium>);
+
+impl ExtractedMedia {
+    /// The media padded to the shaders' fixed array, and how many there are.
+    pub fn padded(&self) -> ([GpuMedium; MAX_MEDIA], u32) {
+        let mut media = [GpuMedium::default(); MAX_MEDIA];
+        media[..self.0.len()].copy_from_slice(&self.0);
+        (media, self.0.len() as u32)
     }
 }
 
-/// A camera and whether it has the depth and normal prepasses.
-type CameraPrepasses = (Entity, Has<DepthPrepass>, Has<NormalPrepass>);
-/// HDR 3D cameras, the ones caustics are drawn for.
-type HdrCameras = (With<Camera3d>, With<Hdr>);
-
-/// The techniques read receiver points from Bevy's prepasses: HDR 3D cameras get the
-/// depth prepass while any technique has work, and the normal prepass while a technique
-/// that reads receiver normals does (caustic volumes, caustic maps). In `Last`, after
-/// every technique has said whether it has work this frame.
-fn add_prepasses(mut commands: Commands, active: Res<ActiveCausticTechniques>, cameras: Query<CameraPrepasses, HdrCameras>) {
-    for (camera, depth, normal) in &cameras {
-        if active.any() && !depth {
-            commands.entity(camera).insert(DepthPrepass);
-        }
-        if active.needs_normals() && !normal {
-            commands.entity(camera).insert(NormalPrepass);
-        }
-    }
+/// What the composite reads of a view besides its buffer (`ViewCaustics` in
+/// `composite.wgsl`).
+#[derive(Clone, Copy, ShaderType)]
+struct GpuViewCaustics {
+    intensity: f32,
+    medium_count: u32,
+    media: [GpuMedium; MAX_MEDIA],
 }
-
-/// Render world: this view has caustics work this frame.
-#[derive(Component)]
-pub struct ViewCausticWork;
 
 /// Render world: a view's caustic irradiance buffer and its bind group for the composite.
+///
+/// The buffer is the size of the camera's render target, as Bevy's prepass textures
+/// and main texture are, and every pass draws into the camera's viewport of it: one
+/// pixel coordinate addresses the buffer, the prepasses and the view's image alike,
+/// for a split-screen half or a minimap as for a full-target camera.
 #[derive(Component)]
 pub struct ViewCausticIrradiance {
     pub texture: CachedTexture,
     pub bind_group: BindGroup,
+    /// The camera's viewport, `None` for the whole target.
+    pub viewport: Option<Viewport>,
 }
 
 impl ViewCausticIrradiance {
     /// A render pass that adds to the buffer (with a pipeline from
-    /// [`projection_pipeline`]), keeping what the techniques before it wrote.
+    /// [`projection_pipeline`]), keeping what the techniques before it wrote, within
+    /// the camera's viewport.
     pub fn accumulate<'a>(&self, encoder: &'a mut CommandEncoder, label: &'static str) -> wgpu::RenderPass<'a> {
-        encoder.begin_render_pass(&RenderPassDescriptor {
+        let mut pass = encoder.begin_render_pass(&RenderPassDescriptor {
             label: Some(label),
             color_attachments: &[Some(RenderPassColorAttachment {
                 view: &self.texture.default_view,
@@ -129,7 +147,18 @@ impl ViewCausticIrradiance {
                 ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
             })],
             ..default()
-        })
+        });
+        self.set_viewport(&mut pass);
+        pass
+    }
+
+    /// Restricts `pass` (on the buffer or on the view's target-sized textures) to the
+    /// camera's viewport, as Bevy's main passes do.
+    pub fn set_viewport(&self, pass: &mut wgpu::RenderPass) {
+        if let Some(v) = &self.viewport {
+            let (position, size) = (v.physical_position.as_vec2(), v.physical_size.as_vec2());
+            pass.set_viewport(position.x, position.y, size.x, size.y, v.depth.start, v.depth.end);
+        }
     }
 }
 
@@ -170,6 +199,8 @@ struct ReceiverAlbedo {
     base_color: LinearRgba,
     texture: Option<AssetId<Image>>,
     uv_transform: Mat3,
+    /// `StandardMaterial::fog_enabled`: the view's `DistanceFog` dims the caustics too.
+    fog_enabled: bool,
 }
 
 /// Render world: the receivers of this frame, by main-world entity.
@@ -182,19 +213,20 @@ pub(crate) fn build(app: &mut App) {
     bevy::shader::load_shader_library!(app, "receiver.wgsl");
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
-        .add_systems(Last, add_prepasses)
-        .add_systems(PostUpdate, warn_receivers_without_standard_material)
+        .add_systems(PostUpdate, warn_receivers_with_unread_material)
+        .add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default())
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
         .init_resource::<ExtractedReceivers>()
+        .init_resource::<ExtractedMedia>()
         .add_systems(
             RenderStartup,
             (composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems), init_inject_pipeline),
         )
-        .add_systems(ExtractSchedule, (extract_receivers, mark_views_with_work))
+        .add_systems(ExtractSchedule, (start_receivers, extract_media, mark_views_with_work))
         .add_systems(
             Render,
             (
@@ -207,89 +239,178 @@ pub(crate) fn build(app: &mut App) {
     composite::build(render_app);
 }
 
-/// A receiver mesh whose albedo the composite cannot read.
-type UnreadReceiver = (With<CausticReceiver>, With<Mesh3d>, Without<MeshMaterial3d<StandardMaterial>>);
+/// A material whose receivers' albedo the composite reads: its `StandardMaterial`
+/// part's base colour, texture and UV transform.
+pub trait ReceiverMaterial: Material {
+    fn standard(&self) -> &StandardMaterial;
+}
 
-/// Warns once per receiver whose mesh has no `StandardMaterial` (an `ExtendedMaterial`
-/// or a material of the game's own): the composite cannot read its albedo and shows
-/// its caustics on white.
-pub fn warn_receivers_without_standard_material(
-    receivers: Query<Entity, UnreadReceiver>,
-    mut warned: Local<HashSet<Entity>>,
-) {
-    for entity in &receivers {
-        if warned.insert(entity) {
-            warn!("bevy_caustics: CausticReceiver {entity} has no StandardMaterial: its caustics are shown with albedo 1 (other materials, ExtendedMaterial included, are not read)");
+impl ReceiverMaterial for StandardMaterial {
+    fn standard(&self) -> &StandardMaterial {
+        self
+    }
+}
+
+impl<E: MaterialExtension> ReceiverMaterial for ExtendedMaterial<StandardMaterial, E> {
+    fn standard(&self) -> &StandardMaterial {
+        &self.base
+    }
+}
+
+/// Lets the composite read the albedo of receivers drawn with `M`; without it a
+/// receiver with that material shows its caustics on white and says so once. The
+/// [`crate::CausticsPlugin`] adds it for `StandardMaterial`; a game whose receivers use
+/// `ExtendedMaterial<StandardMaterial, MyExtension>` adds
+/// `CausticReceiverMaterialPlugin::<ExtendedMaterial<StandardMaterial, MyExtension>>::default()`.
+pub struct CausticReceiverMaterialPlugin<M: ReceiverMaterial>(PhantomData<M>);
+
+impl<M: ReceiverMaterial> Default for CausticReceiverMaterialPlugin<M> {
+    fn default() -> Self {
+        Self(PhantomData)
+    }
+}
+
+impl<M: ReceiverMaterial> Plugin for CausticReceiverMaterialPlugin<M> {
+    fn build(&self, app: &mut App) {
+        let component = app.world_mut().register_component::<MeshMaterial3d<M>>();
+        app.init_resource::<ReadableReceiverMaterials>().world_mut().resource_mut::<ReadableReceiverMaterials>().0.push(component);
+        if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
+            render_app.add_systems(ExtractSchedule, extract_receiver_albedo::<M>.after(start_receivers));
         }
     }
 }
 
-/// Valid receivers, with their material if they have one.
-type ReceiverQuery = Query<
-    'static,
-    'static,
-    (Entity, Option<&'static MeshMaterial3d<StandardMaterial>>),
-    (With<CausticReceiver>, Without<InvalidCausticParams>),
->;
+/// The `MeshMaterial3d<M>` components whose albedo the composite reads.
+#[derive(Resource, Default)]
+pub struct ReadableReceiverMaterials(Vec<ComponentId>);
 
-fn extract_receivers(
-    mut extracted: ResMut<ExtractedReceivers>,
-    receivers: Extract<ReceiverQuery>,
-    materials: Extract<Res<Assets<StandardMaterial>>>,
+/// Warns once per receiver mesh whose material the composite cannot read (none, or a
+/// material without a [`CausticReceiverMaterialPlugin`]): it shows its caustics on white.
+pub fn warn_receivers_with_unread_material(
+    receivers: Query<(Entity, EntityRef), (With<CausticReceiver>, With<Mesh3d>)>,
+    readable: Option<Res<ReadableReceiverMaterials>>,
+    mut warned: Local<HashSet<Entity>>,
 ) {
-    extracted.0.clear();
-    for (entity, material) in &receivers {
-        let material = material.and_then(|m| materials.get(&m.0));
-        let albedo = match material {
-            Some(m) => ReceiverAlbedo {
-                base_color: m.base_color.to_linear(),
-                texture: m.base_color_texture.as_ref().map(Handle::id),
-                uv_transform: Mat3::from(m.uv_transform),
-            },
-            None => ReceiverAlbedo { base_color: LinearRgba::WHITE, texture: None, uv_transform: Mat3::IDENTITY },
-        };
-        extracted.0.insert(MainEntity::from(entity), albedo);
+    let readable = readable.as_deref().map_or(&[][..], |r| &r.0[..]);
+    for (entity, components) in &receivers {
+        if !readable.iter().any(|&id| components.contains_id(id)) && warned.insert(entity) {
+            warn!("bevy_caustics: CausticReceiver {entity} has a material the composite cannot read: its caustics are shown with albedo 1 (add CausticReceiverMaterialPlugin for its material)");
+        }
     }
 }
 
-/// 3D cameras, whether they have injected irradiance and whether they render HDR.
-type CameraQuery =
-    Query<'static, 'static, (Entity, RenderEntity, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>;
+/// Valid receivers.
+type ValidReceivers = (With<CausticReceiver>, Without<InvalidCausticParams>);
 
-/// A view has caustics work when the application injects irradiance into it, or when
-/// a technique has something to draw. Caustics are added to the linear HDR image
-/// before tonemapping, so the camera needs [`Hdr`] (as bloom does); a camera without
-/// it is reported once and skipped.
+/// Starts the frame's receivers: every valid one, on white until its material is read.
+fn start_receivers(mut extracted: ResMut<ExtractedReceivers>, receivers: Extract<Query<Entity, ValidReceivers>>) {
+    extracted.0.clear();
+    let white = ReceiverAlbedo { base_color: LinearRgba::WHITE, texture: None, uv_transform: Mat3::IDENTITY, fog_enabled: true };
+    extracted.0.extend(receivers.iter().map(|entity| (MainEntity::from(entity), white)));
+}
+
+/// Receivers drawn with `M`.
+type ReceiversOf<M> = Query<'static, 'static, (Entity, &'static MeshMaterial3d<M>), With<CausticReceiver>>;
+
+/// Reads the albedo of the receivers drawn with `M`.
+fn extract_receiver_albedo<M: ReceiverMaterial>(
+    mut extracted: ResMut<ExtractedReceivers>,
+    receivers: Extract<ReceiversOf<M>>,
+    materials: Extract<Res<Assets<M>>>,
+) {
+    for (entity, material) in &receivers {
+        let (Some(albedo), Some(m)) = (extracted.0.get_mut(&MainEntity::from(entity)), materials.get(&material.0)) else {
+            continue;
+        };
+        let m = m.standard();
+        *albedo = ReceiverAlbedo {
+            base_color: m.base_color.to_linear(),
+            texture: m.base_color_texture.as_ref().map(Handle::id),
+            uv_transform: Mat3::from(m.uv_transform),
+            fog_enabled: m.fog_enabled,
+        };
+    }
+}
+
+/// Valid media and whether they are visible.
+pub type MediumQuery = Query<
+    'static,
+    'static,
+    (&'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility),
+    Without<InvalidCausticParams>,
+>;
+
+fn extract_media(mut extracted: ResMut<ExtractedMedia>, media: Extract<MediumQuery>) {
+    extracted.0 = media
+        .iter()
+        .filter(|(.., visible)| visible.get())
+        .take(MAX_MEDIA)
+        .map(|(m, t, _)| GpuMedium {
+            local_from_world: t.to_matrix().inverse(),
+            coefficients: Vec4::new(m.scattering, m.absorption, m.asymmetry, 0.0),
+        })
+        .collect();
+}
+
+/// 3D cameras: their caustics settings, whether they have injected irradiance and
+/// whether they render HDR.
+type CameraQuery = Query<
+    'static,
+    'static,
+    (Entity, RenderEntity, Option<&'static CausticsSettings>, Has<InjectedIrradiance>, Has<Hdr>),
+    With<Camera3d>,
+>;
+
+/// A view has caustics work when its camera opted in with [`CausticsSettings`] and the
+/// application injects irradiance into it or a technique has something to draw.
+/// Caustics are added to the linear HDR image before tonemapping, so the camera needs
+/// [`Hdr`] (which `CausticsSettings` requires; a camera that removed it is reported
+/// once and skipped). Injected irradiance on a camera that did not opt in is reported
+/// once too.
 fn mark_views_with_work(
     mut commands: Commands,
     views: Extract<CameraQuery>,
     active: Extract<Res<ActiveCausticTechniques>>,
     mut warned: Local<HashSet<Entity>>,
 ) {
-    for (main_entity, render_entity, injected, hdr) in &views {
+    for (main_entity, render_entity, settings, injected, hdr) in &views {
         let mut entity = commands.entity(render_entity);
         let has_work = injected || active.any();
-        if has_work && hdr {
-            entity.insert(ViewCausticWork);
-        } else {
-            entity.remove::<(ViewCausticWork, ViewCausticIrradiance)>();
+        match settings {
+            Some(settings) if has_work && hdr => {
+                entity.insert(ViewCausticWork(*settings));
+            }
+            _ => {
+                entity.remove::<(ViewCausticWork, ViewCausticIrradiance)>();
+            }
         }
-        if has_work && !hdr && warned.insert(main_entity) {
-            warn!("bevy_caustics: camera {main_entity} has caustics but no `Hdr` component; add `Hdr` to see them");
+        let problem = match (settings.is_some(), hdr) {
+            (true, false) if has_work => Some("has CausticsSettings but no `Hdr` component; add `Hdr` to see caustics"),
+            (false, _) if injected => Some("has InjectedIrradiance but no CausticsSettings; add CausticsSettings to see it"),
+            _ => None,
+        };
+        if let Some(problem) = problem
+            && warned.insert(main_entity)
+        {
+            warn!("bevy_caustics: camera {main_entity} {problem}");
         }
     }
 }
 
+#[expect(clippy::too_many_arguments)]
 fn prepare_irradiance_buffers(
     mut commands: Commands,
-    views: Query<(Entity, &ExtractedCamera), With<ViewCausticWork>>,
+    views: Query<(Entity, &ExtractedCamera, &ViewCausticWork)>,
+    media: Res<ExtractedMedia>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
     pipeline: Res<CausticCompositePipeline>,
     pipeline_cache: Res<PipelineCache>,
 ) {
-    for (entity, camera) in &views {
-        let Some(size) = camera.physical_viewport_size.filter(|s| s.x > 0 && s.y > 0) else {
+    let (padded_media, medium_count) = media.padded();
+    for (entity, camera, work) in &views {
+        let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
             continue;
         };
         let texture = texture_cache.get(
@@ -306,12 +427,20 @@ fn prepare_irradiance_buffers(
                 view_formats: &[],
             },
         );
+        let mut uniform = UniformBuffer::from(GpuViewCaustics {
+            intensity: work.0.applied_intensity(),
+            medium_count,
+            media: padded_media,
+        });
+        uniform.write_buffer(&device, &queue);
+        let Some(binding) = uniform.binding() else { continue };
         let bind_group = device.create_bind_group(
             "caustic_irradiance_bind_group",
             &pipeline_cache.get_bind_group_layout(&pipeline.view_layout),
-            &BindGroupEntries::single(&texture.default_view),
+            &BindGroupEntries::sequential((&texture.default_view, binding)),
         );
-        commands.entity(entity).insert(ViewCausticIrradiance { texture, bind_group });
+        let viewport = camera.viewport.clone();
+        commands.entity(entity).insert(ViewCausticIrradiance { texture, bind_group, viewport });
     }
 }
 
@@ -384,6 +513,7 @@ pub(crate) fn inject_irradiance(
         })],
         ..default()
     });
+    buffer.set_viewport(&mut pass);
     if let (Some(pipeline), Some(bind_group)) = (pipeline, bind_group) {
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &bind_group, &[view_offset.offset]);

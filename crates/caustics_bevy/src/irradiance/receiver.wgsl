@@ -1,5 +1,5 @@
-// What the passes that add caustic irradiance at receivers share: the world point a
-// pixel sees, rebuilt from its depth, and the exposed, capped value they store.
+// What the passes that add caustic light share: the world point a pixel sees, rebuilt
+// from its depth, the exposed, capped value they store, and the participating media.
 
 #define_import_path bevy_caustics::receiver
 
@@ -20,4 +20,45 @@ fn world_at(view: View, frag: vec2<f32>, depth: f32) -> vec3<f32> {
     let uv = (frag - view.viewport.xy) / view.viewport.zw;
     let clip = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
     return clip.xyz / clip.w;
+}
+
+// A `ParticipatingMedium` (`caustics_bevy::irradiance::GpuMedium`): the unit cube
+// [-½, ½]³ of `local_from_world`, and (σs, σa, g).
+struct Medium {
+    local_from_world: mat4x4<f32>,
+    coefficients: vec4<f32>,
+}
+
+// Where the segment o + t·d, t ∈ [0, len], is inside a medium's unit box (empty when x ≥ y).
+fn clip_medium(m: Medium, o: vec3<f32>, d: vec3<f32>, len: f32) -> vec2<f32> {
+    let lo = (m.local_from_world * vec4(o, 1.0)).xyz;
+    let ld = (m.local_from_world * vec4(d, 0.0)).xyz;
+    var t = vec2(0.0, len);
+    for (var axis = 0; axis < 3; axis++) {
+        if abs(ld[axis]) < 1e-12 {
+            if abs(lo[axis]) > 0.5 {
+                return vec2(1.0, 0.0);
+            }
+            continue;
+        }
+        let a = (-0.5 - lo[axis]) / ld[axis];
+        let b = (0.5 - lo[axis]) / ld[axis];
+        t = vec2(max(t.x, min(a, b)), min(t.y, max(a, b)));
+    }
+    return t;
+}
+
+// exp(−σt · ℓ) along the segment from `start` to `end`, ℓ the length inside each medium.
+fn transmittance(media: array<Medium, 4>, count: u32, start: vec3<f32>, end: vec3<f32>) -> f32 {
+    let len = distance(start, end);
+    if len <= 0.0 {
+        return 1.0;
+    }
+    let d = (end - start) / len;
+    var optical_depth = 0.0;
+    for (var i = 0u; i < min(count, 4u); i++) {
+        let t = clip_medium(media[i], start, d, len);
+        optical_depth += (media[i].coefficients.x + media[i].coefficients.y) * max(t.y - t.x, 0.0);
+    }
+    return exp(-optical_depth);
 }

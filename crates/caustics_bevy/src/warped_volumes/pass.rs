@@ -25,15 +25,16 @@ pub(super) struct VolumeDraw<'w> {
 
 impl VolumeDraw<'_> {
     /// Draws every volume's bounding prism, 36 vertices an instance, into `target`
-    /// with the view's pipeline `pipeline_id`, times it as the span `caustics/{pass}`
-    /// and records `pass` in the report.
+    /// (target-sized, within the camera's viewport) with the view's pipeline
+    /// `pipeline_id`, times it as the span `caustics/{pass}` and records `pass` in the
+    /// report.
     fn draw(
         &self,
         ctx: &mut RenderContext,
         pass: &'static str,
         target: &TextureView,
         pipeline_id: CachedRenderPipelineId,
-        (pipelines, prepass, view_offset): (&ViewVolumePipelines, &ViewPrepassTextures, &ViewUniformOffset),
+        (irradiance, work, pipelines, prepass, view_offset): VolumeView,
     ) {
         let (Some(pipeline), Some(depth), Some(normal), Some(view), Some(volumes), Some(settings)) = (
             self.cache.get_render_pipeline(pipeline_id),
@@ -65,8 +66,11 @@ impl VolumeDraw<'_> {
             })],
             ..default()
         });
+        irradiance.set_viewport(&mut render_pass);
         let span = diagnostics.pass_span(&mut render_pass, format!("caustics/{pass}"));
         render_pass.set_pipeline(pipeline);
+        let intensity = f64::from(work.0.applied_intensity());
+        render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
         render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
         render_pass.draw(0..36, 0..self.buffers.count);
         span.end(&mut render_pass);
@@ -74,15 +78,15 @@ impl VolumeDraw<'_> {
     }
 }
 
+/// What the passes read of a view.
+type VolumeView<'a> =
+    (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
+
 /// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer.
-pub(super) fn surface_pass(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewVolumePipelines)>,
-    draw: VolumeDraw,
-    mut ctx: RenderContext,
-) {
-    let (irradiance, prepass, offset, pipelines) = view.into_inner();
-    let target = &irradiance.texture.default_view;
-    draw.draw(&mut ctx, "volumes", target, pipelines.surface, (pipelines, prepass, offset));
+pub(super) fn surface_pass(view: ViewQuery<VolumeView<'static>>, draw: VolumeDraw, mut ctx: RenderContext) {
+    let view = view.into_inner();
+    let target = &view.0.texture.default_view;
+    draw.draw(&mut ctx, "volumes", target, view.2.surface, view);
 }
 
 /// Caustics views that see a medium.
@@ -90,11 +94,10 @@ type MediumViews = (With<ViewSeesMedium>, With<ViewCausticWork>);
 
 /// Adds the light scattered out of the caustic beams in media to the view's HDR image.
 pub(super) fn volumetric_pass(
-    view: ViewQuery<(&ViewTarget, &ViewPrepassTextures, &ViewUniformOffset, &ViewVolumePipelines), MediumViews>,
+    view: ViewQuery<(&ViewTarget, VolumeView<'static>), MediumViews>,
     draw: VolumeDraw,
     mut ctx: RenderContext,
 ) {
-    let (target, prepass, offset, pipelines) = view.into_inner();
-    let target = target.main_texture_view();
-    draw.draw(&mut ctx, "volumetric", target, pipelines.volumetric, (pipelines, prepass, offset));
+    let (target, view) = view.into_inner();
+    draw.draw(&mut ctx, "volumetric", target.main_texture_view(), view.2.volumetric, view);
 }

@@ -1,8 +1,8 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
 use super::{CausticVolumes, WarpedVolumesSettings, pass};
-use crate::components::{InvalidCausticParams, ParticipatingMedium};
-use crate::irradiance::ViewCausticWork;
+use crate::components::CausticsSettings;
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticWork};
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::prelude::*;
@@ -75,17 +75,6 @@ impl From<&CausticVolume> for GpuCausticVolume {
     }
 }
 
-/// The most media one view scatters in.
-pub(super) const MAX_MEDIA: usize = 4;
-
-/// A [`ParticipatingMedium`] as the shader reads it: the unit cube `[-½, ½]³` of its
-/// entity's transform, and (σₛ, σₐ, g).
-#[derive(Clone, Copy, Default, ShaderType)]
-pub(super) struct GpuMedium {
-    local_from_world: Mat4,
-    coefficients: Vec4,
-}
-
 /// `VolumeSettings` in `volumes.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuVolumeSettings {
@@ -102,7 +91,6 @@ struct ExtractedVolumes {
     generation: u64,
     volumes: Arc<Vec<CausticVolume>>,
     settings: WarpedVolumesSettings,
-    media: Vec<GpuMedium>,
 }
 
 /// Render world: the volumes and settings on the GPU.
@@ -114,7 +102,8 @@ pub(super) struct VolumeBuffers {
     pub settings: UniformBuffer<GpuVolumeSettings>,
 }
 
-/// Render world: this view sees a participating medium (and so runs the volumetric pass).
+/// Render world: this view shows shafts (`CausticsSettings::shafts`) and sees a
+/// participating medium, and so runs the volumetric pass.
 #[derive(Component)]
 pub(super) struct ViewSeesMedium;
 
@@ -155,41 +144,33 @@ pub(super) fn build(app: &mut App) {
         );
 }
 
-type MediumQuery = Query<'static, 'static, (&'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility), Without<InvalidCausticParams>>;
-
 fn extract_volumes(
     mut extracted: ResMut<ExtractedVolumes>,
     volumes: Extract<Res<CausticVolumes>>,
     settings: Extract<Res<WarpedVolumesSettings>>,
-    media: Extract<MediumQuery>,
 ) {
     if extracted.generation != volumes.generation {
         extracted.generation = volumes.generation;
         extracted.volumes = volumes.volumes.clone();
     }
     extracted.settings = **settings;
-    extracted.media = media
-        .iter()
-        .filter(|(.., visible)| visible.get())
-        .take(MAX_MEDIA)
-        .map(|(m, t, _)| GpuMedium {
-            local_from_world: t.to_matrix().inverse(),
-            coefficients: Vec4::new(m.scattering, m.absorption, m.asymmetry, 0.0),
-        })
-        .collect();
 }
 
-/// Marks the caustics views whose frustum meets a medium's box.
+/// 3D cameras, their frusta and caustics settings.
+type CameraFrusta = Query<'static, 'static, (RenderEntity, &'static Frustum, Option<&'static CausticsSettings>), With<Camera3d>>;
+
+/// Marks the views that show shafts and whose frustum meets a medium's box.
 fn mark_views_seeing_media(
     mut commands: Commands,
-    views: Extract<Query<(RenderEntity, &Frustum), With<Camera3d>>>,
+    views: Extract<CameraFrusta>,
     media: Extract<MediumQuery>,
 ) {
     let unit_cube = Aabb { center: Vec3::ZERO.into(), half_extents: Vec3::splat(0.5).into() };
-    for (view, frustum) in &views {
-        let sees = media
-            .iter()
-            .any(|(_, t, visible)| visible.get() && frustum.intersects_obb(&unit_cube, &t.affine(), true, true));
+    for (view, frustum, settings) in &views {
+        let sees = settings.is_some_and(|s| s.shafts)
+            && media
+                .iter()
+                .any(|(_, t, visible)| visible.get() && frustum.intersects_obb(&unit_cube, &t.affine(), true, true));
         if sees {
             commands.entity(view).insert(ViewSeesMedium);
         } else {
@@ -200,6 +181,7 @@ fn mark_views_seeing_media(
 
 fn prepare_buffers(
     extracted: Res<ExtractedVolumes>,
+    media: Res<ExtractedMedia>,
     mut buffers: ResMut<VolumeBuffers>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
@@ -212,8 +194,7 @@ fn prepare_buffers(
         buffers.volumes.write_buffer(&device, &queue);
     }
     let settings = extracted.settings.core();
-    let mut media = [GpuMedium::default(); MAX_MEDIA];
-    media[..extracted.media.len()].copy_from_slice(&extracted.media);
+    let (media, medium_count) = media.padded();
     let count = buffers.count;
     buffers.settings.set(GpuVolumeSettings {
         intensity_mode: match settings.intensity {
@@ -222,7 +203,7 @@ fn prepare_buffers(
             IntensityMode::Constant => 2,
         },
         max_magnification: settings.max_magnification,
-        medium_count: extracted.media.len() as u32,
+        medium_count,
         volume_count: count,
         media,
     });
@@ -281,7 +262,11 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         }
         let (label, entry) =
             if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
-        let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        // Shafts go straight into the view's image, scaled by the view's
+        // `CausticsSettings::intensity` as the blend constant; the composite scales
+        // the surface pass's buffer.
+        let src_factor = if key.volumetric { BlendFactor::Constant } else { BlendFactor::One };
+        let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some(label.into()),
             layout: vec![self.layouts[key.multisampled as usize].clone()],

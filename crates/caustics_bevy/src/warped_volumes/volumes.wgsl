@@ -5,7 +5,7 @@
 // (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
 
 #import bevy_render::view::View
-#import bevy_caustics::receiver::{exposed, world_at}
+#import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
 
 struct CausticVolume {
     origin: vec4<f32>,          // xyz: origin (a generator vertex), w: depth
@@ -26,11 +26,6 @@ struct CausticVolume {
     light_distance: vec4<f32>,  // the light's path to each vertex (in y = 0), w: 1/range² or 0
     hit_planes: array<vec4<f32>, 3>, // per vertex ray: the first surface it meets, n·p + w < 0 behind
     corners: array<vec4<f32>, 8>,
-}
-
-struct Medium {
-    local_from_world: mat4x4<f32>,
-    coefficients: vec4<f32>,    // σs, σa, g
 }
 
 struct VolumeSettings {
@@ -203,25 +198,6 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
     let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
     return exposed(v.color.rgb * e, view.exposure);
-}
-
-// Where the segment o + t·d, t ∈ [0, len], is inside a medium's unit box.
-fn clip_medium(m: Medium, o: vec3<f32>, d: vec3<f32>, len: f32) -> vec2<f32> {
-    let lo = (m.local_from_world * vec4(o, 1.0)).xyz;
-    let ld = (m.local_from_world * vec4(d, 0.0)).xyz;
-    var t = vec2(0.0, len);
-    for (var axis = 0; axis < 3; axis++) {
-        if abs(ld[axis]) < 1e-12 {
-            if abs(lo[axis]) > 0.5 {
-                return vec2(1.0, 0.0);
-            }
-            continue;
-        }
-        let a = (-0.5 - lo[axis]) / ld[axis];
-        let b = (0.5 - lo[axis]) / ld[axis];
-        t = vec2(max(t.x, min(a, b)), min(t.y, max(a, b)));
-    }
-    return t;
 }
 
 // Real roots of a s² + b s + c (NaN-free: a missing root is returned as 2, outside [−1, 1]).
