@@ -24,7 +24,7 @@ use bevy::render::render_resource::AsBindGroup;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::irradiance::CausticReceiverMaterialPlugin;
 use bevy_caustics::reference::bevy_mesh;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticsSettings, ParticipatingMedium};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium, PoolRipples};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use support::{render, render_without_caustics};
@@ -35,15 +35,26 @@ const VIEW: f32 = 2.0;
 /// The point light: 20 cd at 2 m, range 20 m.
 const LIGHT: Vec3 = Vec3::new(0.1, 2.0, -0.05);
 
-/// The floor (a receiver, `material`), the IOR-1 plate over it and the point light.
-fn spawn_scene(world: &mut World, material: impl Bundle) {
+/// The floor (a receiver, `material`), the IOR-1 plate over it (its caustics drawn
+/// by `technique`) and the point light; for the convolution, a still 2 m pool of water
+/// over the floor under a sun instead.
+fn spawn_scene(world: &mut World, material: impl Bundle, technique: CausticTechnique) {
     world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
     world.insert_resource(ClearColor(Color::BLACK));
     let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(4.0)).mesh());
     world.spawn((Mesh3d(floor), material, CausticReceiver));
+    if technique == CausticTechnique::Convolution {
+        let pool = PoolRipples { columns: 48, rows: 48, cell_size: 2.0 / 48.0, depth: 0.5, kernel_radius: 4, ..default() };
+        let water = CausticGenerator { technique, ..CausticGenerator::refractive(1.333) };
+        world.spawn((pool, water, RenderLayers::layer(1), Transform::from_xyz(0.1, 0.5, -0.05)));
+        let sun = DirectionalLight { illuminance: 10.0, shadow_maps_enabled: false, ..default() };
+        world.spawn((sun, Transform::default().looking_to(Vec3::new(0.3, -1.0, -0.2), Vec3::Y)));
+        return;
+    }
     let plate = TriMesh::heightfield(97, 3.0, |_, _| 1.0, |_, _| caustics_core::glam::Vec3::Y).unwrap();
     let plate = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&plate));
-    world.spawn((Mesh3d(plate), CausticGenerator::refractive(1.0), RenderLayers::layer(1), NotShadowCaster, Transform::from_xyz(0.013, 0.0, 0.007)));
+    let generator = CausticGenerator { technique, ..CausticGenerator::refractive(1.0) };
+    world.spawn((Mesh3d(plate), generator, RenderLayers::layer(1), NotShadowCaster, Transform::from_xyz(0.013, 0.0, 0.007)));
     let light = PointLight { intensity: 4.0 * std::f32::consts::PI * 20.0, range: 20.0, shadow_maps_enabled: false, ..default() };
     world.spawn((light, Transform::from_translation(LIGHT)));
 }
@@ -62,13 +73,16 @@ fn plain_camera(world: &mut World, target: RenderTarget, centre: Vec3) -> Entity
     camera
 }
 
-/// Renders until the caustic volumes for the current scene are in, then `frames` more.
+/// Renders until the caustics for the current scene are in (the volumes are built off
+/// the frame), then `frames` more.
 fn render_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
     use bevy_caustics::warped_volumes::CausticVolumes;
     let built = renderer.world_mut().resource::<CausticVolumes>().generation;
     for _ in 0..100 {
         render(renderer, 1);
-        if renderer.world_mut().resource::<CausticVolumes>().generation > built {
+        let generation = renderer.world_mut().resource::<CausticVolumes>().generation;
+        let report = renderer.pass_report();
+        if generation > built || report.views("caustic map projection") + report.views("pool floor") > 0 {
             break;
         }
     }
@@ -108,6 +122,18 @@ fn difference(a: &[f32], b: &[f32]) -> Vec<f32> {
 
 #[test]
 fn split_screen_cameras_each_get_a_lone_cameras_caustics_and_only_when_they_opt_in() {
+    // Volumes draw prisms into the buffer; the maps and the pool draw fullscreen
+    // projections. The plate's against Bevy's direct light too (measured 2.7·10⁻³ for
+    // the volumes, 1.1·10⁻³ for the maps: 5·10⁻³ holds both with a margin for
+    // adapters that round differently); the pool's against a lone camera only.
+    split_screen(CausticTechnique::WarpedVolumes, Some(5e-3));
+    split_screen(CausticTechnique::HierarchicalMaps, Some(5e-3));
+    split_screen(CausticTechnique::Convolution, None);
+}
+
+/// The split-screen test with the caustics drawn by `technique`, which match Bevy's
+/// direct light to `direct_tolerance` (relative L2) where the scene has that answer.
+fn split_screen(technique: CausticTechnique, direct_tolerance: Option<f32>) {
     let centres = [Vec3::new(-0.3, 0.0, 0.1), Vec3::new(0.35, 0.0, -0.2)];
 
     // The lone cameras: one full target each.
@@ -117,13 +143,16 @@ fn split_screen_cameras_each_get_a_lone_cameras_caustics_and_only_when_they_opt_
             let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
             let target = renderer.render_target();
             let material = matte(renderer.world_mut());
-            spawn_scene(renderer.world_mut(), material);
+            spawn_scene(renderer.world_mut(), material, technique);
             renderer.world_mut().spawn(support::top_down_camera(target, VIEW, SIZE, centre));
             let direct = view_pixels(&render_without_caustics(&mut renderer, 3), 0);
             let caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &direct);
-            let (error, pixels) = against_direct(&caustic, &direct, centre, 1.0);
-            eprintln!("lone camera over {centre}: caustic against Bevy's direct light, relative L2 {error:.2e} on {pixels} pixels");
-            assert!(pixels > 1000 && error < 5e-3, "lone camera over {centre}: relative L2 {error} on {pixels} pixels");
+            assert!(caustic.iter().sum::<f32>() > 0.0, "{technique:?}: no caustics for the lone camera over {centre}");
+            if let Some(tolerance) = direct_tolerance {
+                let (error, pixels) = against_direct(&caustic, &direct, centre, 1.0);
+                eprintln!("{technique:?}, lone camera over {centre}: caustic against Bevy's direct light, relative L2 {error:.2e} on {pixels} pixels");
+                assert!(pixels > 1000 && error < tolerance, "{technique:?}, lone camera over {centre}: relative L2 {error} on {pixels} pixels");
+            }
             caustic
         })
         .collect();
@@ -132,7 +161,7 @@ fn split_screen_cameras_each_get_a_lone_cameras_caustics_and_only_when_they_opt_
     let mut renderer = HeadlessRenderer::new(2 * SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let material = matte(renderer.world_mut());
-    spawn_scene(renderer.world_mut(), material);
+    spawn_scene(renderer.world_mut(), material, technique);
     let viewport = |x: u32| Some(Viewport { physical_position: UVec2::new(x, 0), physical_size: UVec2::splat(SIZE), ..default() });
     let world = renderer.world_mut();
     let left = world.spawn(support::top_down_camera(target.clone(), VIEW, SIZE, centres[0])).id();
@@ -146,10 +175,11 @@ fn split_screen_cameras_each_get_a_lone_cameras_caustics_and_only_when_they_opt_
     let right_caustic = difference(&view_pixels(&with, SIZE), &view_pixels(&without, SIZE));
     let vs_lone = relative_l2(&left_caustic, &lone[0]);
     let (vs_bevy, _) = against_direct(&left_caustic, &view_pixels(&without, 0), centres[0], 1.0);
-    eprintln!("left half: against the lone camera {vs_lone:.2e}, against Bevy's direct light {vs_bevy:.2e}");
-    assert!(vs_lone < 2e-3 && vs_bevy < 5e-3, "left half: {vs_lone} against the lone camera, {vs_bevy} against Bevy");
+    eprintln!("{technique:?}, left half: against the lone camera {vs_lone:.2e}, against Bevy's direct light {vs_bevy:.2e}");
+    assert!(vs_lone < 2e-3, "{technique:?}, left half: {vs_lone} against the lone camera");
+    assert!(direct_tolerance.is_none_or(|t| vs_bevy < t), "{technique:?}, left half: {vs_bevy} against Bevy");
     let stray = right_caustic.iter().fold(0f32, |m, c| m.max(c.abs()));
-    assert!(stray < 1e-4, "the right camera did not opt in, yet shows caustics up to {stray}");
+    assert!(stray < 1e-4, "{technique:?}: the right camera did not opt in, yet shows caustics up to {stray}");
     let entity = renderer.world_mut().entity(right);
     assert!(!entity.contains::<DepthPrepass>() && !entity.contains::<NormalPrepass>(), "the plugin added prepasses to a camera that did not opt in");
 
@@ -161,9 +191,10 @@ fn split_screen_cameras_each_get_a_lone_cameras_caustics_and_only_when_they_opt_
     let halved: Vec<f32> = lone[1].iter().map(|c| 0.5 * c).collect();
     let vs_lone = relative_l2(&right_caustic, &halved);
     let (vs_bevy, _) = against_direct(&right_caustic, &view_pixels(&without, SIZE), centres[1], 0.5);
-    eprintln!("right half at intensity ½: against the lone camera {vs_lone:.2e}, against half Bevy's direct light {vs_bevy:.2e}");
-    assert!(vs_lone < 2e-3 && vs_bevy < 5e-3, "right half: {vs_lone} against the lone camera, {vs_bevy} against Bevy");
-    assert!(relative_l2(&left_caustic, &lone[0]) < 2e-3, "the left half changed when the right one opted in");
+    eprintln!("{technique:?}, right half at intensity ½: against the lone camera {vs_lone:.2e}, against half Bevy's direct light {vs_bevy:.2e}");
+    assert!(vs_lone < 2e-3, "{technique:?}, right half: {vs_lone} against the lone camera");
+    assert!(direct_tolerance.is_none_or(|t| vs_bevy < t), "{technique:?}, right half: {vs_bevy} against half Bevy's direct light");
+    assert!(relative_l2(&left_caustic, &lone[0]) < 2e-3, "{technique:?}: the left half changed when the right one opted in");
 }
 
 #[derive(Asset, AsBindGroup, Reflect, Debug, Clone, Default)]
@@ -183,7 +214,7 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     let mut renderer = HeadlessRenderer::with_plugins(SIZE, SIZE, plugins).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let material = matte(renderer.world_mut());
-    spawn_scene(renderer.world_mut(), material);
+    spawn_scene(renderer.world_mut(), material, CausticTechnique::Auto);
     let camera = renderer.world_mut().spawn(support::top_down_camera(target, VIEW, SIZE, centre)).id();
     let direct = view_pixels(&render_without_caustics(&mut renderer, 3), 0);
     let caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &direct);

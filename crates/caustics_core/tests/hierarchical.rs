@@ -141,6 +141,32 @@ fn flat_water_transmits_exactly_the_fresnel_fraction() {
     }
 }
 
+/// A plate of IOR 1 bends nothing: under a point light (and a spot) its photons keep to
+/// their own view rays, and the floor gets exactly the light's direct irradiance
+/// `I cos θ / d²`. A photon along its view ray moves across the map by rounding only;
+/// the march once stepped it sideways on that rounding and lost a third of them.
+#[test]
+fn a_plate_of_ior_one_under_a_point_light_passes_its_direct_light() {
+    let position = Vec3::new(0.1, 2.0, -0.05);
+    let plate = TriMesh::heightfield(97, 3.0, |_, _| 1.0, |_, _| Vec3::Y).unwrap();
+    let point = Light::white(LightKind::Point { position, intensity: 20.0 });
+    let spot = Light::white(LightKind::Spot { position, direction: Vec3::NEG_Y, intensity: 20.0, inner_angle: 0.6, outer_angle: 0.7 });
+    for light in [point, spot] {
+        let scene = Scene { lights: vec![light], generators: vec![glass(plate.clone(), 1.0)], receivers: vec![floor(4.0, 0.0)] };
+        let views = scene_caustics(&scene, &settings(512, 512, CLUSTERED, VARIABLE));
+        // Inside the spot's inner cone (0.6 rad): within 0.5 m of the point under it.
+        let (maps, direct): (Vec<f32>, Vec<f32>) = (0..400)
+            .map(|i| Vec3::new(-0.4 + 0.04 * (i % 20) as f32, 0.0, -0.45 + 0.04 * (i / 20) as f32))
+            .map(|p| {
+                let to_light = position - p;
+                (caustics_core::hierarchical::irradiance_at(&views, p, Vec3::Y), 20.0 * to_light.normalize().y / to_light.length_squared())
+            })
+            .unzip();
+        let error = caustics_core::metrics::relative_l2(&maps, &direct);
+        assert!(error < 2e-3, "{:?}: relative L2 {error} against the direct light", light.kind);
+    }
+}
+
 #[test]
 fn a_glass_slab_transmits_the_fresnel_fractions_of_both_faces() {
     let l = Vec3::new(0.25, -1.0, 0.1).normalize();

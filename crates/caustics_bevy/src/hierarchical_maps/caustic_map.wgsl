@@ -160,10 +160,11 @@ fn crossing(o: vec3<f32>, v: vec3<f32>, axis: u32, boundary: f32) -> f32 {
         num = c * o.z - oc;
         den = vc - c * v.z;
     }
-    if abs(den) < 1.0e-20 {
+    let d = num / den;
+    if abs(den) < 1.0e-20 || d < 0.0 {
         return 3.4028235e38;
     }
-    return num / den;
+    return d;
 }
 
 fn direction_step(s: f32) -> i32 {

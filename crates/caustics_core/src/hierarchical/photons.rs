@@ -325,7 +325,11 @@ pub fn texel_of(uv: Vec2, resolution: u32) -> Option<(u32, u32)> {
 
 /// The image-plane line a map coordinate boundary lies on, and the parameter at which
 /// the ray `o + d v` (view coordinates) crosses the column boundary `u` (`axis = 0`)
-/// or the row boundary `v` (`axis = 1`); infinity where it runs parallel to it.
+/// or the row boundary `v` (`axis = 1`); infinity where it runs parallel to it or
+/// crossed it behind its origin. The second matters in perspective for a ray along
+/// its own view ray (a photon that did not bend): its motion across the map is zero
+/// up to rounding, whose sign picks a boundary the ray met only at the light, at
+/// `d < 0`; taken as "now", the march would walk the row sideways off the map.
 #[inline]
 fn crossing(view: &LightView, o: Vec3, v: Vec3, axis: usize, boundary: f32) -> f32 {
     let half = view.half_extent();
@@ -335,7 +339,8 @@ fn crossing(view: &LightView, o: Vec3, v: Vec3, axis: usize, boundary: f32) -> f
         Projection::Orthographic { .. } => (c - oc, vc),
         Projection::Perspective { .. } => (c * o.z - oc, vc - c * v.z),
     };
-    if den.abs() < 1e-20 { f32::INFINITY } else { num / den }
+    let d = num / den;
+    if den.abs() < 1e-20 || d < 0.0 { f32::INFINITY } else { d }
 }
 
 /// The first point along `origin + d·dir` (d ≥ 0) that lies behind the receiver
