@@ -272,7 +272,11 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let flux = |v: &ViewCaustics| v.photons.photons.iter().map(|p| p.flux as f64).sum::<f64>();
     let faded = flux(&twin) / flux(&open);
     assert!((0.75..0.95).contains(&faded), "the spot's range fades the ball's light to {faded}");
-    assert!(error < 0.05, "floor caustics against the CPU twin: relative L2 {error}");
+    // Measured 8.9·10⁻⁴ on lavapipe: the buffer's half floats (5·10⁻⁴) and a few
+    // photons a texel apart across a half-texel rounding of their landing (above).
+    // 5·10⁻³ leaves five times that for other adapters' rounding; a missing or
+    // misplaced splat costs more.
+    assert!(error < 5e-3, "floor caustics against the CPU twin: relative L2 {error}");
     let flat = caustic_irradiance(&flat_image, &without);
     assert!(flat.iter().all(|e| e.is_finite()));
     // Several lights add up: a second, dimmer spot from the other side, alone and then
@@ -333,7 +337,8 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let coarse = caustic_irradiance(&render(&mut renderer, 3), &without);
     let (error, peak, _) = floor_against_twin(&mut renderer, &ball_scene, &coarse);
     eprintln!("16² caustic map: GPU vs CPU twin relative L2 {error:.2e} (peak {peak:.1} lux)");
-    assert!(peak > 1.0 && error < 0.05, "16² map: relative L2 {error}, peak {peak}");
+    // Measured 1.0·10⁻³ and 6.8·10⁻⁴ (below); the same bound as the floor's, above.
+    assert!(peak > 1.0 && error < 5e-3, "16² map: relative L2 {error}, peak {peak}");
     set_settings(&mut renderer, HierarchicalMapsSettings::FULL);
     // A refractor filling the whole light view: a wide slab of water under a narrow spot.
     let slab = TriMesh::cuboid(V3::new(-3.0, 0.8, -3.0), V3::new(3.0, 1.2, 3.0));
@@ -353,7 +358,7 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let fine = caustic_irradiance(&render(&mut renderer, 3), &without);
     let (error, peak, _) = floor_against_twin(&mut renderer, &ball_scene, &fine);
     eprintln!("4096² photons: GPU vs CPU twin relative L2 {error:.2e} (peak {peak:.1} lux)");
-    assert!(peak > 10.0 && error < 0.05, "4096² photons: relative L2 {error}, peak {peak}");
+    assert!(peak > 10.0 && error < 5e-3, "4096² photons: relative L2 {error}, peak {peak}");
     let bytes = gpu(&mut renderer).bytes();
     eprintln!("4096² photons into a 1024² map: {:.0} MB of GPU memory", bytes as f64 / 1e6);
     assert!(bytes < 1_500_000_000, "{bytes} bytes");

@@ -15,12 +15,12 @@
 //!    the receiver's cosine from the normal prepass, to the view's caustic irradiance
 //!    buffer with additive blending; the composite then shows it on receivers;
 //! 2. **volumetric pass** (after the main pass), only for views that see a
-//!    [`crate::ParticipatingMedium`]: the same prisms, with the eye ray's exact path
-//!    through each warped volume and the single-scattering term of §3.5 added to the
-//!    view's HDR image.
+//!    [`crate::ParticipatingMedium`] and show shafts (`CausticsSettings::shafts`): the
+//!    same prisms, with the eye ray's exact path through each warped volume and the
+//!    single-scattering term of §3.5 added to the view's HDR image.
 //!
-//! Caustics views get Bevy's `DepthPrepass` and `NormalPrepass` added for them. The
-//! WGSL in `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU test
+//! Both read Bevy's `DepthPrepass` and `NormalPrepass`, which
+//! [`crate::CausticsSettings`] requires on the camera. The WGSL in `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU test
 //! holds the two together.
 
 mod build;
