@@ -63,7 +63,7 @@ fn auto_picks_by_what_the_generator_is() {
     app.update();
     assert_eq!(seen(&app, glass), "closed refractor → hierarchical maps");
     assert_eq!(seen(&app, water), "open refracting surface → warped volumes");
-    assert_eq!(seen(&app, mirror), "mirror → hierarchical maps");
+    assert_eq!(seen(&app, mirror), "mirror → warped volumes");
     assert_eq!(seen(&app, hazy_mirror), "mirror in a participating medium → warped volumes");
 
     // A hole in the ball (its first band of triangles gone) makes it an open surface.

@@ -11,9 +11,11 @@
 //! - an **open refracting surface** (water, an ocean, a pool) bends light once, where
 //!   the volumes are exact per triangle and resolution-free over any extent, and they
 //!   alone draw the shafts in a participating medium (§3.5);
-//! - a **mirror** reflects once, which both model; the maps also see which receiver
-//!   points the generator itself shadows (their receiver map), so they go first,
-//!   except inside a participating medium, whose shafts only the volumes draw.
+//! - a **mirror** reflects once, which both model, and both keep the light off the
+//!   receivers the generator itself shadows (the maps' receiver map, the volumes' hit
+//!   planes); read at 8² points a cell the two tie on the ring (README), so the
+//!   mirror stays with the volumes, the default the table started from, which also
+//!   draw its beams in a participating medium.
 
 use crate::mesh::TriMesh;
 use crate::params::SpecularInteraction;
@@ -97,7 +99,9 @@ impl GeneratorShape {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct GeneratorFacts {
     pub shape: GeneratorShape,
-    /// Whether a participating medium overlaps the generator's bounds.
+    /// Whether a participating medium overlaps the generator's bounds: part of the
+    /// reason given (only the volumes draw its shafts), no bearing on the choice since
+    /// every generator the volumes can draw already prefers them.
     pub in_medium: bool,
     /// Which sides of its faces take part (glTF's `doubleSided`); no bearing on the
     /// choice, kept for the techniques.
@@ -109,12 +113,10 @@ impl GeneratorFacts {
     /// one is unavailable. Every technique that applies to the shape is listed.
     pub fn preferences(&self) -> &'static [Technique] {
         use Technique::*;
-        match (self.shape, self.in_medium) {
-            (GeneratorShape::ClosedRefractor, _) => &[HierarchicalMaps, WarpedVolumes],
-            (GeneratorShape::OpenRefractor, _) => &[WarpedVolumes, HierarchicalMaps],
-            (GeneratorShape::Pool, _) => &[WarpedVolumes, HierarchicalMaps, Convolution],
-            (GeneratorShape::Mirror, false) => &[HierarchicalMaps, WarpedVolumes],
-            (GeneratorShape::Mirror, true) => &[WarpedVolumes, HierarchicalMaps],
+        match self.shape {
+            GeneratorShape::ClosedRefractor => &[HierarchicalMaps, WarpedVolumes],
+            GeneratorShape::OpenRefractor | GeneratorShape::Mirror => &[WarpedVolumes, HierarchicalMaps],
+            GeneratorShape::Pool => &[WarpedVolumes, HierarchicalMaps, Convolution],
         }
     }
 }
@@ -217,7 +219,7 @@ mod tests {
         assert_eq!(pick(GeneratorShape::ClosedRefractor, false).technique, Technique::HierarchicalMaps);
         assert_eq!(pick(GeneratorShape::OpenRefractor, false).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::Pool, false).technique, Technique::WarpedVolumes);
-        assert_eq!(pick(GeneratorShape::Mirror, false).technique, Technique::HierarchicalMaps);
+        assert_eq!(pick(GeneratorShape::Mirror, false).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::Mirror, true).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::ClosedRefractor, false).to_string(), "closed refractor → hierarchical maps");
         assert_eq!(pick(GeneratorShape::Mirror, true).to_string(), "mirror in a participating medium → warped volumes");
