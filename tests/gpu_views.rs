@@ -73,8 +73,9 @@ fn plain_camera(world: &mut World, target: RenderTarget, centre: Vec3) -> Entity
     camera
 }
 
-/// Renders until the caustics for the current scene are in (the volumes are built off
-/// the frame), then `frames` more.
+/// Renders until the caustics for the current scene are in, then `frames` more: the
+/// volumes are built off the frame, so after `render_without_caustics` (which takes
+/// the generators' technique away) they come back some frames later.
 fn render_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
     use bevy_caustics::warped_volumes::CausticVolumes;
     let built = renderer.world_mut().resource::<CausticVolumes>().generation;
@@ -226,7 +227,7 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     let density = 0.15;
     renderer.world_mut().entity_mut(camera).insert(DistanceFog { falloff: FogFalloff::Exponential { density }, ..default() });
     let fogged_direct = view_pixels(&render_without_caustics(&mut renderer, 2), 0);
-    let fogged_caustic = difference(&view_pixels(&render(&mut renderer, 2), 0), &fogged_direct);
+    let fogged_caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &fogged_direct);
     let eye = centre + 5.0 * Vec3::Y;
     let expected: Vec<f32> = (0..SIZE * SIZE)
         .map(|i| caustic[i as usize] * (-density * eye.distance(floor_point(centre, i % SIZE, i / SIZE))).exp())
@@ -258,7 +259,7 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     let floor = world.query_filtered::<Entity, With<CausticReceiver>>().single(world).unwrap();
     world.entity_mut(floor).remove::<MeshMaterial3d<StandardMaterial>>().insert(MeshMaterial3d(tinted));
     let tinted_direct = view_pixels(&render_without_caustics(&mut renderer, 3), 0);
-    let tinted_caustic = difference(&view_pixels(&render(&mut renderer, 2), 0), &tinted_direct);
+    let tinted_caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &tinted_direct);
     let (error, pixels) = against_direct(&tinted_caustic, &tinted_direct, centre, 1.0);
     let (bevy_half, _) = against_direct(&tinted_direct, &direct, centre, 0.5);
     eprintln!("ExtendedMaterial of base ½: caustic against Bevy's direct light {error:.2e} on {pixels} pixels (Bevy's own: {bevy_half:.2e} from half the white floor's)");

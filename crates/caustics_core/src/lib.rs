@@ -8,6 +8,7 @@ pub mod bvh;
 pub mod convolution;
 pub mod estimate;
 pub mod hierarchical;
+pub mod illumination_textures;
 pub mod mesh;
 pub mod metrics;
 pub mod ocean;
