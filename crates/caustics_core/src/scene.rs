@@ -104,6 +104,21 @@ impl Light {
         }
     }
 
+    /// Light arriving at `p`: its travel direction and the irradiance on a plane
+    /// perpendicular to it (a point or spot light's `I/d²` with the spot's cone; no
+    /// range window, which depends on the whole path).
+    pub fn incident(&self, p: Vec3) -> (Vec3, f32) {
+        match self.kind {
+            LightKind::Directional { direction, irradiance } => (direction.normalize(), irradiance),
+            LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
+                let d = p - position;
+                let r2 = d.length_squared().max(1e-12);
+                let dir = d / r2.sqrt();
+                (dir, intensity / r2 * self.cone_attenuation(dir))
+            }
+        }
+    }
+
     /// The light's position; `None` for a directional light.
     pub fn position(&self) -> Option<Vec3> {
         match self.kind {

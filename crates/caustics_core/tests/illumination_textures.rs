@@ -4,7 +4,10 @@
 //! internal reflection counted, rigid motions reusing one table, the cache, and the
 //! refusals.
 
-use caustics_core::illumination_textures::{CacheOutcome, DirectionGrid, LightTransportTable, TransportBuild, TransportError};
+use caustics_core::illumination_textures::{
+    CacheOutcome, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild, TransportError,
+};
+use caustics_core::scene::{Light, LightKind, Receiver};
 use caustics_core::mesh::TriMesh;
 use caustics_core::optics::{fresnel_transmittance, refract};
 use glam::{Affine3A, Quat, Vec3};
@@ -212,4 +215,31 @@ fn open_meshes_impossible_iors_and_oversized_tables_are_refused_or_lowered() {
     let small = DirectionGrid::fitting(32, ball.positions().len(), 20 << 20).0;
     let table = LightTransportTable::build(&ball, TransportBuild { grid: small, ..build }, &|_, _| {}).unwrap();
     assert!(table.bytes() <= 20 << 20);
+}
+
+#[test]
+fn illumination_textures_under_a_slab_hold_e_cos_theta_t1_t2() {
+    // A 6 m glass slab 0.4 m thick, 0.5 m over a 2 m floor, under a tilted sun: the
+    // floor gets E T₁T₂ cos θ everywhere (the beam leaves parallel to the sun's).
+    let slab = tiled_box(Vec3::new(3.0, 0.2, 3.0), 0.25);
+    let ior = 1.5;
+    let table = table(&slab, ior, 9);
+    let world_from_object = Affine3A::from_translation(Vec3::Y * 0.7);
+    let sun_direction = Vec3::new(0.3, -1.0, 0.2).normalize();
+    let sun = Light::white(LightKind::Directional { direction: sun_direction, irradiance: 2.0 });
+    let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z, Vec3::X), albedo: Vec3::ONE };
+    let inside = refract(sun_direction, Vec3::Y, 1.0 / ior).direction().unwrap();
+    let expected = 2.0 * fresnel_transmittance(sun_direction.y, 1.0 / ior) * fresnel_transmittance(inside.y, ior) * -sun_direction.y;
+    for planes in [1, 4] {
+        let settings = IlluminationSettings { planes, texture_size: 128 };
+        let textures = IlluminationTextures::compute(&table, &slab, &world_from_object, &sun, std::slice::from_ref(&floor), &settings).unwrap();
+        assert!(textures.axis.abs_diff_eq(sun_direction, 1e-4), "the planes face the beam: {}", textures.axis);
+        let samples: Vec<f32> = (0..400)
+            .map(|i| Vec3::new(-0.9 + 0.09 * (i % 20) as f32 + 0.03, 0.0, -0.9 + 0.09 * (i / 20) as f32 + 0.02))
+            .map(|p| textures.irradiance_at(p))
+            .collect();
+        let worst = samples.iter().map(|e| (e / expected - 1.0).abs()).fold(0.0, f32::max);
+        eprintln!("slab, {planes} planes: floor irradiance within {worst:.2e} of E T₁T₂ cos θ = {expected:.4}");
+        assert!(worst < 1e-2, "{planes} planes: off by {worst}");
+    }
 }

@@ -3,11 +3,14 @@
 //! object, through a light transport table precomputed once per mesh (§3, after
 //! Iwasaki et al. 2004 [12]), onto virtual planes around the receivers (§4).
 //!
-//! This stop brings the table ([`LightTransportTable`]); the virtual planes, their
-//! illumination textures and the lookup at receiver points follow (issue 11).
+//! In so far: the table ([`LightTransportTable`]) and the CPU twin of the virtual
+//! planes, their illumination textures and the lookup at receiver points
+//! ([`IlluminationTextures`]); the GPU pass and the Bevy side follow (issue 11).
 
+mod planes;
 mod transport;
 
+pub use planes::{IlluminationPlane, IlluminationSettings, IlluminationTextures, MAX_MAGNIFICATION};
 pub use transport::{
     CacheOutcome, DirectionGrid, LightTransportTable, TRANSPORT_CACHE_VERSION, TransportBuild, TransportError, TransportStats,
     Transported,

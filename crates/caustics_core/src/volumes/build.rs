@@ -5,7 +5,7 @@ use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
 use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
 use crate::params::SpecularInteraction;
-use crate::scene::{Light, LightKind, Scene, Sides};
+use crate::scene::{Light, Scene, Sides};
 use glam::{DVec3, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -90,19 +90,6 @@ impl std::ops::Add for BuildStats {
 /// Smallest cosine between a shared slicing axis and a triangle's rays and normal.
 const SHARED_AXIS_MIN_COS: f32 = 0.25;
 
-/// Light arriving at a vertex: travel direction and irradiance perpendicular to it.
-fn incident(light: &Light, p: Vec3) -> (Vec3, f32) {
-    match light.kind {
-        LightKind::Directional { direction, irradiance } => (direction.normalize(), irradiance),
-        LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
-            let d = p - position;
-            let r2 = d.length_squared().max(1e-12);
-            let dir = d / r2.sqrt();
-            (dir, intensity / r2 * light.cone_attenuation(dir))
-        }
-    }
-}
-
 /// Where a vertex ray first meets a surface of `occluders`: the point and the
 /// surface's geometric normal.
 fn first_hit(occluders: &SceneBvh, p: Vec3, ray: &VertexRay) -> Option<(Vec3, Vec3)> {
@@ -131,7 +118,7 @@ impl VertexRay {
 }
 
 fn vertex_ray(light: &Light, interaction: &SpecularInteraction, ior: Option<f32>, p: Vec3, n: Vec3) -> VertexRay {
-    let (l, irradiance) = incident(light, p);
+    let (l, irradiance) = light.incident(p);
     match interaction {
         SpecularInteraction::Reflect => {
             VertexRay::Ray { direction: reflect(l, n).normalize_or(l), fresnel: 1.0, irradiance, incident: l }
