@@ -193,7 +193,7 @@ impl Beam {
     }
 
     /// Draws the volume's crossing with `plane` into its texture: `flux / (S₀ cos δ)`
-    /// times `cos γ` at each covered texel's receiver.
+    /// times `cos γ` at each texel's receiver, times the share of the texel covered.
     fn draw(&self, plane: &mut IlluminationPlane, (u, v, axis): (Vec3, Vec3, Vec3), (corner, texel, size): (Vec2, Vec2, u32), surface: &[Option<(f32, Vec3)>]) {
         let mut q = [Vec2::ZERO; 3];
         for (q, (exit, direction)) in q.iter_mut().zip(self.exits.iter().zip(&self.directions)) {
@@ -214,19 +214,47 @@ impl Beam {
         if area == 0.0 || lo.x >= hi.x || lo.y >= hi.y {
             return;
         }
-        let edge = |a: Vec2, b: Vec2, p: Vec2| (b - a).perp_dot(p - a) * area.signum();
         for y in lo.y as u32..hi.y as u32 {
             for x in lo.x as u32..hi.x as u32 {
-                let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                if edge(q[0], q[1], c) < 0.0 || edge(q[1], q[2], c) < 0.0 || edge(q[2], q[0], c) < 0.0 {
+                let covered = covered_area(q, Vec2::new(x as f32, y as f32));
+                if covered <= 0.0 {
                     continue;
                 }
                 let index = (y * size + x) as usize;
                 let cos_gamma = surface[index].map_or(1.0, |(_, n)| (-r.dot(n)).max(0.0));
-                plane.texture[index] += intensity * cos_gamma;
+                plane.texture[index] += intensity * cos_gamma * covered;
             }
         }
     }
+}
+
+/// The area of triangle `t` inside the unit square at `corner` (texel units): the
+/// triangle clipped to the square's four sides (Sutherland–Hodgman), by the shoelace
+/// formula. Drawing with it box-filters each volume's crossing into the texels it
+/// covers, so a triangle smaller than a texel deposits its share instead of all or
+/// nothing at the texel's centre.
+fn covered_area(t: [Vec2; 3], corner: Vec2) -> f32 {
+    let mut polygon: Vec<Vec2> = t.to_vec();
+    let sides = [(0, corner.x, 1.0), (0, corner.x + 1.0, -1.0), (1, corner.y, 1.0), (1, corner.y + 1.0, -1.0)];
+    for (axis, at, keep) in sides {
+        let inside = |p: Vec2| (p[axis] - at) * keep >= 0.0;
+        let mut clipped = Vec::with_capacity(polygon.len() + 2);
+        for (i, &a) in polygon.iter().enumerate() {
+            let b = polygon[(i + 1) % polygon.len()];
+            if inside(a) {
+                clipped.push(a);
+            }
+            if inside(a) != inside(b) {
+                clipped.push(a + (b - a) * ((at - a[axis]) / (b[axis] - a[axis])));
+            }
+        }
+        polygon = clipped;
+        if polygon.len() < 3 {
+            return 0.0;
+        }
+    }
+    let twice: f32 = polygon.iter().zip(polygon.iter().cycle().skip(1)).map(|(a, b)| a.perp_dot(*b)).sum();
+    0.5 * twice.abs()
 }
 
 /// The object's triangles facing `light` whose three vertices all pass light, as beams.
