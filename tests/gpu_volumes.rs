@@ -13,7 +13,7 @@ use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::reference::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, ParticipatingMedium};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
@@ -170,6 +170,21 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     // Order of magnitude: σs · 0.8 m · E · p(θ ≈ 105°, g = ½) ≈ 0.3 · 0.8 · 10 · 0.03 ≈ 0.07.
     assert!(scattered > 0.01, "too little in-scattering to compare ({scattered})");
     assert!(error < 0.01, "GPU and CPU in-scattering differ: relative L2 {error}");
+    // The camera's CausticsSettings: shafts at half intensity are half the twin's;
+    // shafts off, no volumetric pass.
+    let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
+    renderer.world_mut().entity_mut(camera).insert(CausticsSettings { intensity: 0.5, ..default() });
+    let dimmed = render(&mut renderer, 3);
+    let half: Vec<f32> = cpu.iter().map(|e| 0.5 * e).collect();
+    let gpu: Vec<f32> = dimmed.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let error = relative_l2(&gpu, &half);
+    eprintln!("GPU vs half the CPU twin, in-scattering at intensity ½: relative L2 {error:.2e}");
+    assert!(error < 0.01, "shafts at intensity ½: relative L2 {error}");
+    renderer.world_mut().entity_mut(camera).insert(CausticsSettings { shafts: false, ..default() });
+    let unlit = render(&mut renderer, 3);
+    assert_eq!(renderer.pass_report().views("volumetric"), 0, "{:?}", renderer.pass_report());
+    assert!(unlit.pixels.iter().zip(&clear.pixels).all(|(a, b)| (a.x - b.x).abs() < 1e-6), "shafts off, yet light in the medium");
+    renderer.world_mut().entity_mut(camera).insert(CausticsSettings::default());
 
     // Stiff: a glass lens 1 m up under an overhead sun, whose normals refract the light
     // exactly onto one point (n ∝ η₁ i − η₂ t, Snell's law in vector form): on the
