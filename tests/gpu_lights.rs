@@ -16,11 +16,10 @@ use bevy::light::{GlobalAmbientLight, NotShadowCaster};
 use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::reference::bevy_mesh;
-use bevy_caustics::warped_volumes::CausticVolumes;
 use bevy_caustics::{CausticGenerator, CausticReceiver};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
-use support::{render, render_without_caustics};
+use support::{render_caustics, render_without_caustics};
 
 const SIZE: u32 = 64;
 const VIEW: f32 = 2.0;
@@ -80,14 +79,7 @@ fn an_ior_one_plate_casts_exactly_bevys_direct_light() {
         let position = renderer.world_mut().get::<Transform>(light).unwrap().translation;
         let direct = render_without_caustics(&mut renderer, 3);
         // The volumes are built off the frame: wait for this light's.
-        let built = renderer.world_mut().resource::<CausticVolumes>().generation;
-        for _ in 0..100 {
-            render(&mut renderer, 1);
-            if renderer.world_mut().resource::<CausticVolumes>().generation > built {
-                break;
-            }
-        }
-        let with = render(&mut renderer, 2);
+        let with = render_caustics(&mut renderer, 2);
         // Pixels whose light arrives within 25° of the floor's normal; for the spot, inside
         // its inner cone, and its falloff band apart, where the volumes take the cone at
         // the plate's vertices and the band's kinks fall inside triangles.

@@ -27,7 +27,7 @@ use bevy_caustics::reference::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium, PoolRipples};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
-use support::{render, render_without_caustics};
+use support::{render, render_caustics, render_without_caustics};
 
 /// Pixels per view side, and metres a view spans.
 const SIZE: u32 = 64;
@@ -71,23 +71,6 @@ fn plain_camera(world: &mut World, target: RenderTarget, centre: Vec3) -> Entity
     let camera = world.spawn(support::top_down_camera(target, VIEW, SIZE, centre)).id();
     world.entity_mut(camera).remove::<(CausticsSettings, DepthPrepass, NormalPrepass)>();
     camera
-}
-
-/// Renders until the caustics for the current scene are in, then `frames` more: the
-/// volumes are built off the frame, so after `render_without_caustics` (which takes
-/// the generators' technique away) they come back some frames later.
-fn render_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
-    use bevy_caustics::warped_volumes::CausticVolumes;
-    let built = renderer.world_mut().resource::<CausticVolumes>().generation;
-    for _ in 0..100 {
-        render(renderer, 1);
-        let generation = renderer.world_mut().resource::<CausticVolumes>().generation;
-        let report = renderer.pass_report();
-        if generation > built || report.views("caustic map projection") + report.views("pool floor") > 0 {
-            break;
-        }
-    }
-    render(renderer, frames)
 }
 
 /// The world point a view over `centre` sees at its pixel `(x, y)`.

@@ -70,3 +70,20 @@ pub fn render_without_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> 
 pub fn render(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
     renderer.render(frames).unwrap_or_else(|e| panic!("{e}"))
 }
+
+/// Renders until the caustics for the current scene are in, then `frames` more: the
+/// volumes are built off the frame, so after `render_without_caustics` (which takes
+/// the generators' technique away) they come back some frames later.
+pub fn render_caustics(renderer: &mut HeadlessRenderer, frames: u32) -> RenderedImage {
+    use bevy_caustics::warped_volumes::CausticVolumes;
+    let built = renderer.world_mut().resource::<CausticVolumes>().generation;
+    for _ in 0..100 {
+        render(renderer, 1);
+        let generation = renderer.world_mut().resource::<CausticVolumes>().generation;
+        let report = renderer.pass_report();
+        if generation > built || report.views("caustic map projection") + report.views("pool floor") > 0 {
+            break;
+        }
+    }
+    render(renderer, frames)
+}
