@@ -58,6 +58,102 @@ impl GridRegion {
     }
 }
 
+/// Where to read a technique so that it measures what [`IrradianceGrid::projected`]
+/// does: points on the receivers' surfaces with their normal and weight, binned into
+/// the cell they lie over. A cell's value is the sum of irradiance × weight over its
+/// points: the flux the technique lands there per area of the cell, as the photons'
+/// deposits give it. Each triangle is cut exactly at the cells' sides (its shadow on
+/// the region's plane clipped to each cell it touches, the pieces lifted back onto
+/// it), and each piece into about `per_cell` points a cell; a triangle within 3° of
+/// standing on edge to the plane is cut into a barycentric grid instead.
+pub fn surface_samples(region: &GridRegion, receivers: &[crate::scene::Receiver], per_cell: usize) -> Vec<Vec<(Vec3, Vec3, f32)>> {
+    let (nu, nv) = (region.nu as f32, region.nv as f32);
+    let (eu, ev) = (region.edge_u / region.edge_u.length_squared() * nu, region.edge_v / region.edge_v.length_squared() * nv);
+    let to_cells = |p: Vec3| glam::Vec2::new((p - region.origin).dot(eu), (p - region.origin).dot(ev));
+    let cell_area = region.cell_area();
+    let mut cells = vec![Vec::new(); region.nu * region.nv];
+    let mut push = |p: Vec3, normal: Vec3, weight: f32| {
+        if let Some(cell) = region.cell_of(p, f32::INFINITY) {
+            cells[cell].push((p, normal, weight));
+        }
+    };
+    for receiver in receivers {
+        for t in 0..receiver.mesh.triangles().len() {
+            let [a, b, c] = receiver.mesh.corners(t);
+            let cross = (b - a).cross(c - a);
+            let (area, normal) = (0.5 * cross.length(), cross.normalize_or_zero());
+            if area.is_nan() || area <= 0.0 {
+                continue;
+            }
+            let facing = normal.dot(region.normal()).abs();
+            let q = [a, b, c].map(to_cells);
+            let projected = 0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]);
+            if facing < 0.05 || projected == 0.0 {
+                let m = ((area / cell_area * per_cell as f32).sqrt().ceil() as usize).clamp(1, 4096);
+                for (p, share) in barycentric_grid([a, b, c], m) {
+                    push(p, normal, share * area / cell_area);
+                }
+                continue;
+            }
+            // A point of the cell plane back onto the triangle, by its barycentrics.
+            let lift = |x: glam::Vec2| {
+                let twice = 2.0 * projected;
+                a + (b - a) * ((x - q[0]).perp_dot(q[2] - q[0]) / twice) + (c - a) * ((q[1] - q[0]).perp_dot(x - q[0]) / twice)
+            };
+            let (lo, hi) = (q[0].min(q[1]).min(q[2]).floor().max(glam::Vec2::ZERO), q[0].max(q[1]).max(q[2]).ceil().min(glam::Vec2::new(nu, nv)));
+            for y in lo.y as i32..hi.y as i32 {
+                for x in lo.x as i32..hi.x as i32 {
+                    let polygon = clip_to_square(&q, glam::Vec2::new(x as f32, y as f32));
+                    for k in 1..polygon.len().saturating_sub(1) {
+                        let piece = [polygon[0], polygon[k], polygon[k + 1]];
+                        let fraction = 0.5 * (piece[1] - piece[0]).perp_dot(piece[2] - piece[0]).abs();
+                        let m = ((fraction * per_cell as f32).sqrt().ceil() as usize).clamp(1, 64);
+                        for (centre, share) in barycentric_grid(piece.map(|p| p.extend(0.0)), m) {
+                            push(lift(centre.truncate()), normal, share * fraction / facing);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    cells
+}
+
+/// The centres of the `m²` triangles of a triangle's barycentric grid, with the share
+/// of its area each stands for.
+fn barycentric_grid([a, b, c]: [Vec3; 3], m: usize) -> impl Iterator<Item = (Vec3, f32)> {
+    let share = 1.0 / (m * m) as f32;
+    let at = move |u: f32, v: f32| a + (b - a) * (u / m as f32) + (c - a) * (v / m as f32);
+    (0..m).flat_map(move |i| (0..m - i).map(move |j| (i as f32, j as f32))).flat_map(move |(i, j)| {
+        let inverted = ((i + j) as usize + 1 < m).then(|| at(i + 2.0 / 3.0, j + 2.0 / 3.0));
+        std::iter::once(at(i + 1.0 / 3.0, j + 1.0 / 3.0)).chain(inverted).map(move |p| (p, share))
+    })
+}
+
+/// Triangle `t` clipped to the unit square at `corner` (Sutherland–Hodgman); empty
+/// when they do not overlap.
+pub(crate) fn clip_to_square(t: &[glam::Vec2; 3], corner: glam::Vec2) -> Vec<glam::Vec2> {
+    let mut polygon: Vec<glam::Vec2> = t.to_vec();
+    for (axis, at, keep) in [(0, corner.x, 1.0), (0, corner.x + 1.0, -1.0), (1, corner.y, 1.0), (1, corner.y + 1.0, -1.0)] {
+        let inside = |p: glam::Vec2| (p[axis] - at) * keep >= 0.0;
+        let mut clipped = Vec::with_capacity(polygon.len() + 2);
+        for (i, &p) in polygon.iter().enumerate() {
+            let n = polygon[(i + 1) % polygon.len()];
+            if inside(p) {
+                clipped.push(p);
+            }
+            if inside(p) != inside(n) {
+                clipped.push(p + (n - p) * ((at - p[axis]) / (n[axis] - p[axis])));
+            }
+        }
+        polygon = clipped;
+        if polygon.len() < 3 {
+            return Vec::new();
+        }
+    }
+    polygon
+}
+
 /// Caustic irradiance binned on a [`GridRegion`]: deposited flux over cell area,
 /// RGB, row-major. Flux accumulates in f64: a cell may receive 10⁶ photons.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,6 +169,14 @@ impl IrradianceGrid {
     pub fn new(region: GridRegion) -> Self {
         let tolerance = 1e-4 * region.edge_u.length().max(region.edge_v.length());
         Self { region, flux: vec![DVec3::ZERO; region.nu * region.nv], tolerance }
+    }
+
+    /// A grid over curved receivers: every photon counts in the cell it lands over,
+    /// at any distance from the plane, so a cell holds the flux landed on the surfaces
+    /// above (and below) it per area of the cell. [`surface_samples`] gives the points
+    /// a technique is read at for the same quantity.
+    pub fn projected(region: GridRegion) -> Self {
+        Self { tolerance: f32::INFINITY, ..Self::new(region) }
     }
 
     /// Irradiance per cell (flux / cell area), RGB, row-major.
@@ -94,7 +198,7 @@ impl IrradianceGrid {
 
 impl PhotonSink for IrradianceGrid {
     fn empty_like(&self) -> Self {
-        Self::new(self.region)
+        Self { flux: vec![DVec3::ZERO; self.flux.len()], ..*self }
     }
     #[inline]
     fn deposit(&mut self, hit: &PhotonHit) {

@@ -117,6 +117,24 @@ impl TriMesh {
         Self::new(positions, normals, triangles)
     }
 
+    /// The same surface flat-shaded: every triangle with its own three vertices and
+    /// its face normal as theirs (a degenerate one keeps its vertex normals), so that
+    /// shading sees the geometry a ray tracer does.
+    pub fn faceted(&self) -> Self {
+        let mut positions = Vec::with_capacity(3 * self.triangles.len());
+        let mut normals = Vec::with_capacity(3 * self.triangles.len());
+        for tri in &self.triangles {
+            let [a, b, c] = tri.map(|i| self.positions[i as usize]);
+            let face = (b - a).cross(c - a).try_normalize();
+            for &i in tri {
+                positions.push(self.positions[i as usize]);
+                normals.push(face.unwrap_or(self.normals[i as usize]));
+            }
+        }
+        let triangles = (0..self.triangles.len() as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
+        Self { positions, normals, triangles }
+    }
+
     /// Vertex positions.
     pub fn positions(&self) -> &[Vec3] {
         &self.positions
