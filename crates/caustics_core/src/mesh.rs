@@ -117,6 +117,32 @@ impl TriMesh {
         Self::new(positions, normals, triangles)
     }
 
+    /// A closed box between `-half` and `half`, each face split into quads of at most
+    /// `cell` metres with their own flat normals, its edges matching face to face.
+    pub fn tiled_box(half: Vec3, cell: f32) -> Self {
+        let faces = [
+            (Vec3::Y, Vec3::Z * half.z, Vec3::X * half.x),
+            (Vec3::NEG_Y, Vec3::X * half.x, Vec3::Z * half.z),
+            (Vec3::X, Vec3::Y * half.y, Vec3::Z * half.z),
+            (Vec3::NEG_X, Vec3::Z * half.z, Vec3::Y * half.y),
+            (Vec3::Z, Vec3::X * half.x, Vec3::Y * half.y),
+            (Vec3::NEG_Z, Vec3::Y * half.y, Vec3::X * half.x),
+        ];
+        let mut mesh: Option<Self> = None;
+        for (n, u, v) in faces {
+            let (nu, nv) = ((2.0 * u.length() / cell).ceil().max(1.0) as usize, (2.0 * v.length() / cell).ceil().max(1.0) as usize);
+            for (i, j) in (0..nu).flat_map(|i| (0..nv).map(move |j| (i, j))) {
+                let centre = n * n.abs().dot(half) + u * ((2 * i + 1) as f32 / nu as f32 - 1.0) + v * ((2 * j + 1) as f32 / nv as f32 - 1.0);
+                let quad = Self::quad(centre, u / nu as f32, v / nv as f32);
+                match mesh.as_mut() {
+                    Some(m) => m.append(&quad),
+                    None => mesh = Some(quad),
+                }
+            }
+        }
+        mesh.expect("six faces")
+    }
+
     /// The same surface flat-shaded: every triangle with its own three vertices and
     /// its face normal as theirs (a degenerate one keeps its vertex normals), so that
     /// shading sees the geometry a ray tracer does.

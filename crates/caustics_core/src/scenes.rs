@@ -88,8 +88,9 @@ pub fn glass_sphere(segments: usize) -> BenchScene {
 
 /// A glass ball (IOR 1.5, radius 0.2, `segments` around) 1.5 m over a Stanford bunny
 /// 0.48 m tall on a floor, under a point light above and a little aside: the paper's
-/// Fig. 1, a caustic and a shadow on a curved receiver. The ball focuses 0.4 m above
-/// the bunny's back; its light spreads over the bunny and the floor around. Its region
+/// Fig. 1, a caustic and a shadow on a curved receiver. The ball focuses about 0.3 m
+/// below its centre, 0.7 m above the bunny's back; its light spreads over the bunny
+/// and the floor around. Its region
 /// is read projected (`IrradianceGrid::projected`, `estimate::surface_samples`): the
 /// flux landed over each cell at every height. The bunny is flat-shaded, so that a
 /// technique's cosine at the surface is the one the tracer's photons meet.

@@ -114,7 +114,7 @@ impl GeneratorFacts {
     pub fn preferences(&self) -> &'static [Technique] {
         use Technique::*;
         match self.shape {
-            GeneratorShape::ClosedRefractor => &[HierarchicalMaps, WarpedVolumes],
+            GeneratorShape::ClosedRefractor => &[HierarchicalMaps, IlluminationTextures, WarpedVolumes],
             GeneratorShape::OpenRefractor | GeneratorShape::Mirror => &[WarpedVolumes, HierarchicalMaps],
             GeneratorShape::Pool => &[WarpedVolumes, HierarchicalMaps, Convolution],
         }
@@ -126,8 +126,6 @@ impl GeneratorFacts {
 pub enum Unavailable {
     /// Its cargo feature is off in this build.
     NotCompiled,
-    /// It is not implemented yet.
-    NotImplemented,
     /// It does not model this kind of generator (convolution needs a pool).
     NotApplicable,
 }
@@ -136,7 +134,6 @@ impl Unavailable {
     fn label(self) -> &'static str {
         match self {
             Unavailable::NotCompiled => "not in this build (cargo feature off)",
-            Unavailable::NotImplemented => "not implemented yet",
             Unavailable::NotApplicable => "does not apply to this generator",
         }
     }
@@ -145,11 +142,15 @@ impl Unavailable {
 /// Whether `technique` can draw a generator of `shape`, given whether its code is
 /// compiled in.
 pub fn availability(technique: Technique, shape: GeneratorShape, compiled: bool) -> Result<(), Unavailable> {
-    if technique == Technique::IlluminationTextures {
-        Err(Unavailable::NotImplemented)
-    } else if !compiled {
+    let applies = match technique {
+        Technique::Convolution => shape == GeneratorShape::Pool,
+        // A light transport table needs a closed mesh for its far side (§3).
+        Technique::IlluminationTextures => shape == GeneratorShape::ClosedRefractor,
+        Technique::WarpedVolumes | Technique::HierarchicalMaps => true,
+    };
+    if !compiled {
         Err(Unavailable::NotCompiled)
-    } else if technique == Technique::Convolution && shape != GeneratorShape::Pool {
+    } else if !applies {
         Err(Unavailable::NotApplicable)
     } else {
         Ok(())
@@ -241,8 +242,8 @@ mod tests {
                 assert!(choice.to_string().starts_with(requested.label()), "{choice}");
             }
         }
-        let textures = choose(Some(Technique::IlluminationTextures), facts(GeneratorShape::ClosedRefractor), |_| true).unwrap();
-        assert_eq!(textures.to_string(), "illumination textures: not implemented yet; closed refractor → hierarchical maps");
+        let textures = choose(Some(Technique::IlluminationTextures), facts(GeneratorShape::OpenRefractor), |_| true).unwrap();
+        assert_eq!(textures.to_string(), "illumination textures: does not apply to this generator; open refracting surface → warped volumes");
         let convolution = choose(Some(Technique::Convolution), facts(GeneratorShape::OpenRefractor), |_| true).unwrap();
         assert_eq!(convolution.passed_over, vec![(Technique::Convolution, Unavailable::NotApplicable)]);
         assert_eq!(convolution.technique, Technique::WarpedVolumes);
@@ -254,6 +255,7 @@ mod tests {
             (Technique::WarpedVolumes, GeneratorShape::ClosedRefractor),
             (Technique::HierarchicalMaps, GeneratorShape::OpenRefractor),
             (Technique::Convolution, GeneratorShape::Pool),
+            (Technique::IlluminationTextures, GeneratorShape::ClosedRefractor),
         ] {
             let choice = choose(Some(requested), facts(shape), |_| true).unwrap();
             assert_eq!((choice.technique, choice.requested), (requested, true));

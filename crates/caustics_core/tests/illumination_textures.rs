@@ -26,37 +26,11 @@ fn directions_around(axis: Vec3) -> Vec<Vec3> {
         .collect()
 }
 
-/// A closed box between `-half` and `half`, each face split into quads of at most
-/// `cell` metres with their own flat normals, its edges matching face to face.
-fn tiled_box(half: Vec3, cell: f32) -> TriMesh {
-    let faces = [
-        (Vec3::Y, Vec3::Z * half.z, Vec3::X * half.x),
-        (Vec3::NEG_Y, Vec3::X * half.x, Vec3::Z * half.z),
-        (Vec3::X, Vec3::Y * half.y, Vec3::Z * half.z),
-        (Vec3::NEG_X, Vec3::Z * half.z, Vec3::Y * half.y),
-        (Vec3::Z, Vec3::X * half.x, Vec3::Y * half.y),
-        (Vec3::NEG_Z, Vec3::Y * half.y, Vec3::X * half.x),
-    ];
-    let mut mesh: Option<TriMesh> = None;
-    for (n, u, v) in faces {
-        let (nu, nv) = ((2.0 * u.length() / cell).ceil().max(1.0) as usize, (2.0 * v.length() / cell).ceil().max(1.0) as usize);
-        for (i, j) in (0..nu).flat_map(|i| (0..nv).map(move |j| (i, j))) {
-            let centre = n * n.abs().dot(half) + u * ((2 * i + 1) as f32 / nu as f32 - 1.0) + v * ((2 * j + 1) as f32 / nv as f32 - 1.0);
-            let quad = TriMesh::quad(centre, u / nu as f32, v / nv as f32);
-            match mesh.as_mut() {
-                Some(m) => m.append(&quad),
-                None => mesh = Some(quad),
-            }
-        }
-    }
-    mesh.unwrap()
-}
-
 #[test]
 fn a_slab_passes_light_straight_on_with_both_fresnel_factors() {
     // 20 m wide, 0.2 m thick, its top tiled 1 m apart: light entering an inner vertex
     // leaves through the bottom, never a side.
-    let slab = tiled_box(Vec3::new(10.0, 0.1, 10.0), 1.0);
+    let slab = TriMesh::tiled_box(Vec3::new(10.0, 0.1, 10.0), 1.0);
     assert!(slab.is_closed());
     let ior = 1.5;
     let table = table(&slab, ior, 17);
@@ -222,7 +196,7 @@ fn open_meshes_impossible_iors_and_oversized_tables_are_refused_or_lowered() {
 fn illumination_textures_under_a_slab_hold_e_cos_theta_t1_t2() {
     // A 6 m glass slab 0.4 m thick, 0.5 m over a 2 m floor, under a tilted sun: the
     // floor gets E T₁T₂ cos θ everywhere (the beam leaves parallel to the sun's).
-    let slab = tiled_box(Vec3::new(3.0, 0.2, 3.0), 0.25);
+    let slab = TriMesh::tiled_box(Vec3::new(3.0, 0.2, 3.0), 0.25);
     let ior = 1.5;
     let table = table(&slab, ior, 9);
     let world_from_object = Affine3A::from_translation(Vec3::Y * 0.7);
@@ -333,7 +307,7 @@ fn light_that_every_ray_loses_to_total_internal_reflection_draws_nothing() {
 
 #[test]
 fn grazing_light_one_and_sixteen_planes_and_a_receiver_under_a_texel_stay_finite() {
-    let slab = tiled_box(Vec3::new(1.0, 0.1, 1.0), 0.25);
+    let slab = TriMesh::tiled_box(Vec3::new(1.0, 0.1, 1.0), 0.25);
     let table = table(&slab, 1.5, 9);
     let place = Affine3A::from_translation(Vec3::Y * 0.5);
     let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 2.0, Vec3::X * 2.0), albedo: Vec3::ONE };

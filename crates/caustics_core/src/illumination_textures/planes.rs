@@ -275,7 +275,8 @@ impl IlluminationTextures {
         let to_top = z - self.planes[0].depth;
         let mut cell = q.floor();
         let mut climbed = 0.0f32;
-        loop {
+        // Each step enters a neighbouring texel: at most two sides' worth of them.
+        for _ in 0..2 * self.size + 2 {
             let Some(index) = self.index(cell) else { return false };
             let exit = [0, 1]
                 .map(|k| if across[k] > 0.0 { (cell[k] + 1.0 - q[k]) / across[k] } else if across[k] < 0.0 { (cell[k] - q[k]) / across[k] } else { f32::INFINITY });
@@ -296,6 +297,7 @@ impl IlluminationTextures {
             cell[k] += across[k].signum();
             climbed = leave;
         }
+        false
     }
 
     /// The textures at texel `index`, interpolated to depth `z` (clamped to the first
