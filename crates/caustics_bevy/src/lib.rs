@@ -16,6 +16,8 @@ mod grid_mesh;
 pub mod headless;
 #[cfg(feature = "hierarchical-maps")]
 pub mod hierarchical_maps;
+#[cfg(feature = "illumination-textures")]
+pub mod illumination_textures;
 pub mod irradiance;
 pub mod lights;
 #[cfg(feature = "ocean")]
@@ -83,6 +85,8 @@ impl Plugin for CausticsPlugin {
         convolution::build(app);
         #[cfg(feature = "hierarchical-maps")]
         hierarchical_maps::build(app);
+        #[cfg(feature = "illumination-textures")]
+        illumination_textures::build(app);
     }
 }
 
@@ -94,6 +98,8 @@ pub mod prelude {
     pub use crate::{DropPebble, PoolRipples};
     #[cfg(feature = "hierarchical-maps")]
     pub use crate::hierarchical_maps::{CausticMapGather, HierarchicalMapsSettings};
+    #[cfg(feature = "illumination-textures")]
+    pub use crate::illumination_textures::{IlluminationCosine, IlluminationTexturesSettings};
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{

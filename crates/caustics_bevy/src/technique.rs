@@ -42,6 +42,7 @@ impl Default for AvailableCausticTechniques {
             (Technique::WarpedVolumes, cfg!(feature = "warped-volumes")),
             (Technique::Convolution, cfg!(feature = "convolution")),
             (Technique::HierarchicalMaps, cfg!(feature = "hierarchical-maps")),
+            (Technique::IlluminationTextures, cfg!(feature = "illumination-textures")),
         ];
         Self(compiled.into_iter().filter_map(|(t, on)| on.then_some(t)).collect())
     }

@@ -110,7 +110,7 @@ fn no_technique_choice_is_silently_dark() {
     // out by the app), on a generator it would otherwise draw.
     let cases = [
         (CausticTechnique::WarpedVolumes, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
-        (CausticTechnique::HierarchicalMaps, Technique::WarpedVolumes, "closed refractor → warped volumes"),
+        (CausticTechnique::HierarchicalMaps, Technique::IlluminationTextures, "closed refractor → illumination textures"),
         (CausticTechnique::Convolution, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
         (CausticTechnique::IlluminationTextures, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
     ];

@@ -74,11 +74,12 @@ pub struct ActiveCausticTechniques {
     pub warped_volumes: bool,
     pub convolution: bool,
     pub hierarchical_maps: bool,
+    pub illumination_textures: bool,
 }
 
 impl ActiveCausticTechniques {
     pub fn any(&self) -> bool {
-        self.warped_volumes || self.convolution || self.hierarchical_maps
+        self.warped_volumes || self.convolution || self.hierarchical_maps || self.illumination_textures
     }
 }
 

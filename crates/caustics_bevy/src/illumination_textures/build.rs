@@ -1,0 +1,320 @@
+//! Main world: a light transport table per mesh, built once, and each light's virtual
+//! planes, set up again only when something they depend on changed.
+
+use super::IlluminationTexturesSettings;
+use crate::components::{CausticGenerator, InvalidCausticParams};
+use crate::irradiance::ActiveCausticTechniques;
+use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh};
+use crate::technique::CausticTechniqueChoice;
+use bevy::platform::collections::{HashMap, HashSet};
+use bevy::prelude::*;
+use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
+use caustics_core::glam::Affine3A;
+use caustics_core::hierarchical::photons::photon_ior;
+use caustics_core::illumination_textures::{
+    CacheOutcome, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild,
+};
+use caustics_core::mesh::TriMesh;
+use caustics_core::scene::{Light, Receiver};
+use caustics_core::technique::Technique;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// The light transport tables the generators use, one per mesh, index of refraction,
+/// scale and direction grid, and how many were ever made: a moving or turning object
+/// and a moving light reuse theirs.
+#[derive(Resource, Default)]
+pub struct LightTransportTables {
+    tables: HashMap<TableKey, Arc<LightTransportTable>>,
+    /// Tables traced since the app started.
+    pub built: u64,
+    /// Tables read back from the disk cache.
+    pub loaded: u64,
+}
+
+impl LightTransportTables {
+    /// How many tables are held.
+    pub fn len(&self) -> usize {
+        self.tables.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.tables.is_empty()
+    }
+
+    /// Bytes the held tables take.
+    pub fn bytes(&self) -> usize {
+        self.tables.values().map(|t| t.bytes()).sum()
+    }
+}
+
+/// What a table is made for: the object's mesh in its own frame, scaled as its
+/// transform scales it (a table follows rigid motions only), at an index of refraction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct TableKey {
+    mesh: AssetId<Mesh>,
+    scale: [u32; 3],
+    ior: u32,
+    directions: u32,
+}
+
+/// Each light's virtual planes through each generator, not drawn (the render world
+/// draws them), shared with the render world. A new `generation` means new contents.
+#[derive(Resource, Clone, Default)]
+pub struct IlluminationFrames {
+    pub frames: Arc<Vec<IlluminationTextures>>,
+    pub generation: u64,
+}
+
+pub(super) fn build(app: &mut App) {
+    app.init_resource::<LightTransportTables>()
+        .init_resource::<IlluminationFrames>()
+        .add_systems(PostUpdate, set_up_planes.in_set(crate::CausticsSystems::ReadScene));
+}
+
+/// One generator as the build reads it.
+struct GeneratorInput {
+    entity: Entity,
+    key: TableKey,
+    /// The mesh in the object's frame, scaled.
+    mesh: TriMesh,
+    world_from_object: Affine3A,
+    table: Option<Arc<LightTransportTable>>,
+}
+
+/// What a build made: the frames, the tables it had to make and how, and what it
+/// could not do, by generator.
+#[derive(Default)]
+struct BuildOutput {
+    frames: Vec<IlluminationTextures>,
+    tables: Vec<(TableKey, Arc<LightTransportTable>, CacheOutcome)>,
+    problems: Vec<(Entity, String)>,
+}
+
+/// Everything the planes depend on that is cheap to compare each frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Inputs {
+    generators: Vec<(Entity, AssetId<Mesh>, Mat4, u32)>,
+    lights: Vec<Light>,
+    occluders: Vec<(AssetId<Mesh>, Mat4)>,
+    settings: Option<IlluminationTexturesSettings>,
+}
+
+#[derive(Default)]
+struct BuildState {
+    last: Inputs,
+    /// Something changed since the running build started.
+    pending: bool,
+    running: Option<Task<BuildOutput>>,
+    warned: HashSet<Entity>,
+    warned_settings: bool,
+}
+
+/// Sets up the virtual planes again when a generator, light, receiver, shadow caster,
+/// mesh asset or the settings changed, on the async compute pool while the frames go
+/// on with the previous ones; makes a generator's table first when it has none.
+#[allow(clippy::too_many_arguments)]
+fn set_up_planes(
+    generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
+    occluders: Query<OccluderComponents, Without<CausticGenerator>>,
+    lights: Query<LightComponents, AnyLight>,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    meshes: Res<Assets<Mesh>>,
+    settings: Res<IlluminationTexturesSettings>,
+    mut tables: ResMut<LightTransportTables>,
+    mut frames: ResMut<IlluminationFrames>,
+    mut active: ResMut<ActiveCausticTechniques>,
+    mut state: Local<BuildState>,
+) {
+    let core_settings = match settings.core() {
+        Ok(s) => {
+            state.warned_settings = false;
+            Some(s)
+        }
+        Err(e) => {
+            if !state.warned_settings {
+                warn!("bevy_caustics: the illumination textures are skipped: {e}");
+                state.warned_settings = true;
+            }
+            None
+        }
+    };
+    let mut next = Inputs { settings: core_settings.map(|_| settings.clone()), ..default() };
+    let mut used = HashSet::new();
+    for (entity, generator, choice, (mesh, transform, visible, _)) in &generators {
+        if choice.technique() != Technique::IlluminationTextures || !visible.get() || core_settings.is_none() {
+            continue;
+        }
+        let Some(ior) = photon_ior(&generator.specular_interaction()) else { continue };
+        used.insert(mesh.id());
+        next.generators.push((entity, mesh.id(), transform.to_matrix(), ior.to_bits()));
+    }
+    if !next.generators.is_empty() {
+        for ((mesh, transform, visible, _), receiver, no_shadows) in &occluders {
+            if blocks_caustic_light(visible, receiver, no_shadows) {
+                used.insert(mesh.id());
+                next.occluders.push((mesh.id(), transform.to_matrix()));
+            }
+        }
+        next.lights = lights
+            .iter()
+            .filter(|(.., visible)| visible.get())
+            .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
+            .filter(|l| l.validate().is_ok())
+            .collect();
+    }
+    let mesh_changed = mesh_events.read().any(|e| match e {
+        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
+        _ => false,
+    });
+    if mesh_changed || next != state.last {
+        state.pending = true;
+        state.last = next.clone();
+    }
+
+    if let Some(task) = state.running.as_mut() {
+        let Some(output) = block_on(poll_once(task)) else { return };
+        state.running = None;
+        for (key, table, outcome) in output.tables {
+            let s = table.stats;
+            let how = match outcome {
+                CacheOutcome::Loaded => {
+                    tables.loaded += 1;
+                    "read from the cache".to_string()
+                }
+                CacheOutcome::Built => {
+                    tables.built += 1;
+                    format!("built in {:.2} s", s.build_seconds)
+                }
+                CacheOutcome::BuiltNotWritten(why) => {
+                    tables.built += 1;
+                    format!("built in {:.2} s, not cached ({why})", s.build_seconds)
+                }
+            };
+            info!(
+                "bevy_caustics: light transport table: {} entries, {:.1} MB, {} lost to total internal reflection, {how}",
+                s.entries,
+                table.bytes() as f64 / 1e6,
+                s.total_internal_reflection
+            );
+            tables.tables.insert(key, table);
+        }
+        for (entity, problem) in output.problems {
+            if state.warned.insert(entity) {
+                warn!("bevy_caustics: CausticGenerator {entity}: {problem}");
+            }
+        }
+        active.set_if_neq(ActiveCausticTechniques { illumination_textures: !output.frames.is_empty(), ..*active });
+        *frames = IlluminationFrames { frames: Arc::new(output.frames), generation: frames.generation + 1 };
+    }
+    if !state.pending || state.running.is_some() {
+        return;
+    }
+    state.pending = false;
+    let Some(core_settings) = core_settings else {
+        if !frames.frames.is_empty() {
+            active.set_if_neq(ActiveCausticTechniques { illumination_textures: false, ..*active });
+            *frames = IlluminationFrames { frames: Arc::default(), generation: frames.generation + 1 };
+        }
+        return;
+    };
+
+    // The build's inputs: generators in their own frame, receivers in the world's.
+    let mut inputs = Vec::new();
+    let mut keys = HashSet::new();
+    for (entity, generator, choice, (mesh3d, transform, visible, _)) in &generators {
+        if choice.technique() != Technique::IlluminationTextures || !visible.get() {
+            continue;
+        }
+        let (Some(mesh), Some(ior)) = (meshes.get(&mesh3d.0), photon_ior(&generator.specular_interaction())) else { continue };
+        let (scale, rotation, translation) = transform.to_scale_rotation_translation();
+        // A turning object's scale comes back from its matrix a rounding off: to five
+        // digits, it keeps its table.
+        let scale = (scale * 1e5).round() / 1e5;
+        let local = match core_mesh(mesh, &GlobalTransform::from_scale(scale)) {
+            Ok(local) => local,
+            Err(e) => {
+                if state.warned.insert(entity) {
+                    warn!("bevy_caustics: the mesh of CausticGenerator {entity} is skipped: it {e}");
+                }
+                continue;
+            }
+        };
+        let key = TableKey { mesh: mesh3d.id(), scale: scale.to_array().map(f32::to_bits), ior: ior.to_bits(), directions: settings.table_directions };
+        keys.insert(key);
+        let world_from_object = Affine3A::from_rotation_translation(
+            caustics_core::glam::Quat::from_array(rotation.to_array()),
+            caustics_core::glam::Vec3::from_array(translation.to_array()),
+        );
+        inputs.push(GeneratorInput { entity, key, mesh: local, world_from_object, table: tables.tables.get(&key).cloned() });
+    }
+    // Tables no generator uses any more are let go.
+    tables.tables.retain(|key, _| keys.contains(key));
+    let mut receivers = Vec::new();
+    if !inputs.is_empty() {
+        for ((mesh3d, transform, visible, _), receiver, no_shadows) in &occluders {
+            if !blocks_caustic_light(visible, receiver, no_shadows) {
+                continue;
+            }
+            if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
+                receivers.push(Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE });
+            }
+        }
+    }
+    let lights = next.lights;
+    let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
+    state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
+        make_frames(inputs, &lights, &receivers, &core_settings, (directions, max_bytes, cache_dir))
+    }));
+}
+
+/// The build: each generator's table (made once per key), then each light's frame.
+fn make_frames(
+    inputs: Vec<GeneratorInput>,
+    lights: &[Light],
+    receivers: &[Receiver],
+    settings: &IlluminationSettings,
+    (directions, max_bytes, cache_dir): (u32, usize, Option<PathBuf>),
+) -> BuildOutput {
+    let mut output = BuildOutput::default();
+    let mut made: HashMap<TableKey, Arc<LightTransportTable>> = HashMap::new();
+    for input in inputs {
+        let table = match input.table.or_else(|| made.get(&input.key).cloned()) {
+            Some(table) => table,
+            None => {
+                let vertices = input.mesh.positions().len();
+                let (grid, lowered) = DirectionGrid::fitting(directions, vertices, max_bytes);
+                if lowered {
+                    let problem = format!(
+                        "its light transport table at {directions}² directions would pass max_table_bytes ({max_bytes}); it uses {}²",
+                        grid.side()
+                    );
+                    output.problems.push((input.entity, problem));
+                }
+                let build = TransportBuild { ior: f32::from_bits(input.key.ior), grid };
+                let result = match &cache_dir {
+                    Some(dir) => LightTransportTable::load_or_build(dir, &input.mesh, build, &|_, _| {}),
+                    None => LightTransportTable::build(&input.mesh, build, &|_, _| {}).map(|t| (t, CacheOutcome::Built)),
+                };
+                match result {
+                    Ok((table, outcome)) => {
+                        let table = Arc::new(table);
+                        made.insert(input.key, table.clone());
+                        output.tables.push((input.key, table.clone(), outcome));
+                        table
+                    }
+                    Err(e) => {
+                        output.problems.push((input.entity, format!("casts no illumination textures: its light transport table: {e}")));
+                        continue;
+                    }
+                }
+            }
+        };
+        for light in lights {
+            if let Some(frame) = IlluminationTextures::frame(&table, &input.mesh, &input.world_from_object, light, receivers, settings) {
+                output.frames.push(frame);
+            }
+        }
+    }
+    output
+}

@@ -1,0 +1,102 @@
+//! Render world: the pass that draws each light's illumination textures once per
+//! change, and their projection into every view each frame.
+
+use super::render::{IlluminationPipelines, IlluminationTexturesGpu, ViewIlluminationPipeline};
+use crate::irradiance::ViewCausticIrradiance;
+use crate::report::PassRecorder;
+use bevy::core_pipeline::prepass::ViewPrepassTextures;
+use bevy::prelude::*;
+use bevy::render::{
+    diagnostic::RecordDiagnostics,
+    render_resource::*,
+    renderer::{RenderContext, ViewQuery},
+    view::{ViewUniformOffset, ViewUniforms},
+};
+
+/// Once per frame in which the frames changed: every plane of every light's frame,
+/// cleared, then every illumination volume's crossing drawn into it (a quad over the
+/// crossing's texels, six vertices a volume; the plane is the instance).
+pub(super) fn draw_illumination_textures(
+    mut ctx: RenderContext,
+    mut gpu: ResMut<IlluminationTexturesGpu>,
+    pipelines: Res<IlluminationPipelines>,
+    cache: Res<PipelineCache>,
+    recorder: Res<PassRecorder>,
+) {
+    if !gpu.dirty || gpu.frames.is_empty() {
+        return;
+    }
+    // The pipeline still compiling: draw next frame.
+    let Some(pipeline) = cache.get_render_pipeline(pipelines.draw) else { return };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let encoder = ctx.command_encoder();
+    let span = diagnostics.time_span(encoder, "illumination_textures/draw");
+    for frame in &gpu.frames {
+        for (plane, layer) in frame.layers.iter().enumerate() {
+            let mut pass = encoder.begin_render_pass(&RenderPassDescriptor {
+                label: Some("illumination_textures"),
+                color_attachments: &[Some(RenderPassColorAttachment {
+                    view: layer,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: Operations { load: LoadOp::Clear(wgpu::Color::TRANSPARENT), store: StoreOp::Store },
+                })],
+                ..default()
+            });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &frame.draw_bind_group, &[]);
+            pass.draw(0..6 * frame.volume_count, plane as u32..plane as u32 + 1);
+        }
+    }
+    span.end(encoder);
+    recorder.record("illumination textures");
+    gpu.dirty = false;
+}
+
+/// Adds every light's illumination textures where the view sees receivers.
+pub(super) fn project_illumination_textures(
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewIlluminationPipeline)>,
+    gpu: Res<IlluminationTexturesGpu>,
+    pipelines: Res<IlluminationPipelines>,
+    cache: Res<PipelineCache>,
+    view_uniforms: Res<ViewUniforms>,
+    recorder: Res<PassRecorder>,
+    mut ctx: RenderContext,
+) {
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    if gpu.frames.is_empty() || gpu.dirty {
+        return;
+    }
+    let (Some(render_pipeline), Some(depth), Some(normal), Some(view_binding)) = (
+        cache.get_render_pipeline(pipeline.pipeline),
+        prepass.depth_view(),
+        prepass.normal_view(),
+        view_uniforms.uniforms.binding(),
+    ) else {
+        return;
+    };
+    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let bind_groups: Vec<BindGroup> = gpu
+        .frames
+        .iter()
+        .filter_map(|f| {
+            Some(ctx.render_device().create_bind_group(
+                "illumination_project_bind_group",
+                &layout,
+                &BindGroupEntries::sequential((view_binding.clone(), depth, normal, f.uniform.binding()?, &f.array, f.surface.binding()?)),
+            ))
+        })
+        .collect();
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let mut pass = buffer.accumulate(ctx.command_encoder(), "illumination_projection");
+    let span = diagnostics.pass_span(&mut pass, "illumination_textures/projection");
+    pass.set_pipeline(render_pipeline);
+    for bind_group in &bind_groups {
+        pass.set_bind_group(0, bind_group, &[offset.offset]);
+        pass.draw(0..3, 0..1);
+    }
+    span.end(&mut pass);
+    recorder.record("illumination textures projection");
+}
