@@ -257,6 +257,9 @@ impl BenchMethod for Auto {
                     let group = BenchScene { scene: group, ..scene.clone() };
                     crate::hierarchical::irradiance(&group, photons, &crate::hierarchical::VARIANTS[4], samples)?
                 }
+                Technique::IlluminationTextures => {
+                    crate::illumination::irradiance(&BenchScene { scene: group, ..scene.clone() }, &Default::default(), samples)?
+                }
                 other => return Err(format!("auto: the bench does not run {other}")),
             };
             total.iter_mut().zip(image).for_each(|(t, e)| *t += e);
@@ -599,6 +602,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         // Caustic maps run on the scene's own tessellation, measured on its region.
         let modes = (args.quick, args.cpu_only, samples);
         notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, modes, &args.out, &mut rows)?);
+        if name == "sphere" {
+            notes.push_str(&crate::illumination::bench_scenes(args.quick, args.cpu_only, &mut rows)?);
+        }
         if name == "pool" {
             let start = Instant::now();
             notes.push_str(&convolution_vs_direct(scene)?);

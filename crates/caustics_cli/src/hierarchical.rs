@@ -117,8 +117,8 @@ pub fn bench_scene(
     out: &Path,
     rows: &mut Vec<Measurement>,
 ) -> Result<String, String> {
-    let points = cell_sample_points(&scene.region, samples);
     let up = up(scene);
+    let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
     let mut stages = Vec::new();
     for p in photon_resolutions(quick) {
         let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, p)?;
@@ -144,7 +144,7 @@ pub fn bench_scene(
             let mut irradiance = vec![0.0f32; points.len()];
             let (mut flux_in, mut flux_capped) = (0.0, 0.0);
             for t in &traced {
-                let g = gather_view(t, variant, p, &points, up, &mut irradiance);
+                let g = gather_view(t, variant, p, &points, &mut irradiance);
                 row.pyramid += g.seconds[0];
                 row.gather += g.seconds[1];
                 row.splat += g.seconds[2];
@@ -195,11 +195,20 @@ fn up(scene: &BenchScene) -> Vec3 {
 /// `scene`'s generators by `variant` at `photons`² photons per light view, and the
 /// photons processed.
 pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant, samples: usize) -> Result<(Vec<f32>, u64), String> {
-    let points = cell_sample_points(&scene.region, samples);
+    let up = up(scene);
+    let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
+    let (irradiance, processed) = irradiance_at(scene, photons, variant, &points)?;
+    Ok((cell_means(&irradiance, samples), processed))
+}
+
+/// Caustic irradiance at receiver points `(position, normal)` from `scene`'s
+/// generators by `variant` at `photons`² photons per light view, and the photons
+/// processed.
+pub fn irradiance_at(scene: &BenchScene, photons: u32, variant: &Variant, points: &[(Vec3, Vec3)]) -> Result<(Vec<f32>, u64), String> {
     let (traced, ..) = trace_light_views(&scene.scene, photons)?;
     let mut irradiance = vec![0.0f32; points.len()];
-    let processed = traced.iter().map(|t| gather_view(t, variant, photons, &points, up(scene), &mut irradiance).stats.total_processed()).sum();
-    Ok((cell_means(&irradiance, samples), processed))
+    let processed = traced.iter().map(|t| gather_view(t, variant, photons, points, &mut irradiance).stats.total_processed()).sum();
+    Ok((irradiance, processed))
 }
 
 /// Every light view of `scene` with its light maps (ray cast) and photon buffer at
@@ -244,7 +253,7 @@ struct Gathered {
 
 /// Gathers and splats one light view's photons by `variant` and adds the resolved
 /// map's irradiance at `points` (receivers facing `up`) into `irradiance`.
-fn gather_view(t: &Traced, variant: &Variant, photons: u32, points: &[Vec3], up: Vec3, irradiance: &mut [f32]) -> Gathered {
+fn gather_view(t: &Traced, variant: &Variant, photons: u32, points: &[(Vec3, Vec3)], irradiance: &mut [f32]) -> Gathered {
     let clock = Instant::now();
     let pyramid = PhotonPyramid::for_gather(&t.photons, MAP_RESOLUTION, variant.gather);
     let pyramid_seconds = clock.elapsed().as_secs_f64();
@@ -255,8 +264,8 @@ fn gather_view(t: &Traced, variant: &Variant, photons: u32, points: &[Vec3], up:
     let (map, splat_stats) = CausticMap::splat_all(&t.photons, &pyramid, &entries, variant.splats, MAP_RESOLUTION);
     let resolved = map.resolve();
     let splat_seconds = clock.elapsed().as_secs_f64();
-    for (e, &q) in irradiance.iter_mut().zip(points) {
-        *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, photons, t.intensity, q, up);
+    for (e, &(q, n)) in irradiance.iter_mut().zip(points) {
+        *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, photons, t.intensity, q, n);
     }
     Gathered { stats, splat_stats, seconds: [pyramid_seconds, gather_seconds, splat_seconds] }
 }

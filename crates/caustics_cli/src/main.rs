@@ -4,6 +4,7 @@
 mod bench;
 mod gltf;
 mod hierarchical;
+mod illumination;
 mod images;
 mod plot;
 mod render;

@@ -36,6 +36,8 @@ pub enum Method {
     Maps,
     /// Hierarchical caustic maps, the flat gather with fixed splats.
     MapsFlat,
+    /// Illumination textures (a closed refractor only).
+    IlluminationTextures,
     /// Each generator by the technique the plugin's `Auto` picks for it.
     Auto,
 }
@@ -48,6 +50,7 @@ impl Method {
             Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => CausticTechnique::WarpedVolumes,
             Method::Convolution => CausticTechnique::Convolution,
             Method::Maps | Method::MapsFlat => CausticTechnique::HierarchicalMaps,
+            Method::IlluminationTextures => CausticTechnique::IlluminationTextures,
             Method::Auto => CausticTechnique::Auto,
         })
     }
@@ -209,6 +212,7 @@ fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>
         }
         Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4], SUPERSAMPLE)?,
         Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0], SUPERSAMPLE)?,
+        Method::IlluminationTextures => crate::illumination::irradiance(bench, &Default::default(), SUPERSAMPLE)?,
         Method::Auto => Auto.run(name, bench, 2, SUPERSAMPLE)?,
     };
     Ok(image)
@@ -226,7 +230,7 @@ pub struct GpuRun {
     pub adapter: String,
     /// GPU milliseconds, from timestamp queries, in the frame where the technique's
     /// passes cost most (the frame that made its maps or volumes): its own passes
-    /// (spans `caustics/*`, `caustic_maps/*`) and every timed pass of that frame,
+    /// (spans `caustics/*`, `caustic_maps/*`, `illumination_textures/*`) and every timed pass of that frame,
     /// Bevy's included. `None` where the adapter has no timestamp queries.
     pub times: Option<GpuTimes>,
 }
@@ -285,13 +289,13 @@ pub fn gpu_run(method: Method, bench: &BenchScene, photons: Option<u32>) -> Resu
     for _ in 0..48 {
         renderer.app.update();
         let spans = renderer.gpu_pass_times();
-        let ours = |span: &str| span.starts_with("caustics/") || span.starts_with("caustic_maps/");
+        let ours = |span: &str| ["caustics/", "caustic_maps/", "illumination_textures/"].iter().any(|p| span.starts_with(p));
         let technique_ms: f64 = spans.iter().filter(|(span, _)| ours(span)).map(|(_, ms)| ms).sum();
         if !spans.is_empty() && times.is_none_or(|t| technique_ms > t.technique_ms) {
             times = Some(GpuTimes { technique_ms, timed_passes_ms: spans.iter().map(|(_, ms)| ms).sum() });
         }
         let report = renderer.pass_report();
-        if left.is_none() && ["volumes", "caustic map projection", "pool floor"].iter().any(|pass| report.views(pass) > 0) {
+        if left.is_none() && ["volumes", "caustic map projection", "pool floor", "illumination textures projection"].iter().any(|pass| report.views(pass) > 0) {
             left = Some(TIMING_FRAMES);
         }
         match &mut left {
