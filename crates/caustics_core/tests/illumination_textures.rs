@@ -367,3 +367,24 @@ fn a_glass_ball_over_the_bunny_is_within_0_15_of_the_tracer_and_planes_help() {
     assert!(errors[3] < errors[2] + 0.02, "8 planes: {errors:?}");
     assert!(paper > 2.0 * errors[2]);
 }
+
+#[test]
+fn a_balls_caustic_carries_the_flux_the_table_sends() {
+    // A glass ball 1 m over a 6 m floor under the sun straight down: every volume's
+    // light lands on the floor, and the floor's irradiance integrates to the flux the
+    // table's transmittances send out.
+    let ball = TriMesh::uv_sphere(Vec3::ZERO, 0.35, 16, 32);
+    let table = table(&ball, 1.5, 8);
+    let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1.0 });
+    let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0), albedo: Vec3::ONE };
+    let settings = IlluminationSettings { planes: 4, texture_size: 256 };
+    let t = IlluminationTextures::compute(&table, &ball, &Affine3A::from_translation(Vec3::Y), &sun, &[floor], &settings).unwrap();
+    let (n, side) = (800, 3.0f32);
+    let h = side / n as f32;
+    let landed: f64 = (0..n * n)
+        .map(|i| Vec3::new(-0.5 * side + h * ((i % n) as f32 + 0.5), 0.0, -0.5 * side + h * ((i / n) as f32 + 0.5)))
+        .map(|p| (t.irradiance_at(p, Vec3::Y, Cosine::Receiver).x * h * h) as f64)
+        .sum();
+    eprintln!("ball: the floor takes {landed:.5} of the {:.5} the table sends (the ball's cross-section: {:.5})", t.flux_out, std::f32::consts::PI * 0.35 * 0.35);
+    assert!((landed / t.flux_out - 1.0).abs() < 0.01, "{landed} of {}", t.flux_out);
+}
