@@ -38,8 +38,7 @@ const RESOLUTION: u32 = 256;
 
 /// World point seen at the centre of pixel (x, y): screen right = +x, screen up = −z.
 fn world_at(x: u32, y: u32) -> V3 {
-    let s = VIEW / SIZE as f32;
-    V3::new((x as f32 + 0.5 - SIZE as f32 / 2.0) * s, 0.0, (y as f32 + 0.5 - SIZE as f32 / 2.0) * s)
+    V3::from_array(support::floor_point(x, y, SIZE, VIEW).to_array())
 }
 
 fn ball() -> TriMesh {

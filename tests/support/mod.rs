@@ -32,6 +32,14 @@ pub fn top_down_camera(target: RenderTarget, view: f32, pixels: u32, centre: Vec
     )
 }
 
+/// The floor point (y = 0) seen at the centre of pixel (x, y) by [`top_down_camera`]
+/// centred on the origin, `view` metres across `pixels`: screen right = +x, screen
+/// up = −z.
+pub fn floor_point(x: u32, y: u32, pixels: u32, view: f32) -> Vec3 {
+    let s = view / pixels as f32;
+    Vec3::new((x as f32 + 0.5 - pixels as f32 / 2.0) * s, 0.0, (y as f32 + 0.5 - pixels as f32 / 2.0) * s)
+}
+
 /// Caustic irradiance per pixel on a white Lambertian receiver: this image minus the
 /// one without caustics, over albedo/π · exposure (the composite's radiance).
 pub fn caustic_irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<f32> {

@@ -41,7 +41,7 @@ fn at_points(scene: &Scene, tables: &[LightTransportTable], settings: &Illuminat
     let mut e = vec![0.0f32; points.len()];
     for (generator, table) in scene.generators.iter().zip(tables) {
         for light in &scene.lights {
-            let frame = IlluminationTextures::compute(table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, settings);
+            let frame = IlluminationTextures::frame(table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, settings).map(IlluminationTextures::drawn);
             let Some(frame) = frame else { continue };
             for (e, &(p, n)) in e.iter_mut().zip(points) {
                 *e += frame.irradiance_at(p, n, Cosine::Receiver).element_sum() / 3.0;

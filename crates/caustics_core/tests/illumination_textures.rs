@@ -207,7 +207,7 @@ fn illumination_textures_under_a_slab_hold_e_cos_theta_t1_t2() {
     let expected = 2.0 * fresnel_transmittance(sun_direction.y, 1.0 / ior) * fresnel_transmittance(inside.y, ior) * -sun_direction.y;
     for planes in [1, 4, 16] {
         let settings = IlluminationSettings { planes, texture_size: 128 };
-        let textures = IlluminationTextures::compute(&table, &slab, &world_from_object, &sun, std::slice::from_ref(&floor), &settings).unwrap();
+        let textures = IlluminationTextures::frame(&table, &slab, &world_from_object, &sun, std::slice::from_ref(&floor), &settings).map(IlluminationTextures::drawn).unwrap();
         assert!(textures.axis.abs_diff_eq(sun_direction, 1e-4), "the planes face the beam: {}", textures.axis);
         let samples: Vec<f32> = (0..400)
             .map(|i| Vec3::new(-0.9 + 0.09 * (i % 20) as f32 + 0.03, 0.0, -0.9 + 0.09 * (i / 20) as f32 + 0.02))
@@ -302,7 +302,7 @@ fn light_that_every_ray_loses_to_total_internal_reflection_draws_nothing() {
     assert!(table.stats.total_internal_reflection > 0, "{:?}", table.stats);
     let floor = Receiver { mesh: TriMesh::quad(Vec3::Y * 3.0, Vec3::X * 2.0, Vec3::Z * 2.0), albedo: Vec3::ONE };
     let settings = IlluminationSettings::default();
-    assert!(IlluminationTextures::compute(&table, &prism, &Affine3A::IDENTITY, &light, &[floor], &settings).is_none());
+    assert!(IlluminationTextures::frame(&table, &prism, &Affine3A::IDENTITY, &light, &[floor], &settings).map(IlluminationTextures::drawn).is_none());
 }
 
 #[test]
@@ -314,7 +314,7 @@ fn grazing_light_one_and_sixteen_planes_and_a_receiver_under_a_texel_stay_finite
     let flux = |direction: Vec3, planes: u32, receivers: &[Receiver]| {
         let sun = Light::white(LightKind::Directional { direction, irradiance: 1.0 });
         let settings = IlluminationSettings { planes, texture_size: 64 };
-        let Some(t) = IlluminationTextures::compute(&table, &slab, &place, &sun, receivers, &settings) else { return 0.0 };
+        let Some(t) = IlluminationTextures::frame(&table, &slab, &place, &sun, receivers, &settings).map(IlluminationTextures::drawn) else { return 0.0 };
         assert!(t.planes.iter().all(|p| p.texture.iter().all(|e| e.is_finite() && e.w >= 0.0)), "a texel is not finite");
         t.flux_out
     };
@@ -330,7 +330,7 @@ fn grazing_light_one_and_sixteen_planes_and_a_receiver_under_a_texel_stay_finite
     // A receiver a thousandth of a texel wide: its texel holds the light crossing it.
     let speck = Receiver { mesh: TriMesh::quad(Vec3::new(0.1, 0.0, 0.1), Vec3::X * 1e-5, Vec3::Z * 1e-5), albedo: Vec3::ONE };
     let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1.0 });
-    let textures = IlluminationTextures::compute(&table, &slab, &place, &sun, &[speck], &IlluminationSettings::default()).unwrap();
+    let textures = IlluminationTextures::frame(&table, &slab, &place, &sun, &[speck], &IlluminationSettings::default()).map(IlluminationTextures::drawn).unwrap();
     let e = textures.irradiance_at(Vec3::new(0.1, 0.0, 0.1), Vec3::Y, Cosine::Receiver).x;
     let expected = fresnel_transmittance(1.0, 1.0 / 1.5) * fresnel_transmittance(1.0, 1.5);
     eprintln!("a speck of 2e-5 m: {e:.4} (E T₁T₂ = {expected:.4})");
@@ -354,7 +354,7 @@ fn a_glass_ball_over_the_bunny_is_within_0_15_of_the_tracer_and_planes_help() {
     let table = LightTransportTable::build(ball, TransportBuild { ior: 1.5, grid: DirectionGrid::default() }, &|_, _| {}).unwrap();
     let error = |planes: u32, cosine: Cosine| {
         let settings = IlluminationSettings { planes, ..IlluminationSettings::default() };
-        let t = IlluminationTextures::compute(&table, ball, &Affine3A::IDENTITY, &scene.lights[0], &scene.receivers, &settings).unwrap();
+        let t = IlluminationTextures::frame(&table, ball, &Affine3A::IDENTITY, &scene.lights[0], &scene.receivers, &settings).map(IlluminationTextures::drawn).unwrap();
         let ours: Vec<f32> = samples.iter().map(|cell| cell.iter().map(|&(p, n, w)| t.irradiance_at(p, n, cosine).x * w).sum()).collect();
         relative_l2(&ours, &truth)
     };
@@ -378,7 +378,7 @@ fn a_balls_caustic_carries_the_flux_the_table_sends() {
     let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1.0 });
     let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0), albedo: Vec3::ONE };
     let settings = IlluminationSettings { planes: 4, texture_size: 256 };
-    let t = IlluminationTextures::compute(&table, &ball, &Affine3A::from_translation(Vec3::Y), &sun, &[floor], &settings).unwrap();
+    let t = IlluminationTextures::frame(&table, &ball, &Affine3A::from_translation(Vec3::Y), &sun, &[floor], &settings).map(IlluminationTextures::drawn).unwrap();
     let (n, side) = (800, 3.0f32);
     let h = side / n as f32;
     let landed: f64 = (0..n * n)

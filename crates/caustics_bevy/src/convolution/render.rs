@@ -5,7 +5,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use caustics_core::technique::Technique;
-use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewCausticWork};
+use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
@@ -21,7 +21,7 @@ use bevy::render::{
     },
     renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue, ViewQuery},
     sync_world::MainEntity,
-    view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
+    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
 };
 use caustics_core::convolution::ripples::mirror_images;
 use std::sync::Arc;
@@ -117,13 +117,6 @@ pub(super) struct ConvolutionPipelines {
     fullscreen: FullscreenShader,
 }
 
-/// Render world: a view's projection pipeline (single-sampled or multisampled depth).
-#[derive(Component)]
-pub(super) struct ViewPoolPipeline {
-    pipeline: CachedRenderPipelineId,
-    multisampled: bool,
-}
-
 pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "convolution.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
@@ -142,7 +135,9 @@ pub(super) fn build(app: &mut App) {
             Render,
             (
                 prepare_buffers.in_set(RenderSystems::PrepareResources),
-                prepare_view_pipelines.in_set(RenderSystems::Prepare),
+                crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>
+                    .run_if(|gpu: Res<PoolGpu>| !gpu.0.is_empty())
+                    .in_set(RenderSystems::Prepare),
             ),
         )
         .add_systems(RenderGraph, compute_floor_irradiance.before(camera_driver))
@@ -395,24 +390,6 @@ impl SpecializedRenderPipeline for ConvolutionPipelines {
     }
 }
 
-fn prepare_view_pipelines(
-    mut commands: Commands,
-    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
-    pipelines: Res<ConvolutionPipelines>,
-    mut specialized: ResMut<SpecializedRenderPipelines<ConvolutionPipelines>>,
-    cache: Res<PipelineCache>,
-    gpu: Res<PoolGpu>,
-) {
-    if gpu.0.is_empty() {
-        return;
-    }
-    for (entity, msaa) in &views {
-        let multisampled = msaa.samples() > 1;
-        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
-        commands.entity(entity).insert(ViewPoolPipeline { pipeline, multisampled });
-    }
-}
-
 /// Once per frame: every pool's heights, per-texel terms and floor irradiance, lifted
 /// to non-negative (`lift_negative_irradiance`).
 fn compute_floor_irradiance(
@@ -444,7 +421,7 @@ fn compute_floor_irradiance(
 
 /// Adds each pool's floor irradiance where the view sees its floor.
 fn project_floor_irradiance(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewPoolPipeline)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<ConvolutionPipelines>)>,
     gpu: Res<PoolGpu>,
     pipelines: Res<ConvolutionPipelines>,
     cache: Res<PipelineCache>,
@@ -453,12 +430,7 @@ fn project_floor_irradiance(
     mut ctx: RenderContext,
 ) {
     let (buffer, prepass, offset, pipeline) = view.into_inner();
-    let (Some(render_pipeline), Some(depth), Some(view_binding)) =
-        (cache.get_render_pipeline(pipeline.pipeline), prepass.depth_view(), view_uniforms.uniforms.binding())
-    else {
-        return;
-    };
-    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let bind_groups: Vec<BindGroup> = gpu
         .0
         .values()
@@ -466,25 +438,12 @@ fn project_floor_irradiance(
             let uniform = buffers.uniform.binding()?;
             Some(ctx.render_device().create_bind_group(
                 "pool_project_bind_group",
-                &layout,
-                &BindGroupEntries::sequential((view_binding.clone(), depth, uniform, buffers.irradiance.as_entire_binding())),
+                &inputs.layout,
+                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, uniform, buffers.irradiance.as_entire_binding())),
             ))
         })
         .collect();
-    if bind_groups.is_empty() {
-        return;
-    }
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    let mut pass = buffer.accumulate(ctx.command_encoder(), "pool_floor");
-    let span = diagnostics.pass_span(&mut pass, "caustics/pool_floor");
-    pass.set_pipeline(render_pipeline);
-    for bind_group in &bind_groups {
-        pass.set_bind_group(0, bind_group, &[offset.offset]);
-        pass.draw(0..3, 0..1);
-    }
-    span.end(&mut pass);
-    recorder.record("pool floor");
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, ("pool_floor", "caustics/pool_floor", "pool floor"), &recorder);
 }
 
 #[cfg(test)]

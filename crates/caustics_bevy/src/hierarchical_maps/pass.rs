@@ -1,8 +1,8 @@
 //! Render world: the passes that make each light view's caustic map once per change,
 //! and its projection into every view each frame.
 
-use super::render::{CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw, ViewCausticMapPipeline, COUNTERS_PER_VIEW};
-use crate::irradiance::ViewCausticIrradiance;
+use super::render::{CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw, COUNTERS_PER_VIEW};
+use crate::irradiance::{ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::prelude::*;
@@ -134,7 +134,7 @@ pub(super) fn make_caustic_maps(
 
 /// Adds every light view's caustic irradiance where the view sees its receivers.
 pub(super) fn project_caustic_maps(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewCausticMapPipeline)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<CausticMapPipelines>)>,
     gpu: Res<CausticMapsGpu>,
     pipelines: Res<CausticMapPipelines>,
     cache: Res<PipelineCache>,
@@ -146,35 +146,19 @@ pub(super) fn project_caustic_maps(
     if gpu.generation.is_none() || gpu.views.is_empty() {
         return;
     }
-    let (Some(render_pipeline), Some(depth), Some(normal), Some(view_binding)) = (
-        cache.get_render_pipeline(pipeline.pipeline),
-        prepass.depth_view(),
-        prepass.normal_view(),
-        view_uniforms.uniforms.binding(),
-    ) else {
-        return;
-    };
-    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
+    let Some(normal) = inputs.normal else { return };
     let bind_groups: Vec<BindGroup> = gpu
         .views
         .iter()
         .filter_map(|v| {
             Some(ctx.render_device().create_bind_group(
                 "caustic_map_project_bind_group",
-                &layout,
-                &BindGroupEntries::sequential((view_binding.clone(), depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
+                &inputs.layout,
+                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
             ))
         })
         .collect();
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    let mut pass = buffer.accumulate(ctx.command_encoder(), "caustic_map_projection");
-    let span = diagnostics.pass_span(&mut pass, "caustic_maps/projection");
-    pass.set_pipeline(render_pipeline);
-    for bind_group in &bind_groups {
-        pass.set_bind_group(0, bind_group, &[offset.offset]);
-        pass.draw(0..3, 0..1);
-    }
-    span.end(&mut pass);
-    recorder.record("caustic map projection");
+    let names = ("caustic_map_projection", "caustic_maps/projection", "caustic map projection");
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

@@ -2,7 +2,6 @@
 //! the passes (`pass.rs`) draw with.
 
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
-use crate::irradiance::ViewCausticWork;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::material::specialize::SpecializedMeshPipelineError;
@@ -20,7 +19,7 @@ use bevy::render::{
         *,
     },
     renderer::{RenderDevice, RenderGraph, RenderQueue},
-    view::{Msaa, ViewUniform},
+    view::ViewUniform,
 };
 use caustics_core::hierarchical::hierarchy::start_level;
 use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Projection, Splats};
@@ -456,13 +455,6 @@ impl CausticMapsGpu {
     }
 }
 
-/// Render world: a view's projection pipeline (single-sampled or multisampled prepass).
-#[derive(Component)]
-pub(super) struct ViewCausticMapPipeline {
-    pub(super) pipeline: CachedRenderPipelineId,
-    pub(super) multisampled: bool,
-}
-
 pub(super) fn build(app: &mut App) {
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -478,7 +470,9 @@ pub(super) fn build(app: &mut App) {
             Render,
             (
                 prepare_maps.in_set(RenderSystems::PrepareResources),
-                prepare_view_pipelines.in_set(RenderSystems::Prepare),
+                crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>
+                    .run_if(|gpu: Res<CausticMapsGpu>| !gpu.views.is_empty())
+                    .in_set(RenderSystems::Prepare),
             ),
         )
         .add_systems(RenderGraph, super::pass::make_caustic_maps.before(camera_driver))
@@ -844,22 +838,4 @@ fn prepare_maps(
         }
     }
     gpu.views = views;
-}
-
-fn prepare_view_pipelines(
-    mut commands: Commands,
-    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
-    pipelines: Res<CausticMapPipelines>,
-    mut specialized: ResMut<SpecializedRenderPipelines<CausticMapPipelines>>,
-    cache: Res<PipelineCache>,
-    gpu: Res<CausticMapsGpu>,
-) {
-    if gpu.views.is_empty() {
-        return;
-    }
-    for (entity, msaa) in &views {
-        let multisampled = msaa.samples() > 1;
-        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
-        commands.entity(entity).insert(ViewCausticMapPipeline { pipeline, multisampled });
-    }
 }

@@ -1,8 +1,8 @@
 //! Render world: the pass that draws each light's illumination textures once per
 //! change, and their projection into every view each frame.
 
-use super::render::{IlluminationPipelines, IlluminationTexturesGpu, ViewIlluminationPipeline};
-use crate::irradiance::ViewCausticIrradiance;
+use super::render::{IlluminationPipelines, IlluminationTexturesGpu};
+use crate::irradiance::{ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::prelude::*;
@@ -56,7 +56,7 @@ pub(super) fn draw_illumination_textures(
 
 /// Adds every light's illumination textures where the view sees receivers.
 pub(super) fn project_illumination_textures(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewIlluminationPipeline)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<IlluminationPipelines>)>,
     gpu: Res<IlluminationTexturesGpu>,
     pipelines: Res<IlluminationPipelines>,
     cache: Res<PipelineCache>,
@@ -68,35 +68,19 @@ pub(super) fn project_illumination_textures(
     if gpu.frames.is_empty() || gpu.dirty {
         return;
     }
-    let (Some(render_pipeline), Some(depth), Some(normal), Some(view_binding)) = (
-        cache.get_render_pipeline(pipeline.pipeline),
-        prepass.depth_view(),
-        prepass.normal_view(),
-        view_uniforms.uniforms.binding(),
-    ) else {
-        return;
-    };
-    let layout = cache.get_bind_group_layout(&pipelines.project_layouts[pipeline.multisampled as usize]);
+    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
+    let Some(normal) = inputs.normal else { return };
     let bind_groups: Vec<BindGroup> = gpu
         .frames
         .iter()
         .filter_map(|f| {
             Some(ctx.render_device().create_bind_group(
                 "illumination_project_bind_group",
-                &layout,
-                &BindGroupEntries::sequential((view_binding.clone(), depth, normal, f.uniform.binding()?, &f.array, f.surface.binding()?)),
+                &inputs.layout,
+                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, f.uniform.binding()?, &f.array, f.surface.binding()?)),
             ))
         })
         .collect();
-    let diagnostics = ctx.diagnostic_recorder();
-    let diagnostics = diagnostics.as_deref();
-    let mut pass = buffer.accumulate(ctx.command_encoder(), "illumination_projection");
-    let span = diagnostics.pass_span(&mut pass, "illumination_textures/projection");
-    pass.set_pipeline(render_pipeline);
-    for bind_group in &bind_groups {
-        pass.set_bind_group(0, bind_group, &[offset.offset]);
-        pass.draw(0..3, 0..1);
-    }
-    span.end(&mut pass);
-    recorder.record("illumination textures projection");
+    let names = ("illumination_projection", "illumination_textures/projection", "illumination textures projection");
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

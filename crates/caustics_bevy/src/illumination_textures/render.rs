@@ -2,7 +2,6 @@
 //! bind groups the passes (`pass.rs`) draw with.
 
 use super::{IlluminationFrames, IlluminationTexturesSettings, MAX_PLANES, pass};
-use crate::irradiance::ViewCausticWork;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::prelude::*;
@@ -16,7 +15,7 @@ use bevy::render::{
         *,
     },
     renderer::{RenderDevice, RenderGraph, RenderQueue},
-    view::{Msaa, ViewUniform},
+    view::ViewUniform,
 };
 use caustics_core::illumination_textures::{
     Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS, SOLID_SPANS, SeenSurface,
@@ -177,13 +176,6 @@ pub(super) struct IlluminationPipelines {
     fullscreen: FullscreenShader,
 }
 
-/// Render world: a view's projection pipeline (single-sampled or multisampled prepass).
-#[derive(Component)]
-pub(super) struct ViewIlluminationPipeline {
-    pub(super) pipeline: CachedRenderPipelineId,
-    pub(super) multisampled: bool,
-}
-
 pub(super) fn build(app: &mut App) {
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -196,7 +188,12 @@ pub(super) fn build(app: &mut App) {
         .add_systems(ExtractSchedule, extract_frames)
         .add_systems(
             Render,
-            (prepare_frames.in_set(RenderSystems::PrepareResources), prepare_view_pipelines.in_set(RenderSystems::Prepare)),
+            (
+                prepare_frames.in_set(RenderSystems::PrepareResources),
+                crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>
+                    .run_if(|gpu: Res<IlluminationTexturesGpu>| !gpu.frames.is_empty())
+                    .in_set(RenderSystems::Prepare),
+            ),
         )
         .add_systems(RenderGraph, pass::draw_illumination_textures.before(camera_driver))
         .add_systems(
@@ -348,22 +345,4 @@ fn prepare_frames(
         gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, draw_bind_group });
     }
     old.clear();
-}
-
-fn prepare_view_pipelines(
-    mut commands: Commands,
-    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
-    pipelines: Res<IlluminationPipelines>,
-    mut specialized: ResMut<SpecializedRenderPipelines<IlluminationPipelines>>,
-    cache: Res<PipelineCache>,
-    gpu: Res<IlluminationTexturesGpu>,
-) {
-    if gpu.frames.is_empty() {
-        return;
-    }
-    for (entity, msaa) in &views {
-        let multisampled = msaa.samples() > 1;
-        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
-        commands.entity(entity).insert(ViewIlluminationPipeline { pipeline, multisampled });
-    }
 }

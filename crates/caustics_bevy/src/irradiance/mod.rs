@@ -21,7 +21,7 @@ mod composite;
 use crate::components::{CausticReceiver, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
-use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::ecs::component::ComponentId;
 use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, StandardMaterial};
 use std::marker::PhantomData;
@@ -30,6 +30,7 @@ use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     camera::ExtractedCamera,
+    diagnostic::RecordDiagnostics,
     extract_component::{ExtractComponent, ExtractComponentPlugin},
     render_asset::RenderAssets,
     render_resource::{
@@ -39,7 +40,7 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery},
     sync_world::{MainEntity, RenderEntity},
     texture::{CachedTexture, GpuImage, TextureCache},
-    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
+    view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
 };
 
 pub use composite::CausticCompositePipeline;
@@ -191,6 +192,93 @@ pub fn projection_pipeline(
             })],
         }),
         ..default()
+    }
+}
+
+/// Render world: a view's pipeline for technique `P`'s fullscreen projection
+/// ([`projection_pipeline`], for a single-sampled or multisampled prepass).
+#[derive(Component)]
+pub struct ViewProjectionPipeline<P: 'static> {
+    pub pipeline: CachedRenderPipelineId,
+    pub multisampled: bool,
+    technique: PhantomData<fn() -> P>,
+}
+
+/// What a projection binds of its view: the pipeline, the prepass's depth (and normal,
+/// where the prepass has one), the view uniform and the bind group layout that fits the
+/// prepass's sampling.
+pub struct ProjectionInputs<'a> {
+    pub pipeline: &'a RenderPipeline,
+    pub depth: &'a TextureView,
+    pub normal: Option<&'a TextureView>,
+    pub view: BindingResource<'a>,
+    pub layout: BindGroupLayout,
+}
+
+impl<P: 'static> ViewProjectionPipeline<P> {
+    /// The inputs to bind, `layouts` the technique's `[single-sampled, multisampled]`
+    /// ones; `None` until the pipeline, the depth prepass and the view uniform exist.
+    pub fn inputs<'a>(
+        &self,
+        cache: &'a PipelineCache,
+        prepass: &'a ViewPrepassTextures,
+        view_uniforms: &'a ViewUniforms,
+        layouts: &[BindGroupLayoutDescriptor; 2],
+    ) -> Option<ProjectionInputs<'a>> {
+        Some(ProjectionInputs {
+            pipeline: cache.get_render_pipeline(self.pipeline)?,
+            depth: prepass.depth_view()?,
+            normal: prepass.normal_view(),
+            view: view_uniforms.uniforms.binding()?,
+            layout: cache.get_bind_group_layout(&layouts[self.multisampled as usize]),
+        })
+    }
+}
+
+/// Specializes `P`'s projection pipeline for every view with caustics work; scheduled
+/// by each technique with a run condition for when it has something to project.
+pub fn prepare_projection_pipelines<P: SpecializedRenderPipeline<Key = bool> + Resource>(
+    mut commands: Commands,
+    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
+    pipelines: Res<P>,
+    mut specialized: ResMut<SpecializedRenderPipelines<P>>,
+    cache: Res<PipelineCache>,
+) {
+    for (entity, msaa) in &views {
+        let multisampled = msaa.samples() > 1;
+        let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
+        commands.entity(entity).insert(ViewProjectionPipeline::<P> { pipeline, multisampled, technique: PhantomData });
+    }
+}
+
+impl ViewCausticIrradiance {
+    /// A technique's projection into the buffer: one fullscreen triangle per bind group
+    /// (a light view, a pool, a light's planes) with `pipeline`, `view_offset` the
+    /// view uniform's, in a render pass named `label`, timed as the span `span` and
+    /// recorded in the report as `pass`. Nothing without bind groups.
+    pub fn project(
+        &self,
+        ctx: &mut RenderContext,
+        pipeline: &RenderPipeline,
+        bind_groups: &[BindGroup],
+        view_offset: u32,
+        (label, span, pass): (&'static str, &'static str, &'static str),
+        recorder: &PassRecorder,
+    ) {
+        if bind_groups.is_empty() {
+            return;
+        }
+        let diagnostics = ctx.diagnostic_recorder();
+        let diagnostics = diagnostics.as_deref();
+        let mut render_pass = self.accumulate(ctx.command_encoder(), label);
+        let timed = diagnostics.pass_span(&mut render_pass, span);
+        render_pass.set_pipeline(pipeline);
+        for bind_group in bind_groups {
+            render_pass.set_bind_group(0, bind_group, &[view_offset]);
+            render_pass.draw(0..3, 0..1);
+        }
+        timed.end(&mut render_pass);
+        recorder.record(pass);
     }
 }
 

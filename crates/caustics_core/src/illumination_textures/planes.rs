@@ -106,24 +106,11 @@ pub struct IlluminationTextures {
 }
 
 impl IlluminationTextures {
-    /// The textures of `light` through `object` (`mesh` placed by `world_from_object`,
-    /// `table` its light transport table) onto `receivers`, drawn. `None` when no light
-    /// leaves the object towards the receivers.
-    pub fn compute(
-        table: &LightTransportTable,
-        mesh: &TriMesh,
-        world_from_object: &Affine3A,
-        light: &Light,
-        receivers: &[Receiver],
-        settings: &IlluminationSettings,
-    ) -> Option<Self> {
-        let mut textures = Self::frame(table, mesh, world_from_object, light, receivers, settings)?;
-        textures.draw();
-        Some(textures)
-    }
-
-    /// [`Self::compute`] but for the drawing: the volumes, the virtual camera, its
-    /// planes and what it sees of the receivers (§4.2).
+    /// The frame of `light`'s textures through `object` (`mesh` placed by
+    /// `world_from_object`, `table` its light transport table) onto `receivers`: the
+    /// volumes, the virtual camera, its planes and what it sees of the receivers (§4.2),
+    /// not drawn yet ([`Self::drawn`]). `None` when no light leaves the object towards
+    /// the receivers.
     pub fn frame(
         table: &LightTransportTable,
         mesh: &TriMesh,
@@ -201,6 +188,12 @@ impl IlluminationTextures {
         let flux_out = volumes.iter().map(|b| b.flux as f64).sum::<f64>() * (scale * colour) as f64;
         let light_color = light.color * scale;
         Some(Self { axis, u, v, corner, extent, size, planes, surface, volumes, light_color, flux_out })
+    }
+
+    /// The frame with its textures drawn.
+    pub fn drawn(mut self) -> Self {
+        self.draw();
+        self
     }
 
     /// Draws every volume into every plane's texture (eq. 3, accumulated): the CPU twin
