@@ -38,6 +38,16 @@ impl Light {
         Self { kind, color: Vec3::ONE, range: f32::INFINITY }
     }
 
+    /// A white linear light, a tube from `a` to `b` of total intensity `intensity`, as
+    /// `n` point lights at the middles of `n` equal pieces, each with `intensity / n`
+    /// (Iwasaki et al. Fig. 6(d)): every technique then draws it light by light.
+    pub fn linear(a: Vec3, b: Vec3, intensity: f32, n: usize) -> Vec<Self> {
+        let n = n.max(1);
+        (0..n)
+            .map(|k| Self::white(LightKind::Point { position: a.lerp(b, (k as f32 + 0.5) / n as f32), intensity: intensity / n as f32 }))
+            .collect()
+    }
+
     /// Checks that directions are non-zero and every number finite and non-negative.
     pub fn validate(&self) -> Result<(), ParamError> {
         let finite = |name, v: Vec3| {

@@ -388,3 +388,44 @@ fn a_balls_caustic_carries_the_flux_the_table_sends() {
     eprintln!("ball: the floor takes {landed:.5} of the {:.5} the table sends (the ball's cross-section: {:.5})", t.flux_out, std::f32::consts::PI * 0.35 * 0.35);
     assert!((landed / t.flux_out - 1.0).abs() < 0.01, "{landed} of {}", t.flux_out);
 }
+
+#[test]
+fn a_linear_light_is_drawn_as_point_lights_and_spreads_the_caustic_along_itself() {
+    // A glass ball under a 2 m tube along x (Fig. 6(d)), as 1, 4 and 16 point lights:
+    // the light the ball sends out stays (the tube is far against its length), the
+    // caustic on the floor stretches along the tube more than across it, and 4 points
+    // already draw it as 16 do.
+    let ball = TriMesh::uv_sphere(Vec3::ZERO, 0.3, 16, 32);
+    let table = table(&ball, 1.5, 8);
+    let place = Affine3A::from_translation(Vec3::Y);
+    let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 2.0, Vec3::X * 2.0), albedo: Vec3::ONE };
+    let settings = IlluminationSettings { planes: 2, texture_size: 128 };
+    let spread = |n: usize| {
+        let lights = Light::linear(Vec3::new(-1.0, 4.0, 0.0), Vec3::new(1.0, 4.0, 0.0), 10.0, n);
+        let frames: Vec<IlluminationTextures> = lights
+            .iter()
+            .filter_map(|l| IlluminationTextures::frame(&table, &ball, &place, l, std::slice::from_ref(&floor), &settings).map(IlluminationTextures::drawn))
+            .collect();
+        let flux: f64 = frames.iter().map(|f| f.flux_out).sum();
+        let (mut sum, mut xx, mut zz) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..200 * 200 {
+            let p = Vec3::new(-2.0 + 0.02 * (i % 200) as f32 + 0.01, 0.0, -2.0 + 0.02 * (i / 200) as f32 + 0.01);
+            let e: f32 = frames.iter().map(|f| f.irradiance_at(p, Vec3::Y, Cosine::Receiver).x).sum();
+            sum += e as f64;
+            xx += (e * p.x * p.x) as f64;
+            zz += (e * p.z * p.z) as f64;
+        }
+        (flux, (xx / sum).sqrt(), (zz / sum).sqrt())
+    };
+    let runs: Vec<(f64, f64, f64)> = [1, 4, 16].map(spread).to_vec();
+    for (n, (flux, x, z)) in [1, 4, 16].iter().zip(&runs) {
+        eprintln!("linear light as {n} points: flux out {flux:.4}, caustic RMS width {x:.3} m along it, {z:.3} m across");
+    }
+    let (point, four, sixteen) = (runs[0], runs[1], runs[2]);
+    assert!((sixteen.0 / point.0 - 1.0).abs() < 0.05, "the ball's light: {runs:?}");
+    // Measured: 0.296 → 0.417 m along the tube, 0.318 → 0.365 m across (the light
+    // spread by the ball's rim, and the tube's ends farther off).
+    assert!(sixteen.1 > 1.3 * point.1, "not stretched along the tube: {runs:?}");
+    assert!(sixteen.1 / sixteen.2 > 1.15 * point.1 / point.2, "stretched as much across the tube: {runs:?}");
+    assert!((sixteen.1 / four.1 - 1.0).abs() < 0.05, "4 and 16 points differ: {runs:?}");
+}
