@@ -91,12 +91,15 @@ struct BuildOutput {
     problems: Vec<(Entity, String)>,
 }
 
-/// Everything the planes depend on that is cheap to compare each frame.
+/// Everything the planes depend on that is cheap to compare each frame: the
+/// generators drawn with illumination textures (with their index of refraction), the
+/// meshes that receive or block their light, the lights, the settings. A build reads
+/// the meshes of exactly these.
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Inputs {
-    generators: Vec<(Entity, AssetId<Mesh>, Mat4, u32)>,
+    generators: Vec<(Entity, AssetId<Mesh>, GlobalTransform, f32)>,
     lights: Vec<Light>,
-    occluders: Vec<(AssetId<Mesh>, Mat4)>,
+    occluders: Vec<(AssetId<Mesh>, GlobalTransform)>,
     settings: Option<IlluminationTexturesSettings>,
 }
 
@@ -147,13 +150,13 @@ fn set_up_planes(
         }
         let Some(ior) = photon_ior(&generator.specular_interaction()) else { continue };
         used.insert(mesh.id());
-        next.generators.push((entity, mesh.id(), transform.to_matrix(), ior.to_bits()));
+        next.generators.push((entity, mesh.id(), *transform, ior));
     }
     if !next.generators.is_empty() {
         for ((mesh, transform, visible, _), receiver, no_shadows) in &occluders {
             if blocks_caustic_light(visible, receiver, no_shadows) {
                 used.insert(mesh.id());
-                next.occluders.push((mesh.id(), transform.to_matrix()));
+                next.occluders.push((mesh.id(), *transform));
             }
         }
         next.lights = lights
@@ -222,11 +225,8 @@ fn set_up_planes(
     // The build's inputs: generators in their own frame, receivers in the world's.
     let mut inputs = Vec::new();
     let mut keys = HashSet::new();
-    for (entity, generator, choice, (mesh3d, transform, visible, _)) in &generators {
-        if choice.technique() != Technique::IlluminationTextures || !visible.get() {
-            continue;
-        }
-        let (Some(mesh), Some(ior)) = (meshes.get(&mesh3d.0), photon_ior(&generator.specular_interaction())) else { continue };
+    for &(entity, mesh_id, transform, ior) in &next.generators {
+        let Some(mesh) = meshes.get(mesh_id) else { continue };
         let (scale, rotation, translation) = transform.to_scale_rotation_translation();
         // A turning object's scale comes back from its matrix a rounding off: to five
         // digits, it keeps its table.
@@ -240,7 +240,7 @@ fn set_up_planes(
                 continue;
             }
         };
-        let key = TableKey { mesh: mesh3d.id(), scale: scale.to_array().map(f32::to_bits), ior: ior.to_bits(), directions: settings.table_directions };
+        let key = TableKey { mesh: mesh_id, scale: scale.to_array().map(f32::to_bits), ior: ior.to_bits(), directions: settings.table_directions };
         keys.insert(key);
         let world_from_object = Affine3A::from_rotation_translation(
             caustics_core::glam::Quat::from_array(rotation.to_array()),
@@ -250,17 +250,12 @@ fn set_up_planes(
     }
     // Tables no generator uses any more are let go.
     tables.tables.retain(|key, _| keys.contains(key));
-    let mut receivers = Vec::new();
-    if !inputs.is_empty() {
-        for ((mesh3d, transform, visible, _), receiver, no_shadows) in &occluders {
-            if !blocks_caustic_light(visible, receiver, no_shadows) {
-                continue;
-            }
-            if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
-                receivers.push(Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE });
-            }
-        }
-    }
+    let receivers: Vec<Receiver> = next
+        .occluders
+        .iter()
+        .filter_map(|(mesh, transform)| meshes.get(*mesh).and_then(|m| core_mesh(m, transform).ok()))
+        .map(|mesh| Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE })
+        .collect();
     let lights = next.lights;
     let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
     state.running = Some(AsyncComputeTaskPool::get().spawn(async move {

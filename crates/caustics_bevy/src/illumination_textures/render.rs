@@ -18,7 +18,7 @@ use bevy::render::{
     view::ViewUniform,
 };
 use caustics_core::illumination_textures::{
-    Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS, SOLID_SPANS, SeenSurface,
+    Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS, SeenSurface,
 };
 use std::sync::Arc;
 
@@ -72,13 +72,12 @@ impl From<&IlluminationVolume> for GpuVolume {
 /// A texel of the virtual camera's depth map as `types.wgsl` reads it: three `vec4`s,
 /// (normal, depth) then the solid spans' (in, out) pairs, [`FAR`] for none.
 fn surface_texel(seen: &Option<SeenSurface>) -> [Vec4; 3] {
-    let far = |d: f32| d.min(FAR);
     match seen {
         None => [Vec4::new(0.0, 0.0, 0.0, FAR), Vec4::splat(FAR), Vec4::splat(FAR)],
         Some(s) => {
-            let spans: Vec<f32> = s.solid.iter().flat_map(|&(a, b)| [far(a), far(b)]).collect();
-            debug_assert_eq!(spans.len(), 2 * SOLID_SPANS);
-            [to_vec4(s.normal).with_w(s.depth), Vec4::from_slice(&spans[0..4]), Vec4::from_slice(&spans[4..8])]
+            // `SOLID_SPANS` is the four spans `types.wgsl` reads, two to a `vec4`.
+            let [(a0, b0), (a1, b1), (a2, b2), (a3, b3)] = s.solid.map(|(a, b)| (a.min(FAR), b.min(FAR)));
+            [to_vec4(s.normal).with_w(s.depth), Vec4::new(a0, b0, a1, b1), Vec4::new(a2, b2, a3, b3)]
         }
     }
 }
@@ -302,7 +301,7 @@ fn prepare_frames(
     gpu.generation = Some(extracted.generation);
     gpu.dirty = true;
     let layout = cache.get_bind_group_layout(&pipelines.draw_layout);
-    let mut old = std::mem::take(&mut gpu.frames);
+    let old = std::mem::take(&mut gpu.frames);
     for (k, t) in extracted.frames.iter().enumerate() {
         let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine));
         uniform.write_buffer(&device, &queue);
@@ -344,5 +343,4 @@ fn prepare_frames(
             device.create_bind_group("illumination_draw_bind_group", &layout, &BindGroupEntries::sequential((frame_binding, volume_binding, surface_binding)));
         gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, draw_bind_group });
     }
-    old.clear();
 }

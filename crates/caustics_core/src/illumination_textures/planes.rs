@@ -91,7 +91,8 @@ pub struct IlluminationTextures {
     pub size: u32,
     /// Depth along `axis`, and after [`Self::draw`] the texture (empty before).
     pub planes: Vec<IlluminationPlane>,
-    /// The nearest receiver along the axis through each texel: depth and normal.
+    /// What the virtual camera sees through each texel: the nearest receiver, its
+    /// normal and the solid spans behind it.
     pub surface: Vec<Option<SeenSurface>>,
     /// One per lit triangle of the object, with the flux it carries in units of
     /// `light_color`'s irradiance.
@@ -245,11 +246,11 @@ impl IlluminationTextures {
     /// plane. The light is followed back through the virtual camera's depth map, texel
     /// by texel: it is stopped in a texel whose surface it crosses there, from behind
     /// (deeper than the surface plus a slack of [`SHADOW_SLACK_TEXELS`] times `n`'s
-    /// slope) to in front of where the solid behind it ends, for each solid span the
-    /// texel holds. Light along the axis
-    /// never leaves its texel, and this is the paper's rule (a point the virtual camera
-    /// does not see is in shadow); askew light can pass under an ear or an overhang,
-    /// and be stopped by a surface the camera sees elsewhere.
+    /// slope in its own texel) to in front of where the solid behind it ends, for each
+    /// solid span the texel holds. Light along the axis never leaves its texel, and this
+    /// is the paper's rule (a point the virtual camera does not see is in shadow);
+    /// askew light can pass under an ear or an overhang, and be stopped by a surface
+    /// the camera sees elsewhere.
     pub fn shadowed(&self, q: Vec2, z: f32, r: Vec3, n: Vec3) -> bool {
         let along = r.dot(self.axis);
         if along.is_nan() || along <= 0.0 {
@@ -275,7 +276,7 @@ impl IlluminationTextures {
                 .map(|k| if across[k] > 0.0 { (cell[k] + 1.0 - q[k]) / across[k] } else if across[k] < 0.0 { (cell[k] - q[k]) / across[k] } else { f32::INFINITY });
             let leave = exit[0].min(exit[1]).min(to_top);
             // The point's own texel: whether it is the surface seen there, by its own
-            // slope; others: whether the light crosses their surface, by theirs.
+            // slope; others: whether the light crosses a solid span, with the flat slack.
             if let Some(seen) = self.surface[index] {
                 let slack = slack(if climbed == 0.0 { n } else { self.axis });
                 let (deep, shallow) = (z - climbed, z - leave);
