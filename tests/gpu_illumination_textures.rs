@@ -15,7 +15,7 @@ use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::render_resource::TextureFormat;
-use bevy_caustics::headless::{HeadlessRenderer, f16_to_f32};
+use bevy_caustics::headless::{HeadlessRenderer, decode_rgba16f};
 use bevy_caustics::illumination_textures::{IlluminationFrames, IlluminationTexturesGpu, IlluminationTexturesSettings, LightTransportTables};
 use bevy_caustics::reference::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
@@ -93,33 +93,13 @@ fn render_textures(renderer: &mut HeadlessRenderer, frames: u32) {
 
 /// Frame `index`'s texture array read back: every plane's texels, row-major.
 fn read_textures(renderer: &mut HeadlessRenderer, index: usize) -> Vec<Vec<V4>> {
-    use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType, TexelCopyBufferInfo, TexelCopyBufferLayout};
-    use bevy::render::renderer::{RenderDevice, RenderQueue};
     let texture = gpu(renderer).textures(index).expect("the textures are on the GPU").clone();
-    let world = renderer.app.sub_app_mut(RenderApp).world_mut();
-    let (device, queue) = (world.resource::<RenderDevice>().clone(), world.resource::<RenderQueue>().clone());
-    let (width, layers) = (texture.width(), texture.depth_or_array_layers());
-    // Rows padded to wgpu's copy alignment (256 bytes).
-    let row = (texture.format().block_copy_size(None).unwrap() * width).next_multiple_of(256);
-    let size = (row * width * layers) as u64;
-    let staging = device.create_buffer(&BufferDescriptor { label: Some("test_readback"), size, usage: BufferUsages::COPY_DST | BufferUsages::MAP_READ, mapped_at_creation: false });
-    let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
-    let layout = TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(width) };
-    encoder.copy_texture_to_buffer(texture.as_image_copy(), TexelCopyBufferInfo { buffer: &staging, layout }, texture.size());
-    queue.submit([encoder.finish()]);
-    let slice = staging.slice(..);
-    slice.map_async(MapMode::Read, |mapped| mapped.expect("the readback buffer maps"));
-    device.poll(PollType::wait_indefinitely()).expect("the GPU finishes");
-    let bytes = slice.get_mapped_range();
-    let texel = match texture.format() {
-        TextureFormat::Rgba32Float => |t: &[u8]| V4::from_array(std::array::from_fn(|c| f32::from_le_bytes(t[4 * c..4 * c + 4].try_into().unwrap()))),
-        _ => |t: &[u8]| V4::from_array(std::array::from_fn(|c| f16_to_f32(u16::from_le_bytes([t[2 * c], t[2 * c + 1]])))),
+    let bytes = renderer.read_texture(&texture).unwrap_or_else(|e| panic!("{e}"));
+    let texels: Vec<V4> = match texture.format() {
+        TextureFormat::Rgba32Float => bytes.chunks_exact(16).map(|t| V4::from_array(std::array::from_fn(|c| f32::from_le_bytes(t[4 * c..4 * c + 4].try_into().unwrap())))).collect(),
+        _ => decode_rgba16f(&bytes).into_iter().map(|e| V4::from_array(e.to_array())).collect(),
     };
-    let bytes_per_texel = texture.format().block_copy_size(None).unwrap() as usize;
-    bytes
-        .chunks_exact((row * width) as usize)
-        .map(|layer| layer.chunks_exact(row as usize).flat_map(|r| r[..bytes_per_texel * width as usize].chunks_exact(bytes_per_texel).map(texel)).collect())
-        .collect()
+    texels.chunks_exact((texture.width() * texture.height()) as usize).map(<[V4]>::to_vec).collect()
 }
 
 /// The main world's first frame, drawn on the CPU: the twin.

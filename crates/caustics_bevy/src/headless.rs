@@ -243,8 +243,6 @@ impl HeadlessRenderer {
     /// view had no caustics work.
     pub fn caustic_irradiance(&mut self, camera: Entity) -> Result<Vec<Vec3>, HeadlessError> {
         use crate::irradiance::ViewCausticIrradiance;
-        use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
-        use bevy::render::renderer::{RenderDevice, RenderQueue};
         use bevy::render::sync_world::RenderEntity;
         let world = self.app.world();
         let exposure = world.get::<bevy::camera::Exposure>(camera).copied().unwrap_or_default().exposure();
@@ -254,13 +252,25 @@ impl HeadlessRenderer {
             return Ok(vec![Vec3::ZERO; (self.width * self.height) as usize]);
         };
         let texture = view.texture.texture.clone();
-        let (width, height) = (texture.width(), texture.height());
+        let bytes = self.read_texture(&texture)?;
+        Ok(decode_rgba16f(&bytes).into_iter().map(|e| e.truncate() / exposure).collect())
+    }
+
+    /// A texture of the render world read back: every layer's rows, top first, packed
+    /// (without wgpu's row padding), in the texture's own format.
+    pub fn read_texture(&mut self, texture: &bevy::render::render_resource::Texture) -> Result<Vec<u8>, HeadlessError> {
+        use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
+        use bevy::render::renderer::{RenderDevice, RenderQueue};
+        let render_world = self.app.sub_app_mut(bevy::render::RenderApp).world_mut();
+        let (width, height, layers) = (texture.width(), texture.height(), texture.depth_or_array_layers());
+        let texel = texture.format().block_copy_size(None).ok_or_else(|| HeadlessError::Readback(format!("{:?} cannot be copied", texture.format())))?;
         let (device, queue) = (render_world.resource::<RenderDevice>().clone(), render_world.resource::<RenderQueue>().clone());
-        // Rows padded to wgpu's copy alignment, 8 bytes a pixel.
-        let row = (8 * width).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        // Rows padded to wgpu's copy alignment.
+        let packed = texel * width;
+        let row = packed.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
         let usage = BufferUsages::COPY_DST | BufferUsages::MAP_READ;
-        let size = (row * height) as u64;
-        let staging = device.create_buffer(&BufferDescriptor { label: Some("caustic_irradiance_readback"), size, usage, mapped_at_creation: false });
+        let size = (row * height * layers) as u64;
+        let staging = device.create_buffer(&BufferDescriptor { label: Some("headless_texture_readback"), size, usage, mapped_at_creation: false });
         let mut encoder = device.create_command_encoder(&CommandEncoderDescriptor::default());
         encoder.copy_texture_to_buffer(
             texture.as_image_copy(),
@@ -281,14 +291,10 @@ impl HeadlessRenderer {
         });
         device.poll(PollType::wait_indefinitely()).map_err(|e| HeadlessError::Readback(e.to_string()))?;
         if mapped.lock().ok().and_then(|s| *s) != Some(true) {
-            return Err(HeadlessError::Readback("the caustic irradiance buffer did not map".into()));
+            return Err(HeadlessError::Readback("the texture's readback buffer did not map".into()));
         }
         let bytes = slice.get_mapped_range();
-        Ok(bytes
-            .chunks_exact(row as usize)
-            .flat_map(|r| decode_rgba16f(&r[..(8 * width) as usize]))
-            .map(|e| e.truncate() / exposure)
-            .collect())
+        Ok(bytes.chunks_exact(row as usize).flat_map(|r| &r[..packed as usize]).copied().collect())
     }
 
     /// The first pipeline whose shader did not compile or whose pipeline was refused,
@@ -310,7 +316,7 @@ impl HeadlessRenderer {
 }
 
 /// Rgba16Float bytes to linear RGBA.
-fn decode_rgba16f(bytes: &[u8]) -> Vec<Vec4> {
+pub fn decode_rgba16f(bytes: &[u8]) -> Vec<Vec4> {
     bytes
         .chunks_exact(8)
         .map(|p| Vec4::from_array(std::array::from_fn(|c| f16_to_f32(u16::from_le_bytes([p[2 * c], p[2 * c + 1]])))))
