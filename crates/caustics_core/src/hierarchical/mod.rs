@@ -20,16 +20,18 @@
 //! each.
 
 pub mod caustic_map;
+pub mod generator_bvh;
 pub mod hierarchy;
 pub mod light_maps;
 pub mod light_view;
 pub mod photons;
 
 pub use caustic_map::{CausticMap, SplatStats};
+pub use generator_bvh::GeneratorBvh;
 pub use hierarchy::{GatherEntry, GatherStats, PhotonPyramid};
 pub use light_maps::LightMaps;
 pub use light_view::{LightView, Projection};
-pub use photons::{Photon, PhotonBuffer, PhotonStats};
+pub use photons::{PathTracer, Photon, PhotonBuffer, PhotonMaterial, PhotonStats};
 
 use crate::params::ParamError;
 use crate::scene::{Light, LightKind, Scene};
@@ -88,6 +90,18 @@ pub enum LevelOverflow {
     Clamp,
 }
 
+/// How a photon crosses the generators past the surface the light meets first.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PhotonPaths {
+    /// In at the front map, out at the back map (Wyman 2008 §3 after Wyman 2005):
+    /// exact for a convex refractor alone, no light from one generator to another.
+    #[default]
+    ImageSpace,
+    /// Past the paper: traced through the generators' triangles, every interface of a
+    /// concave body and every generator on the way ([`photons`]).
+    Traced,
+}
+
 /// Everything one light view's caustic map is made with.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CausticMapSettings {
@@ -97,8 +111,9 @@ pub struct CausticMapSettings {
     pub map_resolution: u32,
     pub gather: Gather,
     pub splats: Splats,
-    /// Refinements of a photon's exit point from a closed refractor.
+    /// Refinements of a photon's exit point from a closed refractor (image space).
     pub exit_iterations: u32,
+    pub paths: PhotonPaths,
 }
 
 impl Default for CausticMapSettings {
@@ -112,11 +127,21 @@ impl Default for CausticMapSettings {
             gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
             splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
             exit_iterations: 4,
+            paths: PhotonPaths::ImageSpace,
         }
     }
 }
 
 impl CausticMapSettings {
+    /// How [`PhotonBuffer::trace`] follows photons under these settings: through `bvh`
+    /// (the scene's [`GeneratorBvh`]) when they are traced and it is given.
+    pub fn path_tracer<'a>(&self, bvh: Option<&'a GeneratorBvh>) -> PathTracer<'a> {
+        match (self.paths, bvh) {
+            (PhotonPaths::Traced, Some(bvh)) => PathTracer::traced(bvh),
+            _ => PathTracer::ImageSpace { exit_iterations: self.exit_iterations },
+        }
+    }
+
     /// Checks the resolutions (powers of two within range) and the fixed splat size.
     pub fn validate(&self) -> Result<(), ParamError> {
         for (name, value) in [("photon resolution", self.photon_resolution), ("caustic map resolution", self.map_resolution)] {
@@ -183,16 +208,19 @@ pub struct ViewCaustics {
 impl ViewCaustics {
     /// Runs every stage for `view` of `light` in `scene`.
     pub fn compute(scene: &Scene, light: &Light, view: &LightView, settings: &CausticMapSettings) -> Self {
-        let clock = Instant::now();
-        let maps = LightMaps::ray_cast(scene, view, settings.photon_resolution, settings.map_resolution);
-        Self::from_maps(scene, light, view, settings, maps, clock.elapsed().as_secs_f64())
+        Self::compute_drawn(scene, light, view, settings, &|_| true)
     }
 
-    /// Runs the stages after the light maps (given, e.g. read back from a GPU).
-    pub fn from_maps(scene: &Scene, light: &Light, view: &LightView, settings: &CausticMapSettings, maps: LightMaps, light_maps: f64) -> Self {
-        let materials: Vec<_> = scene.generators.iter().map(|g| g.interaction).collect();
+    /// [`Self::compute`] of the light that meets the generators `drawn(index)` picks
+    /// first ([`PhotonMaterial::drawn_here`]); the others are drawn by other techniques.
+    pub fn compute_drawn(scene: &Scene, light: &Light, view: &LightView, settings: &CausticMapSettings, drawn: &dyn Fn(usize) -> bool) -> Self {
         let clock = Instant::now();
-        let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.exit_iterations);
+        let maps = LightMaps::ray_cast(scene, view, settings.photon_resolution, settings.map_resolution);
+        let light_maps = clock.elapsed().as_secs_f64();
+        let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
+        let clock = Instant::now();
+        let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
+        let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.path_tracer(bvh.as_ref()));
         let traced = clock.elapsed().as_secs_f64();
         Self::from_photons(light, view, settings, maps, photons, StageTimes { light_maps, photons: traced, ..StageTimes::default() })
     }

@@ -14,12 +14,21 @@
 //! medium. It then marches the receiver map texel by texel (a DDA through the light's
 //! view) to the first texel where it passes behind the receiver surface, and lands
 //! there. [`trace_photon`] is the CPU twin of the GPU's photon kernel.
+//!
+//! Past the paper, [`PhotonPaths::Traced`] follows each photon from its front-map
+//! surface through the generators' triangles ([`GeneratorBvh`]) instead: every
+//! interface it meets, in and out of a concave body as often as it crosses one,
+//! reflected inside past the critical angle, and on through other generators — a
+//! mirror that the light of a glass body falls on, a glass ball behind a window —
+//! until it reaches a receiver in the receiver map. The image-space pair sees one
+//! entry and the farthest exit, which is exact for a convex refractor alone.
 
+use super::generator_bvh::GeneratorBvh;
 use super::light_maps::{LightMaps, NO_SURFACE};
 use super::light_view::{LightView, Projection};
 use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_transmittance, reflect, refract};
 use crate::params::SpecularInteraction;
-use crate::scene::Light;
+use crate::scene::{Generator, Light, Sides};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -60,6 +69,12 @@ pub enum PhotonFate {
     TotalInternalReflection,
     /// It leaves the light's view before reaching a receiver.
     LeftMap,
+    /// Its light falls first on a generator another technique draws.
+    DrawnElsewhere,
+    /// A traced path met the back of a one-sided surface, which absorbs.
+    Absorbed,
+    /// A traced path met more than [`MAX_PATH_EVENTS`] interfaces.
+    Trapped,
 }
 
 /// Counts and flux (in photon units, f64) of a photon buffer by fate.
@@ -79,6 +94,10 @@ pub struct PhotonStats {
     pub flux_total_internal_reflection: f64,
     /// Flux that left the view.
     pub flux_left_map: f64,
+    /// Traced paths absorbed by a one-sided surface's back or cut after
+    /// [`MAX_PATH_EVENTS`] interfaces, and their flux.
+    pub lost_on_path: u64,
+    pub flux_lost_on_path: f64,
 }
 
 impl PhotonStats {
@@ -98,8 +117,12 @@ impl PhotonStats {
                 self.left_map += 1;
                 self.flux_left_map += carried as f64;
             }
+            PhotonFate::Absorbed | PhotonFate::Trapped => {
+                self.lost_on_path += 1;
+                self.flux_lost_on_path += carried as f64;
+            }
             PhotonFate::Shadowed => self.shadowed += 1,
-            PhotonFate::NoGenerator | PhotonFate::OutsideCone => {}
+            PhotonFate::NoGenerator | PhotonFate::OutsideCone | PhotonFate::DrawnElsewhere => {}
         }
         self
     }
@@ -114,6 +137,8 @@ impl PhotonStats {
         self.flux_caustic += o.flux_caustic;
         self.flux_total_internal_reflection += o.flux_total_internal_reflection;
         self.flux_left_map += o.flux_left_map;
+        self.lost_on_path += o.lost_on_path;
+        self.flux_lost_on_path += o.flux_lost_on_path;
         self
     }
 }
@@ -132,19 +157,70 @@ pub fn photon_ior(interaction: &SpecularInteraction) -> Option<f32> {
     interaction.ior_at(RGB_WAVELENGTHS_UM[1])
 }
 
+/// What a photon meets at a generator.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhotonMaterial {
+    /// [`photon_ior`]: `None` for a mirror.
+    pub ior: Option<f32>,
+    /// Whether the back of its faces, reached from outside, absorbs
+    /// ([`Sides::Front`]): only traced paths reach it.
+    pub one_sided: bool,
+    /// Whether this caustic map carries the light that falls on it first. A generator
+    /// another technique draws still shadows, reflects and refracts the photons that
+    /// reach it along a traced path.
+    pub drawn_here: bool,
+}
+
+impl PhotonMaterial {
+    /// Every generator of a scene, each drawn here where `drawn_here(index)` says so.
+    pub fn of_generators(generators: &[Generator], drawn_here: impl Fn(usize) -> bool) -> Vec<Self> {
+        generators
+            .iter()
+            .enumerate()
+            .map(|(i, g)| Self { ior: photon_ior(&g.interaction), one_sided: g.sides() == Sides::Front, drawn_here: drawn_here(i) })
+            .collect()
+    }
+}
+
+/// Interfaces a traced path may cross, the tracer's default depth (the light's entry
+/// into a ball and its exit are two).
+pub const MAX_PATH_EVENTS: u32 = 8;
+
+/// How photons find their way through the generators past the surface the front map
+/// saw.
+#[derive(Clone, Copy, Debug)]
+pub enum PathTracer<'a> {
+    /// The image-space pair (Wyman 2005): out where the back map sees the far side,
+    /// refined `exit_iterations` times.
+    ImageSpace { exit_iterations: u32 },
+    /// Traced through the generators' triangles; `epsilon` lifts each new ray off the
+    /// surface it leaves.
+    Traced { bvh: &'a GeneratorBvh, epsilon: f32 },
+}
+
+impl<'a> PathTracer<'a> {
+    /// A traced path through `bvh`, lifted off surfaces by 2·10⁻⁵ of the generators'
+    /// extent (the tracer's offset).
+    pub fn traced(bvh: &'a GeneratorBvh) -> Self {
+        let extent = bvh.nodes.first().map_or(1.0, |root| {
+            let (lo, hi) = (Vec3::from_array(root.min), Vec3::from_array(root.max));
+            (hi - lo).max_element().max(lo.abs().max_element()).max(hi.abs().max_element()).max(1e-6)
+        });
+        Self::Traced { bvh, epsilon: 2e-5 * extent }
+    }
+}
+
 impl PhotonBuffer {
-    /// Traces every texel of `maps` (materials indexed by the maps' `material`), with
-    /// `exit_iterations` refinements of each exit point.
-    pub fn trace(maps: &LightMaps, view: &LightView, materials: &[SpecularInteraction], light: &Light, exit_iterations: u32) -> Self {
+    /// Traces every texel of `maps` (materials indexed by the maps' `material`).
+    pub fn trace(maps: &LightMaps, view: &LightView, materials: &[PhotonMaterial], light: &Light, paths: PathTracer) -> Self {
         let n = maps.photon_resolution;
-        let iors: Vec<Option<f32>> = materials.iter().map(photon_ior).collect();
         let (photons, stats): (Vec<Vec<Photon>>, Vec<PhotonStats>) = (0..n)
             .into_par_iter()
             .map(|y| {
                 let mut stats = PhotonStats::default();
                 let row = (0..n)
                     .map(|x| {
-                        let traced = trace_photon(maps, view, &iors, light, x, y, exit_iterations);
+                        let traced = trace_photon(maps, view, materials, light, x, y, paths);
                         stats = stats.add(traced.fate, traced.flux_at_generator, traced.flux);
                         traced.photon()
                     })
@@ -190,21 +266,23 @@ impl TracedPhoton {
     }
 }
 
-/// The photon of texel `(x, y)`: `iors[material]` is a generator's index of refraction,
-/// `None` for a mirror.
-pub fn trace_photon(
-    maps: &LightMaps,
-    view: &LightView,
-    iors: &[Option<f32>],
-    light: &Light,
-    x: u32,
-    y: u32,
-    exit_iterations: u32,
-) -> TracedPhoton {
+/// Where a photon lands: the receiver point, the last generator point it left from,
+/// the flux it carries and the path length between its first surface and that point;
+/// or its fate and flux where it does not.
+type Landing = Result<(Vec3, Vec3, f32, f32), (PhotonFate, f32)>;
+
+/// The photon of texel `(x, y)`: `materials` indexed by the maps' generator index.
+pub fn trace_photon(maps: &LightMaps, view: &LightView, materials: &[PhotonMaterial], light: &Light, x: u32, y: u32, paths: PathTracer) -> TracedPhoton {
     let resolution = maps.photon_resolution;
     let front = maps.front(x, y);
     if !front.is_surface() {
         return TracedPhoton::lost(PhotonFate::NoGenerator, 0.0, 0.0);
+    }
+    let Some(&material) = materials.get(front.material as usize) else {
+        return TracedPhoton::lost(PhotonFate::NoGenerator, 0.0, 0.0);
+    };
+    if !material.drawn_here {
+        return TracedPhoton::lost(PhotonFate::DrawnElsewhere, 0.0, 0.0);
     }
     let uv = LightView::texel_center(x, y, resolution);
     // Past the paper, whose front map sees generators alone: a surface nearer the light
@@ -220,55 +298,122 @@ pub fn trace_photon(
     if weight <= 0.0 {
         return TracedPhoton::lost(PhotonFate::OutsideCone, 0.0, 0.0);
     }
-    let forward = view.forward;
-    let p1 = ray_origin + dir * ((front.depth - view.depth(ray_origin)) / dir.dot(forward));
-    let n1 = if front.normal.dot(dir) > 0.0 { -front.normal } else { front.normal };
-    let Some(&ior) = iors.get(front.material as usize) else {
-        return TracedPhoton::lost(PhotonFate::NoGenerator, 0.0, 0.0);
+    let p1 = ray_origin + dir * ((front.depth - view.depth(ray_origin)) / dir.dot(view.forward));
+    let landing = match paths {
+        PathTracer::ImageSpace { exit_iterations } => image_space_path(maps, view, material, (x, y), p1, dir, weight, exit_iterations),
+        PathTracer::Traced { bvh, epsilon } => traced_path(maps, view, materials, bvh, epsilon, (p1, front.material, front.normal), dir, weight),
     };
-    let (origin, out, flux) = match ior {
+    let (hit, last, flux, travelled) = match landing {
+        Ok(landed) => landed,
+        Err((fate, flux)) => return TracedPhoton::lost(fate, weight, flux),
+    };
+    match view.uv(hit) {
+        Some(uv) if (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y) => {
+            // A point or spot light's range fades the photon by its whole path.
+            let path = light.position().map_or(0.0, |l| (p1 - l).length() + travelled + (hit - last).length());
+            TracedPhoton {
+                fate: PhotonFate::Caustic,
+                hit,
+                uv: uv.min(Vec2::splat(ONE_BELOW)),
+                flux_at_generator: weight,
+                flux: flux * light.range_attenuation(path),
+                solid_angle: beam * view.texel_measure(resolution),
+            }
+        }
+        _ => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
+    }
+}
+
+/// The image-space pair: a mirror reflects at `p1`; a refractor bends the light in
+/// there and, where the back map sees its far side behind, out there.
+#[allow(clippy::too_many_arguments)]
+fn image_space_path(
+    maps: &LightMaps,
+    view: &LightView,
+    material: PhotonMaterial,
+    (x, y): (u32, u32),
+    p1: Vec3,
+    dir: Vec3,
+    weight: f32,
+    exit_iterations: u32,
+) -> Landing {
+    let front = maps.front(x, y);
+    let n1 = if front.normal.dot(dir) > 0.0 { -front.normal } else { front.normal };
+    let (origin, out, flux) = match material.ior {
         None => (p1, reflect(dir, n1), weight),
         Some(ior) => {
             let Refraction::Transmitted(t1) = refract(dir, n1, 1.0 / ior) else {
-                return TracedPhoton::lost(PhotonFate::TotalInternalReflection, weight, weight);
+                return Err((PhotonFate::TotalInternalReflection, weight));
             };
             let flux = weight * fresnel_transmittance(dir.dot(n1), 1.0 / ior);
             let back = maps.back(x, y);
             if back.is_surface() && back.depth > front.depth {
                 let (d, normal) = exit_distance(maps, view, p1, front.depth, t1, back, exit_iterations);
-                let p2 = p1 + t1 * d;
                 match refract(t1, normal, ior) {
-                    Refraction::Transmitted(t2) => (p2, t2, flux * fresnel_transmittance(t1.dot(normal), ior)),
-                    Refraction::TotalInternalReflection => {
-                        return TracedPhoton::lost(PhotonFate::TotalInternalReflection, weight, flux);
-                    }
+                    Refraction::Transmitted(t2) => (p1 + t1 * d, t2, flux * fresnel_transmittance(t1.dot(normal), ior)),
+                    Refraction::TotalInternalReflection => return Err((PhotonFate::TotalInternalReflection, flux)),
                 }
             } else {
                 (p1, t1, flux)
             }
         }
     };
-    match march_receivers(maps, view, origin, out) {
-        Some(hit) => match view.uv(hit) {
-            Some(uv) if (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y) => TracedPhoton {
-                fate: PhotonFate::Caustic,
-                hit,
-                uv: uv.min(Vec2::splat(ONE_BELOW)),
-                flux_at_generator: weight,
-                // A point or spot light's range fades the photon by its whole path.
-                flux: flux * light.range_attenuation(path_length(light, p1, origin, hit)),
-                solid_angle: beam * view.texel_measure(resolution),
-            },
-            _ => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
-        },
-        None => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
+    match march_receivers(maps, view, origin, out, f32::INFINITY) {
+        Some(hit) => Ok((hit, origin, flux, (origin - p1).length())),
+        None => Err((PhotonFate::LeftMap, flux)),
     }
 }
 
-/// The path length from `light` through the generator entry `p1` and exit `p2` (the
-/// same point for one interface) to the receiver `hit`; 0 from a directional light.
-fn path_length(light: &Light, p1: Vec3, p2: Vec3, hit: Vec3) -> f32 {
-    light.position().map_or(0.0, |l| (p1 - l).length() + (p2 - p1).length() + (hit - p2).length())
+/// A traced path from `p1` on generator `material` (smooth normal `normal` there, as
+/// the front map holds it, standing in for the geometric one at this first surface):
+/// at every interface a mirror reflects, a refractor transmits its Fresnel fraction or,
+/// past the critical angle, reflects all of it inside (the tracer's transmitted branch
+/// and, at total internal reflection, its only one). The photon lands where its ray
+/// reaches a receiver in the receiver map before any generator triangle.
+#[allow(clippy::too_many_arguments)]
+fn traced_path(
+    maps: &LightMaps,
+    view: &LightView,
+    materials: &[PhotonMaterial],
+    bvh: &GeneratorBvh,
+    epsilon: f32,
+    (p1, material, normal): (Vec3, u32, Vec3),
+    mut dir: Vec3,
+    mut flux: f32,
+) -> Landing {
+    let (mut p, mut travelled) = (p1, 0.0f32);
+    let (mut material, mut ns, mut ng) = (material, normal, normal);
+    for _ in 0..MAX_PATH_EVENTS {
+        let Some(m) = materials.get(material as usize) else { return Err((PhotonFate::NoGenerator, flux)) };
+        if m.one_sided && dir.dot(ng) > 0.0 {
+            return Err((PhotonFate::Absorbed, flux));
+        }
+        let n = if ns.dot(dir) > 0.0 { -ns } else { ns };
+        dir = match m.ior {
+            None => reflect(dir, n),
+            Some(ior) => {
+                let eta = if dir.dot(ng) < 0.0 { 1.0 / ior } else { ior };
+                match refract(dir, n, eta) {
+                    Refraction::Transmitted(t) => {
+                        flux *= fresnel_transmittance(dir.dot(n), eta);
+                        t
+                    }
+                    Refraction::TotalInternalReflection => reflect(dir, n),
+                }
+            }
+        };
+        // Leave the surface on the side the new direction goes.
+        let side = if dir.dot(ng) >= 0.0 { ng } else { -ng };
+        let origin = p + side * epsilon;
+        let next = bvh.intersect(origin, dir, 0.0, f32::INFINITY);
+        if let Some(hit) = march_receivers(maps, view, origin, dir, next.map_or(f32::INFINITY, |h| h.t)) {
+            return Ok((hit, origin, flux, travelled));
+        }
+        let Some(next) = next else { return Err((PhotonFate::LeftMap, flux)) };
+        (p, travelled) = (origin + dir * next.t, travelled + next.t);
+        (material, ns, ng) = (next.generator, next.normal, next.geometric_normal);
+    }
+    Err((PhotonFate::Trapped, flux))
 }
 
 /// How much nearer the light than a generator a receiver must be to shadow it (view
@@ -343,11 +488,12 @@ fn crossing(view: &LightView, o: Vec3, v: Vec3, axis: usize, boundary: f32) -> f
     if den.abs() < 1e-20 || d < 0.0 { f32::INFINITY } else { d }
 }
 
-/// The first point along `origin + d·dir` (d ≥ 0) that lies behind the receiver
-/// surface in the receiver map, texel by texel; `None` when the ray leaves the view
-/// first (or runs into the light). Each texel holds its receiver's depth at its centre:
+/// The first point along `origin + d·dir` (0 ≤ d ≤ `reach`) that lies behind the
+/// receiver surface in the receiver map, texel by texel; `None` when the ray leaves the
+/// view first, runs into the light or goes past `reach` (where a traced path meets a
+/// generator). Each texel holds its receiver's depth at its centre:
 /// the ray lands at its first texel whose depth it reaches.
-pub fn march_receivers(maps: &LightMaps, view: &LightView, origin: Vec3, dir: Vec3) -> Option<Vec3> {
+pub fn march_receivers(maps: &LightMaps, view: &LightView, origin: Vec3, dir: Vec3, reach: f32) -> Option<Vec3> {
     let m = maps.map_resolution;
     let o = view.to_view(origin);
     let v = Vec3::new(dir.dot(view.right), dir.dot(view.up), dir.dot(view.forward));
@@ -363,6 +509,9 @@ pub fn march_receivers(maps: &LightMaps, view: &LightView, origin: Vec3, dir: Ve
     let mf = m as f32;
     let mut d_enter = 0.0f32;
     for _ in 0..(2 * m + 4) {
+        if d_enter > reach {
+            return None;
+        }
         let boundary = |i: u32, s: i64| if s > 0 { (i + 1) as f32 / mf } else { i as f32 / mf };
         let du = if step_u == 0 { f32::INFINITY } else { crossing(view, o, v, 0, boundary(ix, step_u)).max(d_enter) };
         let dv = if step_v == 0 { f32::INFINITY } else { crossing(view, o, v, 1, boundary(iy, step_v)).max(d_enter) };
@@ -375,7 +524,7 @@ pub fn march_receivers(maps: &LightMaps, view: &LightView, origin: Vec3, dir: Ve
             if v.z > 0.0 {
                 let d_hit = (z_receiver - o.z) / v.z;
                 if d_hit <= d_exit {
-                    return Some(origin + dir * d_hit);
+                    return (d_hit <= reach).then(|| origin + dir * d_hit);
                 }
             }
         }
