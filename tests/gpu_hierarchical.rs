@@ -412,3 +412,85 @@ fn a_slab_between_the_spot_and_the_ball_keeps_the_light_off_the_ball() {
     assert!(report.views("caustic map projection") > 0, "{report:?}");
     assert_eq!(valid(&gpu_photons(&mut renderer)), open);
 }
+
+#[test]
+fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
+    // The core test's scene (`traced_paths_carry_a_glass_balls_light_onto_a_mirror…`):
+    // a glass ball high beside a vertical mirror under a low sun. The ball is the maps'
+    // (traced paths, the default); the mirror the volumes'. The maps draw the light that
+    // meets the ball first and follow it off the mirror onto the floor; the light that
+    // meets the mirror first is the volumes'.
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    let target = renderer.render_target();
+    let ball_mesh = TriMesh::uv_sphere(V3::new(0.0, 1.6, 0.0), 0.3, 32, 64);
+    let mirror_mesh = TriMesh::quad(V3::new(-0.6, 0.6, 0.0), V3::Y * 0.6, V3::Z * 0.6);
+    let sun = (
+        DirectionalLight { illuminance: 2.0, shadow_maps_enabled: false, ..default() },
+        Transform::default().looking_to(Vec3::new(-0.5, -1.0, 0.0), Vec3::Z),
+    );
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    world.insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, ..default() });
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    let add = |world: &mut World, mesh: &TriMesh| world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(mesh));
+    let floor_handle = add(world, &floor());
+    world.spawn((Mesh3d(floor_handle), MeshMaterial3d(white.clone()), CausticReceiver));
+    let ball_handle = add(world, &ball_mesh);
+    let glass = CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) };
+    world.spawn((Mesh3d(ball_handle), MeshMaterial3d(white.clone()), glass, RenderLayers::layer(1)));
+    let mirror_handle = add(world, &mirror_mesh);
+    let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };
+    world.spawn((Mesh3d(mirror_handle), MeshMaterial3d(white), mirror, RenderLayers::layer(1)));
+    world.spawn(sun);
+    world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
+    render(&mut renderer, 3);
+    let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
+    assert_eq!(plan.generators.iter().map(|g| g.drawn).collect::<Vec<_>>(), [true, false], "{plan:?}");
+    assert!(plan.bvh.as_ref().is_some_and(|b| b.triangles.len() == ball_mesh.triangles().len() + 2));
+
+    let light = core_light(Some(&sun.0), None, None, &GlobalTransform::from(sun.1)).unwrap();
+    let scene = Scene {
+        lights: vec![light],
+        generators: vec![
+            Generator::new(ball_mesh, SpecularInteraction::Refract { ior: 1.5, dispersion: None }),
+            Generator::new(mirror_mesh, SpecularInteraction::Reflect),
+        ],
+        receivers: vec![Receiver { mesh: floor(), albedo: V3::ONE }],
+    };
+    let core = settings(&mut renderer).core();
+    let view = plan.views[0].view;
+    let twin = ViewCaustics::compute_drawn(&scene, &light, &view, &core, &|g| g == 0);
+    let image_space = ViewCaustics::compute_drawn(&scene, &light, &view, &HierarchicalMapsSettings::FULL.core(), &|g| g == 0);
+    let photons = gpu_photons(&mut renderer);
+    let landing = |a: &Photon, b: &Photon| (a.uv - b.uv).length() * (RESOLUTION as f32) < 0.5 && (a.flux / b.flux - 1.0).abs() < 1e-3;
+    let matches = |cpu: &PhotonBuffer| {
+        let both = photons.photons.iter().zip(&cpu.photons).filter(|(g, c)| g.is_valid() && c.is_valid()).count();
+        let near = photons.photons.iter().zip(&cpu.photons).filter(|(g, c)| g.is_valid() && c.is_valid() && landing(g, c)).count();
+        (both, near)
+    };
+    let valid = |b: &PhotonBuffer| b.photons.iter().filter(|p| p.is_valid()).count();
+    let (both, near) = matches(&twin.photons);
+    let (_, near_image_space) = matches(&image_space.photons);
+    // Photons the ball sends onto the mirror: they land on the floor by the mirror's base.
+    let reflected = |b: &PhotonBuffer| {
+        b.photons.iter().filter(|p| p.is_valid() && view.uv(V3::new(-0.3, 0.0, 0.0)).is_some_and(|uv| (p.uv.x - uv.x).abs() < 0.1)).count()
+    };
+    eprintln!(
+        "ball onto a mirror: {} GPU photons, {} on the twin, {both} on both, {near} within half a texel ({near_image_space} of the image-space twin's); {} by the mirror on the GPU, {} on the twin",
+        valid(&photons),
+        valid(&twin.photons),
+        reflected(&photons),
+        reflected(&twin.photons)
+    );
+    assert!(both > 2000, "{both} photons on both");
+    assert!(valid(&photons).abs_diff(valid(&twin.photons)) < valid(&twin.photons) / 50);
+    assert!(near as f64 > 0.97 * both as f64, "{near} of {both} photons land within half a texel of the twin's");
+    assert!(reflected(&twin.photons) > 500, "the ball's light reaches the floor off the mirror");
+    assert!((near_image_space as f64) < 0.8 * near as f64, "the image-space pair lands the same photons: {near_image_space} of {near}");
+    // The resolved map against the twin's.
+    let map = read_floats(&mut renderer, |g| g.resolved(0));
+    let error = relative_l2(&map, &twin.resolved);
+    eprintln!("ball onto a mirror: caustic map against the twin's, relative L2 {error:.1e}");
+    assert!(error < 5e-3, "caustic map against the twin: {error}");
+}

@@ -2,7 +2,8 @@
 // `caustics_core::hierarchical`, entry point by entry point.
 //
 // - `trace_photons`: one photon per photon buffer texel, through the generator in
-//   image space and onto the receivers (`photons::trace_photon`);
+//   image space or along a path traced through the generators' BVH, and onto the
+//   receivers (`photons::trace_photon`);
 // - `build_pyramid`: one pyramid level from the one below (`Node::parent`);
 // - `write_args`: the indirect dispatch of the next step from a list's length, which
 //   it records as the nodes processed at that level;
@@ -14,7 +15,7 @@
 // - `resolve`: the levels summed into the full-resolution map (eq. 3).
 
 #import bevy_caustics::caustic_maps::{
-    LightView, NO_SURFACE, EMPTY, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
+    LightView, NO_SURFACE, EMPTY, DRAWN_HERE, ONE_SIDED, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
     SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
     map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, range_attenuation, texel_of, reflect_about,
     refract_through, fresnel_transmittance, oct_decode, bilinear_taps, bilinear_mix,
@@ -59,6 +60,9 @@ const WORKGROUP: u32 = 64u;
 @group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(12) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
 @group(0) @binding(13) var<storage, read_write> resolved: array<f32>;
+// `GeneratorBvh`: its nodes (two vec4s each), then from `view.bvh_triangles` its
+// triangles (six vec4s each: three corners, w the generator's bits, three normals).
+@group(0) @binding(14) var<storage, read> generator_bvh: array<vec4<f32>>;
 // Only `write_args` binds the indirect arguments: a dispatch may not read the buffer it
 // is dispatched from as storage.
 @group(1) @binding(0) var<storage, read_write> args: array<u32>;
@@ -184,8 +188,8 @@ fn boundary(i: u32, s: i32, m: f32) -> f32 {
     return f32(i) / m;
 }
 
-// `photons::march_receivers`: xyz where the ray lands, w 1 if it does.
-fn march_receivers(origin: vec3<f32>, dir: vec3<f32>) -> vec4<f32> {
+// `photons::march_receivers`: xyz where the ray lands, w 1 if it does by `reach`.
+fn march_receivers(origin: vec3<f32>, dir: vec3<f32>, reach: f32) -> vec4<f32> {
     let m = view.map_resolution;
     let mf = f32(m);
     let o = to_view(view, origin);
@@ -211,6 +215,9 @@ fn march_receivers(origin: vec3<f32>, dir: vec3<f32>) -> vec4<f32> {
     let infinity = 3.4028235e38;
     var d_enter = 0.0;
     for (var i = 0u; i < 2u * m + 4u; i++) {
+        if d_enter > reach {
+            return vec4(0.0);
+        }
         var du = infinity;
         if step_u != 0 {
             du = max(crossing(o, v, 0u, boundary(ix, step_u, mf)), d_enter);
@@ -228,7 +235,7 @@ fn march_receivers(origin: vec3<f32>, dir: vec3<f32>) -> vec4<f32> {
             if v.z > 0.0 {
                 let d_hit = (z_receiver - o.z) / v.z;
                 if d_hit <= d_exit {
-                    return vec4(origin + dir * d_hit, 1.0);
+                    return vec4(origin + dir * d_hit, f32(d_hit <= reach));
                 }
             }
         }
@@ -256,6 +263,227 @@ fn march_receivers(origin: vec3<f32>, dir: vec3<f32>) -> vec4<f32> {
     return vec4(0.0);
 }
 
+// ---------------------------------------------------------------- traced paths
+
+// `generator_bvh::STACK_DEPTH` and `photons::MAX_PATH_EVENTS`.
+const BVH_STACK_DEPTH: u32 = 32u;
+const MAX_PATH_EVENTS: u32 = 8u;
+
+fn material_ior(m: u32) -> f32 {
+    return view.materials[m / 4u][m % 4u];
+}
+
+fn material_flags(m: u32) -> u32 {
+    return view.material_flags[m / 4u][m % 4u];
+}
+
+// `generator_bvh::slab`.
+fn slab(origin: vec3<f32>, inv: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>, t_min: f32, t_max: f32) -> bool {
+    let t0 = (lo - origin) * inv;
+    let t1 = (hi - origin) * inv;
+    let near = max(max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z)), t_min);
+    let far = min(min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z)), t_max);
+    return near <= far;
+}
+
+fn bvh_corner(triangle: u32, i: u32) -> vec4<f32> {
+    return generator_bvh[view.bvh_triangles + 6u * triangle + i];
+}
+
+// `generator_bvh::möller_trumbore`: x t, yz (u, v), w 1 for a hit.
+fn moller_trumbore(triangle: u32, origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
+    let v0 = bvh_corner(triangle, 0u).xyz;
+    let e1 = bvh_corner(triangle, 1u).xyz - v0;
+    let e2 = bvh_corner(triangle, 2u).xyz - v0;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if det == 0.0 {
+        return vec4(0.0);
+    }
+    let inv = 1.0 / det;
+    let s = origin - v0;
+    let u = dot(s, p) * inv;
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv;
+    let t = dot(e2, q) * inv;
+    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min && t < t_max {
+        return vec4(t, u, v, 1.0);
+    }
+    return vec4(0.0);
+}
+
+struct GeneratorHit {
+    t: f32,  // negative: no hit
+    generator: u32,
+    normal: vec3<f32>,
+    geometric_normal: vec3<f32>,
+}
+
+// `GeneratorBvh::intersect`.
+fn intersect_generators(origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> GeneratorHit {
+    var none = GeneratorHit(-1.0, 0u, vec3(0.0), vec3(0.0));
+    if view.bvh_triangles == 0u {
+        return none;
+    }
+    let inv = 1.0 / dir;
+    var t_far = t_max;
+    var best = 0u;
+    var best_uv = vec2(0.0);
+    var found = false;
+    var stack: array<u32, BVH_STACK_DEPTH>;
+    stack[0] = 0u;
+    var len = 1u;
+    while len > 0u {
+        len -= 1u;
+        let node = stack[len];
+        let lo = generator_bvh[2u * node];
+        let hi = generator_bvh[2u * node + 1u];
+        if !slab(origin, inv, lo.xyz, hi.xyz, t_min, t_far) {
+            continue;
+        }
+        let first = bitcast<u32>(lo.w);
+        let count = bitcast<u32>(hi.w);
+        if count > 0u {
+            for (var i = first; i < first + count; i++) {
+                let r = moller_trumbore(i, origin, dir, t_min, t_far);
+                if r.w > 0.0 {
+                    t_far = r.x;
+                    best = i;
+                    best_uv = r.yz;
+                    found = true;
+                }
+            }
+        } else if len + 2u <= BVH_STACK_DEPTH {
+            stack[len] = first;
+            stack[len + 1u] = first + 1u;
+            len += 2u;
+        }
+    }
+    if !found {
+        return none;
+    }
+    let c0 = bvh_corner(best, 0u);
+    let geometric = cross(bvh_corner(best, 1u).xyz - c0.xyz, bvh_corner(best, 2u).xyz - c0.xyz);
+    var g = vec3(0.0);
+    if dot(geometric, geometric) > 0.0 {
+        g = normalize(geometric);
+    }
+    let n = bvh_corner(best, 3u).xyz * (1.0 - best_uv.x - best_uv.y) + bvh_corner(best, 4u).xyz * best_uv.x
+        + bvh_corner(best, 5u).xyz * best_uv.y;
+    var normal = g;
+    if dot(n, n) > 0.0 {
+        normal = normalize(n);
+    }
+    return GeneratorHit(t_far, bitcast<u32>(c0.w), normal, g);
+}
+
+// Where a photon lands (`photons::Landing`): the receiver point, the last generator
+// point it left, its flux and its path length between its first surface and there.
+struct Landing {
+    hit: vec3<f32>,
+    last: vec3<f32>,
+    flux: f32,
+    travelled: f32,
+    landed: bool,
+}
+
+// `photons::traced_path`.
+fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_in: vec3<f32>, flux_in: f32) -> Landing {
+    var lost = Landing(vec3(0.0), vec3(0.0), 0.0, 0.0, false);
+    var p = p1;
+    var dir = dir_in;
+    var flux = flux_in;
+    var travelled = 0.0;
+    var material = first_material;
+    var ns = first_normal;
+    var ng = first_normal;
+    for (var event = 0u; event < MAX_PATH_EVENTS; event++) {
+        if material >= view.material_count {
+            return lost;
+        }
+        if (material_flags(material) & ONE_SIDED) != 0u && dot(dir, ng) > 0.0 {
+            return lost;
+        }
+        var n = ns;
+        if dot(ns, dir) > 0.0 {
+            n = -ns;
+        }
+        let ior = material_ior(material);
+        if ior > 0.0 {
+            var eta = ior;
+            if dot(dir, ng) < 0.0 {
+                eta = 1.0 / ior;
+            }
+            let t = refract_through(dir, n, eta);
+            if t.w == 0.0 {
+                dir = reflect_about(dir, n);
+            } else {
+                flux *= fresnel_transmittance(dot(dir, n), eta);
+                dir = t.xyz;
+            }
+        } else {
+            dir = reflect_about(dir, n);
+        }
+        var side = -ng;
+        if dot(dir, ng) >= 0.0 {
+            side = ng;
+        }
+        let origin = p + side * view.path_epsilon;
+        let next = intersect_generators(origin, dir, 0.0, 3.4028235e38);
+        var reach = 3.4028235e38;
+        if next.t >= 0.0 {
+            reach = next.t;
+        }
+        let hit = march_receivers(origin, dir, reach);
+        if hit.w != 0.0 {
+            return Landing(hit.xyz, origin, flux, travelled, true);
+        }
+        if next.t < 0.0 {
+            return lost;
+        }
+        p = origin + dir * next.t;
+        travelled += next.t;
+        material = next.generator;
+        ns = next.normal;
+        ng = next.geometric_normal;
+    }
+    return lost;
+}
+
+// `photons::image_space_path`.
+fn image_space_path(id: vec2<u32>, front: Sample, p1: vec3<f32>, dir: vec3<f32>, weight: f32) -> Landing {
+    var lost = Landing(vec3(0.0), vec3(0.0), 0.0, 0.0, false);
+    var n1 = front.normal;
+    if dot(n1, dir) > 0.0 {
+        n1 = -n1;
+    }
+    let ior = material_ior(front.material);
+    var origin = p1;
+    var out = reflect_about(dir, n1);
+    var flux = weight;
+    if ior > 0.0 {
+        let t1 = refract_through(dir, n1, 1.0 / ior);
+        if t1.w == 0.0 {
+            return lost;
+        }
+        flux = weight * fresnel_transmittance(dot(dir, n1), 1.0 / ior);
+        out = t1.xyz;
+        let back = back_at(id.x, id.y);
+        if back.depth < NO_SURFACE && back.depth > front.depth {
+            let exit = exit_distance(p1, front.depth, t1.xyz, back);
+            let t2 = refract_through(t1.xyz, exit.xyz, ior);
+            if t2.w == 0.0 {
+                return lost;
+            }
+            flux *= fresnel_transmittance(dot(t1.xyz, exit.xyz), ior);
+            origin = p1 + t1.xyz * exit.w;
+            out = t2.xyz;
+        }
+    }
+    let hit = march_receivers(origin, out, 3.4028235e38);
+    return Landing(hit.xyz, origin, flux, length(origin - p1), hit.w != 0.0);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     let n = view.photon_resolution;
@@ -267,6 +495,10 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     photon_flux[index] = vec2(0.0);
     let front = front_at(id.x, id.y);
     if front.depth >= NO_SURFACE || front.material >= view.material_count {
+        return;
+    }
+    // Light another technique draws.
+    if (material_flags(front.material) & DRAWN_HERE) == 0u {
         return;
     }
     let uv0 = texel_center(id.x, id.y, n);
@@ -285,46 +517,24 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     let forward = view.forward.xyz;
     let dir = ray.direction;
     let p1 = ray.origin + dir * ((front.depth - dot(ray.origin - view.origin.xyz, forward)) / dot(dir, forward));
-    var n1 = front.normal;
-    if dot(n1, dir) > 0.0 {
-        n1 = -n1;
+    var landing: Landing;
+    if view.traced_paths != 0u {
+        landing = traced_path(p1, front.material, front.normal, dir, weight);
+    } else {
+        landing = image_space_path(id.xy, front, p1, dir, weight);
     }
-    let ior = view.materials[front.material / 4u][front.material % 4u];
-    var origin = p1;
-    var out = reflect_about(dir, n1);
-    var flux = weight;
-    if ior > 0.0 {
-        let t1 = refract_through(dir, n1, 1.0 / ior);
-        if t1.w == 0.0 {
-            return;
-        }
-        flux = weight * fresnel_transmittance(dot(dir, n1), 1.0 / ior);
-        out = t1.xyz;
-        let back = back_at(id.x, id.y);
-        if back.depth < NO_SURFACE && back.depth > front.depth {
-            let exit = exit_distance(p1, front.depth, t1.xyz, back);
-            let t2 = refract_through(t1.xyz, exit.xyz, ior);
-            if t2.w == 0.0 {
-                return;
-            }
-            flux *= fresnel_transmittance(dot(t1.xyz, exit.xyz), ior);
-            origin = p1 + t1.xyz * exit.w;
-            out = t2.xyz;
-        }
-    }
-    let hit = march_receivers(origin, out);
-    if hit.w == 0.0 {
+    if !landing.landed {
         return;
     }
-    let uv = map_uv(view, hit.xyz);
+    let uv = map_uv(view, landing.hit);
     if uv.z == 0.0 || uv.x < 0.0 || uv.y < 0.0 || uv.x > 1.0 || uv.y > 1.0 {
         return;
     }
-    // `photons::path_length`: a point or spot light's range fades the photon by its whole
-    // path (the light sits at a perspective view's origin).
-    let path = length(p1 - view.origin.xyz) + length(origin - p1) + length(hit.xyz - origin);
+    // A point or spot light's range fades the photon by its whole path (the light sits
+    // at a perspective view's origin).
+    let path = length(p1 - view.origin.xyz) + landing.travelled + length(landing.hit - landing.last);
     photon_uv[index] = min(uv.xy, vec2(ONE_BELOW));
-    photon_flux[index] = vec2(flux * range_attenuation(view, path), beam * texel_measure(view, n));
+    photon_flux[index] = vec2(landing.flux * range_attenuation(view, path), beam * texel_measure(view, n));
 }
 
 // ---------------------------------------------------------------- pyramid

@@ -40,11 +40,12 @@ pub use plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 pub use render::{COUNTERS_PER_VIEW, CausticMapsGpu, MAX_GENERATORS, PROCESSED_COUNTER};
 
 use bevy::prelude::*;
-use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Splats};
+use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, PhotonPaths, Splats};
 
 /// How the caustic maps are made: a resource, shared by every light view. The presets
 /// are the paper's comparison (§5): [`Self::FLAT`], [`Self::HIERARCHICAL`] and
-/// [`Self::FULL`] (the default).
+/// [`Self::FULL`]; the default, [`Self::TRACED`], is the full method with photons
+/// traced through the generators.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Resource)]
 pub struct HierarchicalMapsSettings {
@@ -62,8 +63,12 @@ pub struct HierarchicalMapsSettings {
     /// Drop variable splats too wide for the top level, as the paper does, instead of
     /// clamping them into it (which keeps their energy; the bench measures the loss).
     pub drop_splats_above_top_level: bool,
-    /// Refinements of each photon's exit point from a closed refractor.
+    /// Refinements of each photon's exit point from a closed refractor (image space).
     pub exit_iterations: u32,
+    /// Photons traced through the generators' triangles (past the paper: every
+    /// interface of a concave body, light from one generator onto another) instead of
+    /// the image-space pair of front and back maps (Wyman 2005).
+    pub traced_paths: bool,
 }
 
 /// How the photon buffer is gathered.
@@ -90,11 +95,17 @@ impl HierarchicalMapsSettings {
         top_splat_level: 3,
         drop_splats_above_top_level: false,
         exit_iterations: 4,
+        traced_paths: false,
     };
     /// The traversal, fixed splats: the same map as [`Self::FLAT`], from fewer photons processed.
     pub const HIERARCHICAL: Self = Self { gather: CausticMapGather::Hierarchical, ..Self::FLAT };
     /// The traversal with clustering at the last level and variable splats.
     pub const FULL: Self = Self { gather: CausticMapGather::ClusterLastLevel, variable_splats: true, ..Self::FLAT };
+    /// [`Self::FULL`] with photons traced through the generators' triangles (past the
+    /// paper): right through concave glass and from one generator onto another, where
+    /// the image-space pair sees one entry and the farthest exit (README, "Choosing a
+    /// technique", has the measurements).
+    pub const TRACED: Self = Self { traced_paths: true, ..Self::FULL };
 
     /// The core crate's settings.
     pub fn core(&self) -> CausticMapSettings {
@@ -116,13 +127,14 @@ impl HierarchicalMapsSettings {
             gather,
             splats,
             exit_iterations: self.exit_iterations,
+            paths: if self.traced_paths { PhotonPaths::Traced } else { PhotonPaths::ImageSpace },
         }
     }
 }
 
 impl Default for HierarchicalMapsSettings {
     fn default() -> Self {
-        Self::FULL
+        Self::TRACED
     }
 }
 

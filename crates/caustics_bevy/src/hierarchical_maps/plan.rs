@@ -12,11 +12,13 @@ use crate::reference::{
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::bvh::SceneBvh;
-use caustics_core::hierarchical::{CausticMapSettings, LightView, light_intensity};
+use caustics_core::hierarchical::{CausticMapSettings, GeneratorBvh, LightView, PhotonPaths, light_intensity};
+use caustics_core::mesh::TriMesh;
 use caustics_core::scene::{Light, Receiver, Scene, Sides};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// One light view to make a caustic map for, with the light it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,6 +45,13 @@ pub struct CausticMapInstance {
     /// An open double-sided generator (`Sides::Both`): the front light map keeps its
     /// back faces. Unused for occluders, drawn from both sides.
     pub both_sides: bool,
+    /// An open one-sided generator (`Sides::Front`): the back of its faces absorbs
+    /// what a traced path brings there.
+    pub one_sided: bool,
+    /// Whether the caustic maps draw the light that falls on this generator first;
+    /// with traced paths, the generators other techniques draw are planned too, to
+    /// shadow, reflect and refract the photons that reach them (`PhotonMaterial`).
+    pub drawn: bool,
 }
 
 /// What the caustic maps are made of. A new `generation` means new contents.
@@ -55,6 +64,9 @@ pub struct CausticMapPlan {
     /// every light: a generator in full shadow costs no map work.
     pub shadowed: usize,
     pub settings: Option<CausticMapSettings>,
+    /// The generators' triangles in world space, in the order of `generators`, where
+    /// photons are traced through them; built when the plan changes.
+    pub bvh: Option<Arc<GeneratorBvh>>,
     pub generation: u64,
 }
 
@@ -89,8 +101,19 @@ fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Asse
         lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p)))
     };
     let before = plan.generators.len();
-    plan.generators.retain(|g| lit(g));
+    plan.generators.retain(|g| !g.drawn || lit(g));
     plan.shadowed = before - plan.generators.len();
+}
+
+/// The BVH of the planned generators, in their order (a generator whose mesh is not
+/// loaded is left out of it: photons pass where it would be).
+fn generator_bvh(generators: &[CausticMapInstance], meshes: &Assets<Mesh>) -> GeneratorBvh {
+    let meshes: Vec<(u32, TriMesh)> = generators
+        .iter()
+        .enumerate()
+        .filter_map(|(k, g)| Some((k as u32, core_mesh(meshes.get(g.mesh)?, &GlobalTransform::from(g.world_from_local)).ok()?)))
+        .collect();
+    GeneratorBvh::of_meshes(meshes.iter().map(|(k, mesh)| (*k, mesh)))
 }
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the
@@ -127,8 +150,10 @@ fn plan_caustic_maps(
     // Generation 0 until it is planned: `planned` keeps what the last plan was made of.
     let mut next = CausticMapPlan { settings: Some(core_settings), ..default() };
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
+    let traced = core_settings.paths == PhotonPaths::Traced;
     for (entity, generator, choice, (mesh, transform, visible, aabb)) in &generators {
-        if choice.technique() != Technique::HierarchicalMaps || !visible.get() || !valid {
+        let drawn = choice.technique() == Technique::HierarchicalMaps;
+        if !(drawn || traced && choice.facts.shape.traced_through()) || !visible.get() || !valid {
             continue;
         }
         if next.generators.len() == super::render::MAX_GENERATORS {
@@ -138,14 +163,17 @@ fn plan_caustic_maps(
             continue;
         }
         let Some(aabb) = aabb else { continue };
-        let bounds = world_aabb(transform, aabb);
-        generator_bounds = Some(generator_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
+        if drawn {
+            let bounds = world_aabb(transform, aabb);
+            generator_bounds = Some(generator_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
+        }
         let ior = match generator.specular_interaction() {
             SpecularInteraction::Reflect => 0.0,
             interaction => caustics_core::hierarchical::photons::photon_ior(&interaction).unwrap_or(1.0),
         };
-        let both_sides = choice.facts.sides == Sides::Both;
-        next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior, both_sides });
+        let (both_sides, one_sided) = (choice.facts.sides == Sides::Both, choice.facts.sides == Sides::Front);
+        let world_from_local = transform.to_matrix();
+        next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local, ior, both_sides, one_sided, drawn });
     }
     let mut receiver_bounds: Option<(Vec3, Vec3)> = None;
     if generator_bounds.is_some() {
@@ -157,7 +185,8 @@ fn plan_caustic_maps(
                 let bounds = world_aabb(transform, aabb);
                 receiver_bounds = Some(receiver_bounds.map_or(bounds, |(lo, hi)| (lo.min(bounds.0), hi.max(bounds.1))));
             }
-            let occluder = CausticMapInstance { mesh: mesh.id(), world_from_local: transform.to_matrix(), ior: 0.0, both_sides: false };
+            let world_from_local = transform.to_matrix();
+            let occluder = CausticMapInstance { mesh: mesh.id(), world_from_local, ior: 0.0, both_sides: false, one_sided: false, drawn: false };
             next.occluders.push(occluder);
         }
     }
@@ -185,12 +214,15 @@ fn plan_caustic_maps(
     if mesh_changed || next != *planned {
         *planned = next.clone();
         leave_out_shadowed(&mut next, &core_lights, &meshes);
-        if next.generators.is_empty() {
+        if !next.generators.iter().any(|g| g.drawn) {
             next.views.clear();
         }
         if next.views.is_empty() {
             next.generators.clear();
             next.occluders.clear();
+        }
+        if traced && !next.views.is_empty() {
+            next.bvh = Some(Arc::new(generator_bvh(&next.generators, &meshes)));
         }
         next.generation = plan.generation + 1;
         *plan = next;

@@ -22,7 +22,9 @@ use bevy::render::{
     view::ViewUniform,
 };
 use caustics_core::hierarchical::hierarchy::start_level;
-use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, Projection, Splats};
+use caustics_core::hierarchical::{
+    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, PathTracer, PhotonPaths, Projection, Splats,
+};
 
 /// `LightView` in `types.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
@@ -49,10 +51,20 @@ pub(super) struct GpuLightView {
     pyramid_offsets: [UVec4; 3],
     level_offsets: [UVec4; 3],
     materials: [Vec4; 16],
+    /// `DRAWN_HERE` and `ONE_SIDED` bits per generator, four to a vector.
+    material_flags: [UVec4; 16],
     material_count: u32,
     /// 1/range² of a point or spot light, 0 without a range.
     inverse_range_squared: f32,
+    traced_paths: u32,
+    path_epsilon: f32,
+    /// Where the BVH's triangles start in its buffer (vec4s), 0 without a BVH.
+    bvh_triangles: u32,
 }
+
+/// `DRAWN_HERE` and `ONE_SIDED` in `types.wgsl`.
+const DRAWN_HERE: u32 = 1;
+const ONE_SIDED: u32 = 2;
 
 /// The most generators the caustic maps draw (their indices of refraction live in the
 /// light view's uniform).
@@ -113,7 +125,7 @@ fn top_level(settings: &CausticMapSettings) -> u32 {
 }
 
 impl GpuLightView {
-    fn new(planned: &PlannedLightView, settings: &CausticMapSettings, iors: &[f32]) -> (Self, u32, u32) {
+    fn new(planned: &PlannedLightView, settings: &CausticMapSettings, generators: &[CausticMapInstance], bvh: Option<&GeneratorBvh>) -> (Self, u32, u32) {
         let v = &planned.view;
         let half = v.half_extent();
         let p = settings.photon_resolution;
@@ -164,9 +176,20 @@ impl GpuLightView {
             exit_iterations: settings.exit_iterations,
             pyramid_offsets,
             level_offsets,
-            materials: std::array::from_fn(|i| Vec4::from_array(std::array::from_fn(|c| iors.get(4 * i + c).copied().unwrap_or(0.0)))),
-            material_count: iors.len().min(MAX_GENERATORS) as u32,
+            materials: std::array::from_fn(|i| Vec4::from_array(std::array::from_fn(|c| generators.get(4 * i + c).map_or(0.0, |g| g.ior)))),
+            material_flags: std::array::from_fn(|i| {
+                UVec4::from_array(std::array::from_fn(|c| {
+                    generators.get(4 * i + c).map_or(0, |g| DRAWN_HERE * g.drawn as u32 + ONE_SIDED * g.one_sided as u32)
+                }))
+            }),
+            material_count: generators.len().min(MAX_GENERATORS) as u32,
             inverse_range_squared: planned.inverse_range_squared,
+            traced_paths: bvh.is_some() as u32,
+            path_epsilon: match bvh.map(PathTracer::traced) {
+                Some(PathTracer::Traced { epsilon, .. }) => epsilon,
+                _ => 0.0,
+            },
+            bvh_triangles: bvh.filter(|b| !b.triangles.is_empty()).map_or(0, |b| 2 * b.nodes.len() as u32),
         };
         (gpu, pyramid_nodes, map_texels)
     }
@@ -405,6 +428,8 @@ pub struct CausticMapsGpu {
     pub(super) views: Vec<ViewMaps>,
     generators: StorageBuffer<Vec<GpuInstance>>,
     occluders: StorageBuffer<Vec<GpuInstance>>,
+    /// `generator_bvh` in `caustic_map.wgsl` (one zero vector without a BVH).
+    bvh: Option<Buffer>,
     steps: DynamicUniformBuffer<GpuStep>,
     pub(super) generator_draws: Vec<MeshDraw>,
     pub(super) occluder_draws: Vec<MeshDraw>,
@@ -523,6 +548,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
                 storage_buffer::<u32>(false),
                 storage_buffer::<u32>(false),
                 storage_buffer::<f32>(false),
+                storage_buffer_read_only::<Vec4>(false),
             ),
         ),
     );
@@ -725,7 +751,17 @@ fn prepare_maps(
     }
     let mut generators: Vec<GpuInstance> = plan.generators.iter().enumerate().map(|(k, i)| instance(i, k as u32)).collect();
     let mut occluders: Vec<GpuInstance> = plan.occluders.iter().map(|i| instance(i, 0)).collect();
-    let iors: Vec<f32> = plan.generators.iter().map(|i| i.ior).collect();
+    let bvh = plan.bvh.as_deref().filter(|_| settings.paths == PhotonPaths::Traced);
+    // Nodes then triangles, as `generator_bvh` reads them; a binding may not be empty.
+    let mut bvh_bytes: Vec<u8> = bvh.map_or(Vec::new(), |b| [bytemuck::cast_slice(&b.nodes), bytemuck::cast_slice(&b.triangles)].concat());
+    if bvh_bytes.is_empty() {
+        bvh_bytes = vec![0; 16];
+    }
+    gpu.bvh = Some(device.create_buffer_with_data(&BufferInitDescriptor {
+        label: Some("caustic_map_generator_bvh"),
+        contents: &bvh_bytes,
+        usage: BufferUsages::STORAGE,
+    }));
     // A binding may not be empty.
     for list in [&mut generators, &mut occluders] {
         if list.is_empty() {
@@ -743,7 +779,7 @@ fn prepare_maps(
     let mut plans = Vec::new();
     let (mut pyramid_nodes, mut map_texels) = (0, 0);
     for (k, planned) in plan.views.iter().enumerate() {
-        let (uniform, nodes, texels) = GpuLightView::new(planned, &settings, &iors);
+        let (uniform, nodes, texels) = GpuLightView::new(planned, &settings, &plan.generators, bvh);
         (pyramid_nodes, map_texels) = (nodes, texels);
         uniforms.push(uniform);
         let (dispatches, steps) = plan_dispatches(&settings, k as u32 * COUNTERS_PER_VIEW);
@@ -772,7 +808,8 @@ fn prepare_maps(
         gpu.scratch = Some(scratch);
         gpu.views.clear();
     }
-    let (Some(generators), Some(occluders), Some(steps)) = (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding())
+    let (Some(generators), Some(occluders), Some(steps), Some(bvh)) =
+        (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding(), gpu.bvh.clone())
     else {
         return;
     };
@@ -819,6 +856,7 @@ fn prepare_maps(
                 scratch.counters.as_entire_binding(),
                 scratch.levels.as_entire_binding(),
                 resolved.as_entire_binding(),
+                bvh.as_entire_binding(),
             )),
         );
         let view_maps = ViewMaps {

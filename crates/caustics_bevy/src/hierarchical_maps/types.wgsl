@@ -50,9 +50,21 @@ struct LightView {
     level_offsets: array<vec4<u32>, 3>,
     // Each generator's index of refraction, 0 for a mirror, four to a vector.
     materials: array<vec4<f32>, 16>,
+    // Each generator's `DRAWN_HERE` and `ONE_SIDED` bits, four to a vector.
+    material_flags: array<vec4<u32>, 16>,
     material_count: u32,
     inverse_range_squared: f32,  // 1/range² of a point or spot light, 0 without
+    // Photons traced through the generators' BVH (1) or the image-space pair (0).
+    traced_paths: u32,
+    // How far a traced ray starts off the surface it leaves (`PathTracer::Traced`).
+    path_epsilon: f32,
+    // Where the BVH's triangles start in `generator_bvh` (vec4s); 0: no BVH.
+    bvh_triangles: u32,
 }
+
+// `PhotonMaterial::drawn_here` and `PhotonMaterial::one_sided`.
+const DRAWN_HERE: u32 = 1u;
+const ONE_SIDED: u32 = 2u;
 
 fn pyramid_offset(view: LightView, level: u32) -> u32 {
     let i = level - 1u;
