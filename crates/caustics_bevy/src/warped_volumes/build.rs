@@ -13,10 +13,9 @@ use caustics_core::scene::{Light, Sides};
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
 use caustics_core::bvh::SceneBvh;
 use caustics_core::mesh::TriMesh;
-use caustics_core::scene::{Receiver, Scene};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
-use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels};
+use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels, occluders_of};
 use std::sync::Arc;
 
 /// The caustic volumes of the current scene, shared with the render world. A new
@@ -83,8 +82,9 @@ struct BuildState {
 
 /// Rebuilds every caustic volume when a generator, light, receiver, shadow caster or
 /// the settings changed, or a generator's or occluder's mesh asset was modified (an
-/// animated ocean: every frame). Receivers and shadow casters hide generator vertices
-/// from the light (`build_generator_volumes`). The build runs on the async compute
+/// animated ocean: every frame). Receivers, shadow casters and the other generators
+/// hide generator vertices from the light and end their rays (`build_generator_volumes`,
+/// `occluders_of`). The build runs on the async compute
 /// pool, in parallel over triangles, while the frames go on with the previous volumes:
 /// no frame waits for it. Changes that arrive during a build start one more when it
 /// ends.
@@ -161,20 +161,25 @@ fn build_volumes(
         }
         state.meshes.insert(mesh3d.id());
         if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
-            shadowing.push(Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE });
+            shadowing.push(mesh);
         }
     }
+    // Every generator shadows the others (`occluders_of`): the volumes' own, and the
+    // ones other techniques draw.
     let mut inputs = Vec::new();
+    let mut other_generators = Vec::new();
     for (entity, generator, choice, mesh3d, transform, visible) in &generators {
         state.meshes.insert(mesh3d.id());
         let uses_volumes = choice.technique() == Technique::WarpedVolumes;
-        let (Some(mesh), true, true) = (meshes.get(&mesh3d.0), visible.get(), uses_volumes) else {
+        let (Some(mesh), true) = (meshes.get(&mesh3d.0), visible.get()) else {
             continue;
         };
         match core_mesh(mesh, transform) {
+            Ok(mesh) if !uses_volumes => other_generators.push((entity, mesh)),
             Ok(mesh) => {
                 state.warned.remove(&entity);
                 let sides = choice.facts.sides;
+                other_generators.push((entity, mesh.clone()));
                 inputs.push(GeneratorInput { entity, mesh, interaction: generator.specular_interaction(), sides });
             }
             Err(e) => {
@@ -192,8 +197,9 @@ fn build_volumes(
         let Some(bounds) = bounds else {
             return (built, stats, kept);
         };
-        let occluders = SceneBvh::build(&Scene { receivers: shadowing, ..Scene::default() });
         for input in inputs {
+            let others = other_generators.iter().filter(|(e, _)| *e != input.entity).map(|(_, m)| m.clone());
+            let occluders = SceneBvh::build(&occluders_of(shadowing.iter().cloned(), others));
             let mut fan = fans.remove(&input.entity).unwrap_or_default();
             if !fan.fits(&input.mesh) {
                 fan = VertexFans::new(&input.mesh);

@@ -481,18 +481,33 @@ impl TriangleContext<'_> {
 /// Builds every volume of a scene: each light × generator, and one set per RGB
 /// channel for a dispersive refractor (its Cauchy index at the channel's wavelength,
 /// the flux in that channel only — Ernst et al. render one pass per colour, §5).
-/// Volumes end beyond the bounds of all receivers, which shadow the generators.
+/// Volumes end beyond the bounds of all receivers. The receivers and the other
+/// generators shadow each generator ([`occluders_of`]).
 pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::VolumeSet {
+    build_drawn_volumes(scene, settings, |_| true)
+}
+
+/// [`build_scene_volumes`] for the generators `drawn(index)` picks; the others only
+/// shadow them (another technique draws them).
+pub fn build_drawn_volumes(scene: &Scene, settings: &VolumeSettings, drawn: impl Fn(usize) -> bool) -> super::VolumeSet {
     let bounds = scene
         .receivers
         .iter()
         .map(|r| r.mesh.bounds())
         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
         .unwrap_or((Vec3::ZERO, Vec3::ZERO));
-    let occluders = SceneBvh::build(&Scene { receivers: scene.receivers.clone(), ..Scene::default() });
     let mut volumes = Vec::new();
     let mut stats = BuildStats::default();
-    for generator in &scene.generators {
+    let others = |g: usize| scene.generators.iter().enumerate().filter(move |(i, _)| *i != g).map(|(_, o)| o.mesh.clone());
+    let receivers_only = SceneBvh::build(&occluders_of(scene.receivers.iter().map(|r| r.mesh.clone()), std::iter::empty()));
+    for (g, generator) in scene.generators.iter().enumerate().filter(|(g, _)| drawn(*g)) {
+        let with_others;
+        let occluders = if scene.generators.len() > 1 {
+            with_others = SceneBvh::build(&occluders_of(scene.receivers.iter().map(|r| r.mesh.clone()), others(g)));
+            &with_others
+        } else {
+            &receivers_only
+        };
         let fans = VertexFans::new(&generator.mesh);
         let sides = generator.sides();
         for light in &scene.lights {
@@ -507,7 +522,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
                         light,
                         color,
                         bounds,
-                        Some(&occluders),
+                        Some(occluders),
                         settings,
                         &mut volumes,
                     );
@@ -515,6 +530,16 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
         }
     }
     super::VolumeSet::new(volumes, stats)
+}
+
+/// What shadows a generator and ends its caustic volumes' rays: the receivers and
+/// every other generator, as occluders. A path belongs to the first generator the light
+/// meets: light a glass body bends onto a mirror is that body's technique's to carry
+/// (the caustic maps' traced paths follow it on), and the volumes of a mirror behind it
+/// get none, where the paper (§3.1) lights every generator as if alone.
+pub fn occluders_of(receivers: impl Iterator<Item = TriMesh>, other_generators: impl Iterator<Item = TriMesh>) -> Scene {
+    let receivers = receivers.chain(other_generators).map(|mesh| crate::scene::Receiver { mesh, albedo: Vec3::ONE }).collect();
+    Scene { receivers, ..Scene::default() }
 }
 
 /// The colour channels a generator is built in: one with the light's colour, or three

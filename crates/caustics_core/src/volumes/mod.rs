@@ -37,7 +37,7 @@ mod build;
 mod medium;
 mod prism;
 
-pub use build::{BuildStats, VertexFans, build_generator_volumes, build_scene_volumes, channels};
+pub use build::{BuildStats, VertexFans, build_drawn_volumes, build_generator_volumes, build_scene_volumes, channels, occluders_of};
 pub use medium::{MAX_RAY_PIECES, MediumBox, in_scattered_radiance, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
 
