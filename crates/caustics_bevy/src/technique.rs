@@ -141,6 +141,7 @@ pub fn choose_techniques(
         .filter(|(_, visible)| visible.get())
         .map(|(t, _)| world_aabb(t, &Aabb::from_min_max(Vec3::splat(-0.5), Vec3::splat(0.5))))
         .collect();
+    let mut facts = Vec::new();
     for (entity, generator, mesh3d, transform, aabb, invalid, pool, ocean, current) in &generators {
         if invalid {
             if current.is_some() {
@@ -174,7 +175,13 @@ pub fn choose_techniques(
             let (lo, hi) = world_aabb(transform, aabb);
             media.iter().any(|&(mlo, mhi)| lo.cmple(mhi).all() && mlo.cmple(hi).all())
         });
-        let facts = GeneratorFacts { shape, in_medium, sides: Sides::of(is_closed, generator.double_sided) };
+        let sides = Sides::of(is_closed, generator.double_sided);
+        facts.push((entity, generator, current, GeneratorFacts { shape, in_medium, sides, with_closed_refractor: false }));
+    }
+    let with_closed_refractor = facts.iter().any(|(.., f)| f.shape == GeneratorShape::ClosedRefractor);
+    for (entity, generator, current, facts) in facts {
+        let facts = GeneratorFacts { with_closed_refractor, ..facts };
+        let shape = facts.shape;
         let requested = generator.technique.requested();
         match choose(requested, facts, |t| available.0.contains(&t)) {
             Some(choice) => {

@@ -18,7 +18,7 @@ use caustics_core::scene::{LightKind, Scene};
 use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose};
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
-use caustics_core::volumes::{IntensityMode, VolumeSettings, build_scene_volumes};
+use caustics_core::volumes::{IntensityMode, VolumeSettings, build_drawn_volumes};
 use crate::render::{GpuTimes, Method};
 use clap::Args;
 use std::fmt::Write as _;
@@ -199,8 +199,19 @@ fn tessellated(name: &str, scene: &BenchScene, cells: usize) -> Result<BenchScen
 /// The caustic irradiance per cell of `region` (the mean of `samples`² points) from
 /// every generator of `scene` by the volumes' CPU twin, and the number of volumes.
 pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode, samples: usize) -> (Vec<f32>, u64) {
+    drawn_volumes_irradiance(scene, region, intensity, samples, |_| true)
+}
+
+/// [`volumes_irradiance`] from the generators `drawn(index)` picks; the others shadow them.
+fn drawn_volumes_irradiance(
+    scene: &Scene,
+    region: &GridRegion,
+    intensity: IntensityMode,
+    samples: usize,
+    drawn: impl Fn(usize) -> bool,
+) -> (Vec<f32>, u64) {
     let settings = VolumeSettings { intensity, ..VolumeSettings::default() };
-    let set = build_scene_volumes(scene, &settings);
+    let set = build_drawn_volumes(scene, &settings, drawn);
     let points = cell_sample_points(region, samples);
     // The floor faces up (the region's `edge_u × edge_v` may point either way).
     let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
@@ -238,24 +249,32 @@ impl BenchMethod for Auto {
     fn run(&self, name: &str, scene: &BenchScene, quality: u64, samples: usize) -> Result<(Vec<f32>, u64), String> {
         let (tessellation, photons) = Self::steps(name)[quality as usize];
         let own = tessellated(name, scene, tessellation)?;
-        let mut groups: Vec<(Technique, Scene)> = Vec::new();
-        for generator in &own.scene.generators {
-            let shape = GeneratorShape::of(&generator.mesh, &generator.interaction);
-            let facts = GeneratorFacts { shape, in_medium: false, sides: generator.sides() };
-            let choice = choose(None, facts, |_| true).ok_or("auto: no technique draws a generator")?;
-            match groups.iter_mut().find(|(t, _)| *t == choice.technique) {
-                Some((_, group)) => group.generators.push(generator.clone()),
-                None => groups.push((choice.technique, Scene { generators: vec![generator.clone()], ..own.scene.clone() })),
-            }
+        let shapes: Vec<GeneratorShape> = own.scene.generators.iter().map(|g| GeneratorShape::of(&g.mesh, &g.interaction)).collect();
+        let with_closed_refractor = shapes.contains(&GeneratorShape::ClosedRefractor);
+        let mut choices = Vec::new();
+        for (generator, &shape) in own.scene.generators.iter().zip(&shapes) {
+            let facts = GeneratorFacts { shape, in_medium: false, sides: generator.sides(), with_closed_refractor };
+            choices.push(choose(None, facts, |_| true).ok_or("auto: no technique draws a generator")?.technique);
         }
         let mut total = vec![0.0f32; scene.region.nu * scene.region.nv];
         let mut work = 0;
-        for (technique, group) in groups {
+        let mut techniques = choices.clone();
+        techniques.dedup();
+        techniques.sort_by_key(|t| Technique::ALL.iter().position(|a| a == t));
+        techniques.dedup();
+        for technique in techniques {
+            let drawn = |i: usize| choices[i] == technique;
+            let group = Scene { generators: own.scene.generators.iter().enumerate().filter(|(i, _)| drawn(*i)).map(|(_, g)| g.clone()).collect(), ..own.scene.clone() };
             let (image, done) = match technique {
-                Technique::WarpedVolumes => volumes_irradiance(&group, &scene.region, IntensityMode::Conserving, samples),
+                Technique::WarpedVolumes => drawn_volumes_irradiance(&own.scene, &scene.region, IntensityMode::Conserving, samples, drawn),
+                // The maps draw the light their generators meet first and follow it
+                // through every generator, the other techniques' too.
                 Technique::HierarchicalMaps => {
-                    let group = BenchScene { scene: group, ..scene.clone() };
-                    crate::hierarchical::irradiance(&group, photons, &crate::hierarchical::VARIANTS[4], samples)?
+                    let followed = |i: &usize| drawn(*i) || shapes[*i].traced_through();
+                    let generators: Vec<usize> = (0..choices.len()).filter(followed).collect();
+                    let maps_scene = Scene { generators: generators.iter().map(|&i| own.scene.generators[i].clone()).collect(), ..own.scene.clone() };
+                    let bench = BenchScene { scene: maps_scene, ..scene.clone() };
+                    crate::hierarchical::drawn_irradiance(&bench, photons, crate::hierarchical::TRACED, samples, &|k| drawn(generators[k]))?
                 }
                 Technique::IlluminationTextures => {
                     crate::illumination::irradiance(&BenchScene { scene: group, ..scene.clone() }, &Default::default(), samples)?

@@ -13,7 +13,8 @@ use crate::plot::{Axes, Series, plot_log_log};
 use caustics_core::hierarchical::caustic_map::{self, CausticMap};
 use caustics_core::hierarchical::hierarchy::{self, PhotonPyramid};
 use caustics_core::hierarchical::{
-    Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, Splats, light_intensity,
+    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
+    PhotonPaths, Splats, light_intensity,
 };
 use caustics_core::glam::Vec3;
 use caustics_core::scene::Scene;
@@ -28,6 +29,7 @@ pub struct Variant {
     pub name: &'static str,
     pub gather: Gather,
     pub splats: Splats,
+    pub paths: PhotonPaths,
     pub gpu: Option<Method>,
 }
 
@@ -37,35 +39,51 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 /// Flat (every photon), hierarchical (§3.1), clustering at the last and at every level
 /// (§3.2), and the full method — clustering at the last level with variable splats into
 /// levels 0–3 (§3.3), splats past level 3 clamped into it (`maps-full`) or dropped as the
-/// paper does (`maps-full-cap`).
-pub const VARIANTS: [Variant; 6] = [
-    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, gpu: Some(Method::MapsFlat) },
-    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, gpu: None },
+/// paper does (`maps-full-cap`); and the full method with photons traced through the
+/// generators' triangles instead of the image-space pair (`maps-traced`, past the paper).
+pub const VARIANTS: [Variant; 7] = [
+    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, paths: PhotonPaths::ImageSpace, gpu: Some(Method::MapsFlat) },
+    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, paths: PhotonPaths::ImageSpace, gpu: None },
     Variant {
         name: "maps-combine-last",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: FIXED,
+        paths: PhotonPaths::ImageSpace,
         gpu: None,
     },
     Variant {
         name: "maps-combine-all",
         gather: Gather::Hierarchical { clustering: Clustering::AllLevels },
         splats: FIXED,
+        paths: PhotonPaths::ImageSpace,
         gpu: None,
     },
     Variant {
         name: "maps-full",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
-        gpu: Some(Method::Maps),
+        paths: PhotonPaths::ImageSpace,
+        gpu: Some(Method::MapsImageSpace),
     },
     Variant {
         name: "maps-full-cap",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Discard },
+        paths: PhotonPaths::ImageSpace,
         gpu: None,
     },
+    Variant {
+        name: "maps-traced",
+        gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
+        splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
+        paths: PhotonPaths::Traced,
+        gpu: Some(Method::Maps),
+    },
 ];
+
+/// The full method with traced paths: the plugin's default, what `Auto` draws closed
+/// refractors with.
+pub const TRACED: &Variant = &VARIANTS[6];
 
 /// Caustic map side: one map for every photon count, so that the photon counts' effect
 /// on noise shows.
@@ -121,10 +139,16 @@ pub fn bench_scene(
     let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
     let mut stages = Vec::new();
     for p in photon_resolutions(quick) {
-        let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, p)?;
-        eprintln!("{name:>8} caustic maps {p:>5}²: {} light views ray cast in {maps_seconds:.3} s", traced.len());
-        eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced in {tracing_seconds:.3} s");
+        let mut buffers = Vec::new();
+        for paths in [PhotonPaths::ImageSpace, PhotonPaths::Traced] {
+            let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, p, paths, &|_| true)?;
+            eprintln!("{name:>8} caustic maps {p:>5}²: {} light views ray cast in {maps_seconds:.3} s", traced.len());
+            eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced ({paths:?}) in {tracing_seconds:.3} s");
+            buffers.push((paths, traced, maps_seconds, tracing_seconds));
+        }
         for variant in &VARIANTS {
+            let Some((_, traced, maps_seconds, tracing_seconds)) = buffers.iter().find(|b| b.0 == variant.paths) else { continue };
+            let (maps_seconds, tracing_seconds) = (*maps_seconds, *tracing_seconds);
             let mut row = StageRow {
                 photons: p,
                 variant: variant.name,
@@ -143,7 +167,7 @@ pub fn bench_scene(
             };
             let mut irradiance = vec![0.0f32; points.len()];
             let (mut flux_in, mut flux_capped) = (0.0, 0.0);
-            for t in &traced {
+            for t in traced {
                 let g = gather_view(t, variant, p, &points, &mut irradiance);
                 row.pyramid += g.seconds[0];
                 row.gather += g.seconds[1];
@@ -195,9 +219,23 @@ fn up(scene: &BenchScene) -> Vec3 {
 /// `scene`'s generators by `variant` at `photons`² photons per light view, and the
 /// photons processed.
 pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant, samples: usize) -> Result<(Vec<f32>, u64), String> {
+    drawn_irradiance(scene, photons, variant, samples, &|_| true)
+}
+
+/// [`irradiance`] from the generators `drawn(index)` picks; the others still shadow,
+/// reflect and refract the photons that reach them along traced paths.
+pub fn drawn_irradiance(
+    scene: &BenchScene,
+    photons: u32,
+    variant: &Variant,
+    samples: usize,
+    drawn: &dyn Fn(usize) -> bool,
+) -> Result<(Vec<f32>, u64), String> {
     let up = up(scene);
     let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
-    let (irradiance, processed) = irradiance_at(scene, photons, variant, &points)?;
+    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, drawn)?;
+    let mut irradiance = vec![0.0f32; points.len()];
+    let processed = traced.iter().map(|t| gather_view(t, variant, photons, &points, &mut irradiance).stats.total_processed()).sum();
     Ok((cell_means(&irradiance, samples), processed))
 }
 
@@ -205,15 +243,16 @@ pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant, samples: 
 /// generators by `variant` at `photons`² photons per light view, and the photons
 /// processed.
 pub fn irradiance_at(scene: &BenchScene, photons: u32, variant: &Variant, points: &[(Vec3, Vec3)]) -> Result<(Vec<f32>, u64), String> {
-    let (traced, ..) = trace_light_views(&scene.scene, photons)?;
+    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, &|_| true)?;
     let mut irradiance = vec![0.0f32; points.len()];
     let processed = traced.iter().map(|t| gather_view(t, variant, photons, points, &mut irradiance).stats.total_processed()).sum();
     Ok((irradiance, processed))
 }
 
 /// Every light view of `scene` with its light maps (ray cast) and photon buffer at
-/// `photons`² texels, and the seconds the maps and the photon trace took.
-fn trace_light_views(scene: &Scene, photons: u32) -> Result<(Vec<Traced>, f64, f64), String> {
+/// `photons`² texels (of the light the generators `drawn` picks meet first, along
+/// `paths`), and the seconds the maps and the photon trace took.
+fn trace_light_views(scene: &Scene, photons: u32, paths: PhotonPaths, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<Traced>, f64, f64), String> {
     let generators = scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
     let receivers = scene
         .receivers
@@ -221,7 +260,7 @@ fn trace_light_views(scene: &Scene, photons: u32) -> Result<(Vec<Traced>, f64, f
         .map(|r| r.mesh.bounds())
         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
         .ok_or("caustic maps: the scene has no receivers")?;
-    let materials: Vec<_> = scene.generators.iter().map(|g| g.interaction).collect();
+    let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
     let clock = Instant::now();
     let mut views = Vec::new();
     for light in &scene.lights {
@@ -233,10 +272,12 @@ fn trace_light_views(scene: &Scene, photons: u32) -> Result<(Vec<Traced>, f64, f
     }
     let maps_seconds = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
+    let settings = CausticMapSettings { paths, ..CausticMapSettings::default() };
+    let bvh = (paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
     let traced = views
         .into_iter()
         .map(|(view, light, intensity, maps)| {
-            let photons = PhotonBuffer::trace(&maps, &view, &materials, light, 4);
+            let photons = PhotonBuffer::trace(&maps, &view, &materials, light, settings.path_tracer(bvh.as_ref()));
             Traced { view, intensity, maps, photons }
         })
         .collect();

@@ -32,8 +32,12 @@ pub enum Method {
     VolumesPaper,
     /// Convolution caustics (a heightfield pool only).
     Convolution,
-    /// Hierarchical caustic maps, the full method (clustering, variable splats).
+    /// Hierarchical caustic maps as the plugin draws them by default: the full method
+    /// (clustering, variable splats) with photons traced through the generators.
     Maps,
+    /// Hierarchical caustic maps, the paper's full method: photons through the
+    /// image-space pair of front and back maps.
+    MapsImageSpace,
     /// Hierarchical caustic maps, the flat gather with fixed splats.
     MapsFlat,
     /// Illumination textures (a closed refractor only).
@@ -49,7 +53,7 @@ impl Method {
             Method::Reference => return None,
             Method::Volumes | Method::VolumesConstant | Method::VolumesPaper => CausticTechnique::WarpedVolumes,
             Method::Convolution => CausticTechnique::Convolution,
-            Method::Maps | Method::MapsFlat => CausticTechnique::HierarchicalMaps,
+            Method::Maps | Method::MapsImageSpace | Method::MapsFlat => CausticTechnique::HierarchicalMaps,
             Method::IlluminationTextures => CausticTechnique::IlluminationTextures,
             Method::Auto => CausticTechnique::Auto,
         })
@@ -62,7 +66,11 @@ impl Method {
             Method::VolumesPaper => VolumeIntensity::Interpolated,
             _ => VolumeIntensity::Conserving,
         };
-        let maps = if self == Method::MapsFlat { HierarchicalMapsSettings::FLAT } else { HierarchicalMapsSettings::FULL };
+        let maps = match self {
+            Method::MapsFlat => HierarchicalMapsSettings::FLAT,
+            Method::MapsImageSpace => HierarchicalMapsSettings::FULL,
+            _ => HierarchicalMapsSettings::default(),
+        };
         (WarpedVolumesSettings { intensity, ..Default::default() }, maps)
     }
 }
@@ -210,7 +218,8 @@ fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>
             }
             run.map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
         }
-        Method::Maps => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4], SUPERSAMPLE)?,
+        Method::Maps => crate::hierarchical::irradiance(bench, 1024, crate::hierarchical::TRACED, SUPERSAMPLE)?,
+        Method::MapsImageSpace => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4], SUPERSAMPLE)?,
         Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0], SUPERSAMPLE)?,
         Method::IlluminationTextures => crate::illumination::irradiance(bench, &Default::default(), SUPERSAMPLE)?,
         Method::Auto => Auto.run(name, bench, 2, SUPERSAMPLE)?,

@@ -5,9 +5,10 @@
 //!
 //! The table, by what each technique models (README, "Choosing a technique", has the
 //! measured errors behind it):
-//! - a **closed refractor** (a watertight glass or water body) bends light twice, in
-//!   and out: hierarchical maps follow both faces (Wyman 2008 §3.1), warped volumes
-//!   one (Ernst et al. 2005 §3.1), which focuses in the wrong place;
+//! - a **closed refractor** (a watertight glass or water body) bends light twice or
+//!   more, in and out: hierarchical maps follow every face their traced paths cross
+//!   (past Wyman 2008 §3.1's image-space pair), warped volumes one (Ernst et al. 2005
+//!   §3.1), which focuses in the wrong place;
 //! - an **open refracting surface** (water, an ocean, a pool) bends light once, where
 //!   the volumes are exact per triangle and resolution-free over any extent, and they
 //!   alone draw the shafts in a participating medium (§3.5);
@@ -15,7 +16,9 @@
 //!   receivers the generator itself shadows (the maps' receiver map, the volumes' hit
 //!   planes); read at 8² points a cell the two tie on the ring (README), so the
 //!   mirror stays with the volumes, the default the table started from, which also
-//!   draw its beams in a participating medium.
+//!   draw its beams in a participating medium — except beside a closed refractor,
+//!   where it joins the glass on the maps, whose traced paths carry light between the
+//!   two (`GeneratorFacts::with_closed_refractor`).
 
 use crate::mesh::TriMesh;
 use crate::params::SpecularInteraction;
@@ -84,6 +87,15 @@ impl GeneratorShape {
         }
     }
 
+    /// Whether the caustic maps' traced paths follow light onto a generator of this
+    /// shape that another technique draws (`hierarchical::PhotonPaths::Traced`):
+    /// mirrors and closed refractors. Open water is left out: an ocean or a pool
+    /// changes its mesh every frame, which would rebuild the maps' BVH and maps every
+    /// frame; light through it from a glass body goes on unbent.
+    pub fn traced_through(self) -> bool {
+        matches!(self, GeneratorShape::Mirror | GeneratorShape::ClosedRefractor)
+    }
+
     /// The shape in prose.
     pub fn label(self) -> &'static str {
         match self {
@@ -106,6 +118,12 @@ pub struct GeneratorFacts {
     /// Which sides of its faces take part (glTF's `doubleSided`); no bearing on the
     /// choice, kept for the techniques.
     pub sides: Sides,
+    /// Whether the scene holds a closed refractor (which the maps draw): a mirror then
+    /// joins it there, outside a medium, so that the maps' traced paths follow the
+    /// light both ways between them — glass onto the mirror, the mirror into the glass.
+    /// Apart, each technique would draw only the light that meets its generator first
+    /// (README: `mirror_bunny` 0.14 L2 on the maps, 0.23 split between the two).
+    pub with_closed_refractor: bool,
 }
 
 impl GeneratorFacts {
@@ -115,6 +133,7 @@ impl GeneratorFacts {
         use Technique::*;
         match self.shape {
             GeneratorShape::ClosedRefractor => &[HierarchicalMaps, IlluminationTextures, WarpedVolumes],
+            GeneratorShape::Mirror if self.with_closed_refractor && !self.in_medium => &[HierarchicalMaps, WarpedVolumes],
             GeneratorShape::OpenRefractor | GeneratorShape::Mirror => &[WarpedVolumes, HierarchicalMaps],
             GeneratorShape::Pool => &[WarpedVolumes, HierarchicalMaps, Convolution],
         }
@@ -178,7 +197,11 @@ impl fmt::Display for TechniqueChoice {
             write!(f, "{} as set on the generator", self.technique)
         } else {
             let medium = if self.facts.in_medium { " in a participating medium" } else { "" };
-            write!(f, "{}{medium} → {}", self.facts.shape.label(), self.technique)
+            let glass = match self.facts.shape {
+                GeneratorShape::Mirror if self.facts.with_closed_refractor && !self.facts.in_medium => " beside a closed refractor",
+                _ => "",
+            };
+            write!(f, "{}{medium}{glass} → {}", self.facts.shape.label(), self.technique)
         }
     }
 }
@@ -210,13 +233,13 @@ mod tests {
         [GeneratorShape::ClosedRefractor, GeneratorShape::OpenRefractor, GeneratorShape::Pool, GeneratorShape::Mirror];
 
     fn facts(shape: GeneratorShape) -> GeneratorFacts {
-        GeneratorFacts { shape, in_medium: false, sides: Sides::Front }
+        GeneratorFacts { shape, in_medium: false, sides: Sides::Front, with_closed_refractor: false }
     }
 
     #[test]
     fn auto_follows_the_table_and_says_why() {
         let all = |_| true;
-        let pick = |shape, in_medium| choose(None, GeneratorFacts { shape, in_medium, sides: Sides::Front }, all).unwrap();
+        let pick = |shape, in_medium| choose(None, GeneratorFacts { in_medium, ..facts(shape) }, all).unwrap();
         assert_eq!(pick(GeneratorShape::ClosedRefractor, false).technique, Technique::HierarchicalMaps);
         assert_eq!(pick(GeneratorShape::OpenRefractor, false).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::Pool, false).technique, Technique::WarpedVolumes);
@@ -224,6 +247,10 @@ mod tests {
         assert_eq!(pick(GeneratorShape::Mirror, true).technique, Technique::WarpedVolumes);
         assert_eq!(pick(GeneratorShape::ClosedRefractor, false).to_string(), "closed refractor → hierarchical maps");
         assert_eq!(pick(GeneratorShape::Mirror, true).to_string(), "mirror in a participating medium → warped volumes");
+        // Beside a closed refractor, a mirror joins it on the maps, but for the shafts.
+        let beside = |in_medium| choose(None, GeneratorFacts { in_medium, with_closed_refractor: true, ..facts(GeneratorShape::Mirror) }, all).unwrap();
+        assert_eq!(beside(false).to_string(), "mirror beside a closed refractor → hierarchical maps");
+        assert_eq!(beside(true).technique, Technique::WarpedVolumes);
     }
 
     #[test]
