@@ -4,11 +4,13 @@
 //! caustics adding up.
 //!
 //! `cargo run --example hierarchical` opens a window (or writes `target/hierarchical.png`
-//! without a display; `--headless --out PATH` to force it). Keys 1, 2 and 3 switch
-//! between the flat gather (every photon), the hierarchical gather and the full method
-//! (hierarchy, clustering, variable splats); headless, `--flat` or `--hierarchical`
-//! picks one (the full method by default). `--photons N` sets the photon buffer's side
-//! (a power of two, default 1024).
+//! without a display; `--headless --out PATH` to force it). Keys 1 to 4 switch between
+//! the flat gather (every photon), the hierarchical gather, the paper's full method
+//! (hierarchy, clustering, variable splats; photons through the image-space pair of
+//! front and back maps) and the plugin's default, the full method with photons traced
+//! through the generators (the light the bunny throws onto the ring); headless,
+//! `--flat`, `--hierarchical` or `--image-space` picks one (the default otherwise).
+//! `--photons N` sets the photon buffer's side (a power of two, default 1024).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -27,14 +29,16 @@ fn main() -> ExitCode {
 }
 
 fn run() -> Result<(), String> {
-    let args = support::Args::parse("hierarchical", &["photons"], &["flat", "hierarchical"])?;
+    let args = support::Args::parse("hierarchical", &["photons"], &["flat", "hierarchical", "image-space"])?;
     let photons: u32 = args.number("photons", 1024)?;
     let preset = if args.has("flat") {
         HierarchicalMapsSettings::FLAT
     } else if args.has("hierarchical") {
         HierarchicalMapsSettings::HIERARCHICAL
-    } else {
+    } else if args.has("image-space") {
         HierarchicalMapsSettings::FULL
+    } else {
+        HierarchicalMapsSettings::TRACED
     };
     let settings = HierarchicalMapsSettings { photon_resolution: photons, ..preset };
     let bunny = TriMesh::from_obj(include_str!("../assets/models/bunny.obj")).map_err(|e| format!("assets/models/bunny.obj: {e}"))?;
@@ -42,12 +46,13 @@ fn run() -> Result<(), String> {
     support::show(&args, "hierarchical caustic maps", (800, 520), 4, spawn, switch_gather)
 }
 
-/// Keys 1–3: flat, hierarchical, full.
+/// Keys 1–4: flat, hierarchical, full (the paper's image-space pair), traced paths.
 fn switch_gather(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<HierarchicalMapsSettings>) {
     let preset = match keys.get_just_pressed().next() {
         Some(KeyCode::Digit1) => ("flat gather", HierarchicalMapsSettings::FLAT),
         Some(KeyCode::Digit2) => ("hierarchical gather", HierarchicalMapsSettings::HIERARCHICAL),
         Some(KeyCode::Digit3) => ("hierarchy, clustering and variable splats", HierarchicalMapsSettings::FULL),
+        Some(KeyCode::Digit4) => ("the full method, photons traced through the generators", HierarchicalMapsSettings::TRACED),
         _ => return,
     };
     info!("caustic maps: {}", preset.0);

@@ -471,6 +471,7 @@ impl CausticMapsGpu {
     /// Bytes of GPU memory the caustic maps hold.
     pub fn bytes(&self) -> u64 {
         self.scratch.as_ref().map_or(0, |s| s.bytes)
+            + self.bvh.as_ref().map_or(0, |b| b.size())
             + self.views.iter().map(|v| v.resolved.size() + 8 * v.receivers.0.width() as u64 * v.receivers.0.height() as u64).sum::<u64>()
     }
 
