@@ -259,7 +259,6 @@ impl BenchMethod for Auto {
         let mut total = vec![0.0f32; scene.region.nu * scene.region.nv];
         let mut work = 0;
         let mut techniques = choices.clone();
-        techniques.dedup();
         techniques.sort_by_key(|t| Technique::ALL.iter().position(|a| a == t));
         techniques.dedup();
         for technique in techniques {

@@ -233,9 +233,7 @@ pub fn drawn_irradiance(
 ) -> Result<(Vec<f32>, u64), String> {
     let up = up(scene);
     let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
-    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, drawn)?;
-    let mut irradiance = vec![0.0f32; points.len()];
-    let processed = traced.iter().map(|t| gather_view(t, variant, photons, &points, &mut irradiance).stats.total_processed()).sum();
+    let (irradiance, processed) = drawn_irradiance_at(scene, photons, variant, &points, drawn)?;
     Ok((cell_means(&irradiance, samples), processed))
 }
 
@@ -243,7 +241,18 @@ pub fn drawn_irradiance(
 /// generators by `variant` at `photons`² photons per light view, and the photons
 /// processed.
 pub fn irradiance_at(scene: &BenchScene, photons: u32, variant: &Variant, points: &[(Vec3, Vec3)]) -> Result<(Vec<f32>, u64), String> {
-    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, &|_| true)?;
+    drawn_irradiance_at(scene, photons, variant, points, &|_| true)
+}
+
+/// [`irradiance_at`] from the generators `drawn(index)` picks.
+fn drawn_irradiance_at(
+    scene: &BenchScene,
+    photons: u32,
+    variant: &Variant,
+    points: &[(Vec3, Vec3)],
+    drawn: &dyn Fn(usize) -> bool,
+) -> Result<(Vec<f32>, u64), String> {
+    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, drawn)?;
     let mut irradiance = vec![0.0f32; points.len()];
     let processed = traced.iter().map(|t| gather_view(t, variant, photons, points, &mut irradiance).stats.total_processed()).sum();
     Ok((irradiance, processed))

@@ -127,13 +127,19 @@ pub struct GeneratorFacts {
 }
 
 impl GeneratorFacts {
+    /// A mirror that joins a closed refractor on the maps: beside one, outside a medium
+    /// (where only the volumes draw its beams).
+    fn mirror_beside_glass(&self) -> bool {
+        self.shape == GeneratorShape::Mirror && self.with_closed_refractor && !self.in_medium
+    }
+
     /// `Auto`'s order of preference, best first; later ones stand in where an earlier
     /// one is unavailable. Every technique that applies to the shape is listed.
     pub fn preferences(&self) -> &'static [Technique] {
         use Technique::*;
         match self.shape {
             GeneratorShape::ClosedRefractor => &[HierarchicalMaps, IlluminationTextures, WarpedVolumes],
-            GeneratorShape::Mirror if self.with_closed_refractor && !self.in_medium => &[HierarchicalMaps, WarpedVolumes],
+            GeneratorShape::Mirror if self.mirror_beside_glass() => &[HierarchicalMaps, WarpedVolumes],
             GeneratorShape::OpenRefractor | GeneratorShape::Mirror => &[WarpedVolumes, HierarchicalMaps],
             GeneratorShape::Pool => &[WarpedVolumes, HierarchicalMaps, Convolution],
         }
@@ -197,10 +203,7 @@ impl fmt::Display for TechniqueChoice {
             write!(f, "{} as set on the generator", self.technique)
         } else {
             let medium = if self.facts.in_medium { " in a participating medium" } else { "" };
-            let glass = match self.facts.shape {
-                GeneratorShape::Mirror if self.facts.with_closed_refractor && !self.facts.in_medium => " beside a closed refractor",
-                _ => "",
-            };
+            let glass = if self.facts.mirror_beside_glass() { " beside a closed refractor" } else { "" };
             write!(f, "{}{medium}{glass} → {}", self.facts.shape.label(), self.technique)
         }
     }

@@ -85,35 +85,31 @@ fn occluder_bvh(occluders: &[CausticMapInstance], meshes: &Assets<Mesh>) -> Scen
 }
 
 /// Leaves out the generators whose every vertex the occluders hide from every light
-/// (the CPU rays the volumes use, `SceneBvh::hides`), counting them in `shadowed`; the
-/// photon kernel still drops the shadowed photons of the rest. A generator with
-/// every vertex hidden but light through a gap between them would be lost: an
-/// occluder with holes smaller than the generator's triangles.
-fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Assets<Mesh>) {
+/// (the CPU rays the volumes use, `SceneBvh::hides`), counting them in `shadowed`, and
+/// their meshes from `world` (each generator's mesh in world space, `None` where it
+/// is not loaded); the photon kernel still drops the shadowed photons of the rest. A
+/// generator with every vertex hidden but light through a gap between them would be
+/// lost: an occluder with holes smaller than the generator's triangles.
+fn leave_out_shadowed(plan: &mut CausticMapPlan, world: &mut Vec<Option<TriMesh>>, lights: &[Light], meshes: &Assets<Mesh>) {
     if plan.generators.is_empty() || plan.occluders.is_empty() {
         return;
     }
     let occluders = occluder_bvh(&plan.occluders, meshes);
-    let lit = |g: &CausticMapInstance| {
-        let Some(Ok(mesh)) = meshes.get(g.mesh).map(|m| core_mesh(m, &GlobalTransform::from(g.world_from_local))) else {
-            return true;
-        };
-        lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p)))
+    let lit = |mesh: &Option<TriMesh>| {
+        mesh.as_ref().is_none_or(|mesh| lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p))))
     };
+    let keep: Vec<bool> = plan.generators.iter().zip(world.iter()).map(|(g, mesh)| !g.drawn || lit(mesh)).collect();
     let before = plan.generators.len();
-    plan.generators.retain(|g| !g.drawn || lit(g));
+    let mut flags = keep.iter();
+    plan.generators.retain(|_| *flags.next().unwrap_or(&true));
+    let mut flags = keep.iter();
+    world.retain(|_| *flags.next().unwrap_or(&true));
     plan.shadowed = before - plan.generators.len();
 }
 
-/// The BVH of the planned generators, in their order (a generator whose mesh is not
-/// loaded is left out of it: photons pass where it would be).
-fn generator_bvh(generators: &[CausticMapInstance], meshes: &Assets<Mesh>) -> GeneratorBvh {
-    let meshes: Vec<(u32, TriMesh)> = generators
-        .iter()
-        .enumerate()
-        .filter_map(|(k, g)| Some((k as u32, core_mesh(meshes.get(g.mesh)?, &GlobalTransform::from(g.world_from_local)).ok()?)))
-        .collect();
-    GeneratorBvh::of_meshes(meshes.iter().map(|(k, mesh)| (*k, mesh)))
+/// Each planned generator's mesh in world space, `None` where it is not loaded.
+fn world_meshes(generators: &[CausticMapInstance], meshes: &Assets<Mesh>) -> Vec<Option<TriMesh>> {
+    generators.iter().map(|g| core_mesh(meshes.get(g.mesh)?, &GlobalTransform::from(g.world_from_local)).ok()).collect()
 }
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the
@@ -213,7 +209,9 @@ fn plan_caustic_maps(
     });
     if mesh_changed || next != *planned {
         *planned = next.clone();
-        leave_out_shadowed(&mut next, &core_lights, &meshes);
+        // Each mesh in world space once, for the shadow test and the BVH.
+        let mut world = if traced || !next.occluders.is_empty() { world_meshes(&next.generators, &meshes) } else { Vec::new() };
+        leave_out_shadowed(&mut next, &mut world, &core_lights, &meshes);
         if !next.generators.iter().any(|g| g.drawn) {
             next.views.clear();
         }
@@ -222,7 +220,12 @@ fn plan_caustic_maps(
             next.occluders.clear();
         }
         if traced && !next.views.is_empty() {
-            next.bvh = Some(Arc::new(generator_bvh(&next.generators, &meshes)));
+            // A light that moved, or a new occluder, leaves the generators' BVH as it
+            // was (a generator whose mesh is not loaded is left out of it).
+            next.bvh = match &plan.bvh {
+                Some(bvh) if !mesh_changed && next.generators == plan.generators => Some(bvh.clone()),
+                _ => Some(Arc::new(GeneratorBvh::of_meshes(world.iter().enumerate().filter_map(|(k, m)| Some((k as u32, m.as_ref()?)))))),
+            };
         }
         next.generation = plan.generation + 1;
         *plan = next;

@@ -23,7 +23,7 @@ use bevy::render::{
 };
 use caustics_core::hierarchical::hierarchy::start_level;
 use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, PathTracer, PhotonPaths, Projection, Splats,
+    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, PhotonPaths, Projection, Splats,
 };
 
 /// `LightView` in `types.wgsl`.
@@ -185,10 +185,7 @@ impl GpuLightView {
             material_count: generators.len().min(MAX_GENERATORS) as u32,
             inverse_range_squared: planned.inverse_range_squared,
             traced_paths: bvh.is_some() as u32,
-            path_epsilon: match bvh.map(PathTracer::traced) {
-                Some(PathTracer::Traced { epsilon, .. }) => epsilon,
-                _ => 0.0,
-            },
+            path_epsilon: bvh.map_or(0.0, GeneratorBvh::ray_offset),
             bvh_triangles: bvh.filter(|b| !b.triangles.is_empty()).map_or(0, |b| 2 * b.nodes.len() as u32),
         };
         (gpu, pyramid_nodes, map_texels)

@@ -118,6 +118,15 @@ impl GeneratorBvh {
         Self { nodes, triangles }
     }
 
+    /// How far a traced ray starts off the surface it leaves: 2·10⁻⁵ of the
+    /// generators' extent (the tracer's offset).
+    pub fn ray_offset(&self) -> f32 {
+        self.nodes.first().map_or(2e-5, |root| {
+            let (lo, hi) = (Vec3::from_array(root.min), Vec3::from_array(root.max));
+            2e-5 * (hi - lo).max_element().max(lo.abs().max_element()).max(hi.abs().max_element()).max(1e-6)
+        })
+    }
+
     /// The closest generator hit along `origin + t·dir` with `t` in `(t_min, t_max)`.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<GeneratorHit> {
         if self.nodes.is_empty() {

@@ -199,14 +199,9 @@ pub enum PathTracer<'a> {
 }
 
 impl<'a> PathTracer<'a> {
-    /// A traced path through `bvh`, lifted off surfaces by 2·10⁻⁵ of the generators'
-    /// extent (the tracer's offset).
+    /// A traced path through `bvh`, lifted off surfaces by [`GeneratorBvh::ray_offset`].
     pub fn traced(bvh: &'a GeneratorBvh) -> Self {
-        let extent = bvh.nodes.first().map_or(1.0, |root| {
-            let (lo, hi) = (Vec3::from_array(root.min), Vec3::from_array(root.max));
-            (hi - lo).max_element().max(lo.abs().max_element()).max(hi.abs().max_element()).max(1e-6)
-        });
-        Self::Traced { bvh, epsilon: 2e-5 * extent }
+        Self::Traced { bvh, epsilon: bvh.ray_offset() }
     }
 }
 
