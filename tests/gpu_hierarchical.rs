@@ -419,7 +419,8 @@ fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
     // a glass ball high beside a vertical mirror under a low sun. The ball is the maps'
     // (traced paths, the default); the mirror the volumes'. The maps draw the light that
     // meets the ball first and follow it off the mirror onto the floor; the light that
-    // meets the mirror first is the volumes'.
+    // meets the mirror first is the volumes'. First the transmitted light alone, then
+    // with the default's Fresnel branch: the light the ball's front face reflects.
     let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let ball_mesh = TriMesh::uv_sphere(V3::new(0.0, 1.6, 0.0), 0.3, 32, 64);
@@ -431,7 +432,7 @@ fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
     let world = renderer.world_mut();
     world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
     world.insert_resource(ClearColor(Color::BLACK));
-    world.insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, ..default() });
+    world.insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, fresnel_branches: 0, ..default() });
     let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
     let add = |world: &mut World, mesh: &TriMesh| world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(mesh));
     let floor_handle = add(world, &floor());
@@ -493,4 +494,82 @@ fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
     let error = relative_l2(&map, &twin.resolved);
     eprintln!("ball onto a mirror: caustic map against the twin's, relative L2 {error:.1e}");
     assert!(error < 5e-3, "caustic map against the twin: {error}");
+
+    // The Fresnel branch: a second photon buffer, gathered and splatted into the same
+    // map. The GPU's photon buffer holds the last one traced, the branch's.
+    set_settings(&mut renderer, HierarchicalMapsSettings::TRACED);
+    render(&mut renderer, 3);
+    let core = settings(&mut renderer).core();
+    assert_eq!(core.fresnel_branches, 1, "the default follows one Fresnel branch");
+    let branched = ViewCaustics::compute_drawn(&scene, &light, &view, &core, &|g| g == 0);
+    let photons = gpu_photons(&mut renderer);
+    let reflected = &branched.branches[0];
+    let both = photons.photons.iter().zip(&reflected.photons).filter(|(g, c)| g.is_valid() && c.is_valid()).count();
+    let near = photons.photons.iter().zip(&reflected.photons).filter(|(g, c)| g.is_valid() && c.is_valid() && landing(g, c)).count();
+    let flux = |v: &ViewCaustics| v.map.total_flux();
+    eprintln!(
+        "ball onto a mirror, Fresnel branch: {} GPU photons, {} on the twin, {near} of {both} within half a texel; map flux {:.1} against {:.1} without it",
+        valid(&photons),
+        valid(reflected),
+        flux(&branched),
+        flux(&twin)
+    );
+    assert!(both > 150, "{both} reflected photons on both");
+    assert!(valid(&photons).abs_diff(valid(reflected)) < valid(reflected) / 50);
+    assert!(near as f64 > 0.97 * both as f64, "{near} of {both} reflected photons land within half a texel of the twin's");
+    assert!(flux(&branched) > 1.01 * flux(&twin), "the branch adds the reflected light");
+    let map = read_floats(&mut renderer, |g| g.resolved(0));
+    let error = relative_l2(&map, &branched.resolved);
+    let apart = relative_l2(&twin.resolved, &branched.resolved);
+    eprintln!("ball onto a mirror, Fresnel branch: caustic map against the twin's, relative L2 {error:.1e} (the branch moves it {apart:.1e})");
+    assert!(error < 5e-3 && error < apart / 2.0, "caustic map with the branch against the twin: {error}");
+}
+
+#[test]
+fn a_point_lights_caustic_map_carries_a_windows_fresnel_reflection() {
+    // The core test's window (`a_fresnel_branch_carries_the_light_a_window_reflects`):
+    // glass standing on the floor beside a point light 2 m up. Its front face reflects
+    // `R(θ)` of the light onto the floor on the light's side, as the light mirrored in
+    // the face would shine. That light is the default's Fresnel branch, and it lands past
+    // the edge of the cube face it left from, on the part of that face's maps that
+    // reaches past it.
+    let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    world.insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: RESOLUTION, ..default() });
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    let floor_handle = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&floor()));
+    world.spawn((Mesh3d(floor_handle), MeshMaterial3d(white.clone()), CausticReceiver));
+    let window = TriMesh::cuboid(V3::new(0.5, 0.0, -1.5), V3::new(0.52, 3.0, 1.5));
+    let window = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&window));
+    let glass = CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) };
+    world.spawn((Mesh3d(window), MeshMaterial3d(white), glass, RenderLayers::layer(1)));
+    // 20 cd, and a range far past the scene (its window fades nothing here).
+    let light = PointLight { intensity: 4.0 * std::f32::consts::PI * 20.0, range: 1000.0, shadow_maps_enabled: false, ..default() };
+    world.spawn((light, Transform::from_xyz(0.0, 2.0, 0.0)));
+    world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
+    let without = render_without_caustics(&mut renderer, 3);
+    let image = caustic_irradiance(&render(&mut renderer, 3), &without);
+    let plan = renderer.world_mut().resource::<CausticMapPlan>().clone();
+    let emission: Vec<f32> = plan.views.iter().map(|v| v.view.emission).collect();
+    assert!(emission.contains(&0.5), "a face whose maps reach past it: {emission:?}");
+    let mirrored = V3::new(1.0, 2.0, 0.0);
+    let (gpu, expected): (Vec<f32>, Vec<f32>) = (0..SIZE * SIZE)
+        .filter_map(|i| {
+            let p = world_at(i % SIZE, i / SIZE);
+            ((-0.8..0.4).contains(&p.x) && p.z.abs() < 0.6).then(|| {
+                let d = p - mirrored;
+                let reflectance = 1.0 - caustics_core::optics::fresnel_transmittance(d.x.abs() / d.length(), 1.0 / 1.5);
+                (image[i as usize], reflectance * 20.0 * (d.y.abs() / d.length()) / d.length_squared())
+            })
+        })
+        .unzip();
+    let error = relative_l2(&gpu, &expected);
+    let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+    eprintln!("a window's reflection on lavapipe: {} pixels, relative L2 {error:.2e}, mean {:.4} lux against {:.4}", gpu.len(), mean(&gpu), mean(&expected));
+    // The core test holds the twin to 2·10⁻³; here the caustic buffer's half floats
+    // and the texel rounding of rasterised maps add theirs.
+    assert!(gpu.len() > 1000 && error < 1e-2, "relative L2 {error}");
 }

@@ -229,11 +229,12 @@ pub struct Auto;
 
 impl Auto {
     /// `(tessellation, photons per side)` per step; tessellation 0 keeps the scene's own.
+    /// The caustic maps are 1024² but for 4096² photons, which splat into 2048² maps.
     fn steps(scene: &str) -> [(usize, u32); 4] {
         match scene {
             "pool" | "roofed_pool" | "boxed_pool" | "ball_pool" => [(32, 256), (64, 512), (128, 1024), (256, 2048)],
             "sphere" => [(64, 256), (64, 512), (64, 1024), (64, 2048)],
-            "ring" | "mirror_bunny" => [(64, 256), (128, 512), (256, 1024), (1024, 2048)],
+            "ring" | "mirror_bunny" => [(64, 512), (128, 1024), (256, 2048), (1024, 4096)],
             _ => [(0, 256), (0, 512), (0, 1024), (0, 2048)],
         }
     }
@@ -273,7 +274,8 @@ impl BenchMethod for Auto {
                     let generators: Vec<usize> = (0..choices.len()).filter(followed).collect();
                     let maps_scene = Scene { generators: generators.iter().map(|&i| own.scene.generators[i].clone()).collect(), ..own.scene.clone() };
                     let bench = BenchScene { scene: maps_scene, ..scene.clone() };
-                    crate::hierarchical::drawn_irradiance(&bench, photons, crate::hierarchical::TRACED, samples, &|k| drawn(generators[k]))?
+                    let settings = crate::hierarchical::TRACED.settings(photons, crate::hierarchical::MAP_RESOLUTION.max(photons / 2));
+                    crate::hierarchical::drawn_irradiance(&bench, &settings, samples, &|k| drawn(generators[k]))?
                 }
                 Technique::IlluminationTextures => {
                     crate::illumination::irradiance(&BenchScene { scene: group, ..scene.clone() }, &Default::default(), samples)?

@@ -16,6 +16,7 @@ use caustics_core::hierarchical::{
     CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
     PhotonPaths, Splats, light_intensity,
 };
+use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
 use caustics_core::glam::Vec3;
 use caustics_core::scene::Scene;
 use caustics_core::scenes::BenchScene;
@@ -30,7 +31,24 @@ pub struct Variant {
     pub gather: Gather,
     pub splats: Splats,
     pub paths: PhotonPaths,
+    /// Fresnel-reflected branches of traced paths.
+    pub fresnel_branches: u32,
     pub gpu: Option<Method>,
+}
+
+impl Variant {
+    /// The core's settings of this gather at `photons`² photons into a `map`² map.
+    pub fn settings(&self, photons: u32, map: u32) -> CausticMapSettings {
+        CausticMapSettings {
+            photon_resolution: photons,
+            map_resolution: map,
+            gather: self.gather,
+            splats: self.splats,
+            paths: self.paths,
+            fresnel_branches: self.fresnel_branches,
+            ..CausticMapSettings::default()
+        }
+    }
 }
 
 /// The paper's constant splats: 3 texels across (Fig. 4's 3² splats).
@@ -40,15 +58,17 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 /// (§3.2), and the full method — clustering at the last level with variable splats into
 /// levels 0–3 (§3.3), splats past level 3 clamped into it (`maps-full`) or dropped as the
 /// paper does (`maps-full-cap`); and the full method with photons traced through the
-/// generators' triangles instead of the image-space pair (`maps-traced`, past the paper).
+/// generators' triangles instead of the image-space pair, with the plugin's Fresnel
+/// branches (`maps-traced`, past the paper).
 pub const VARIANTS: [Variant; 7] = [
-    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, paths: PhotonPaths::ImageSpace, gpu: Some(Method::MapsFlat) },
-    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, paths: PhotonPaths::ImageSpace, gpu: None },
+    Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, paths: PhotonPaths::ImageSpace, fresnel_branches: 0, gpu: Some(Method::MapsFlat) },
+    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, paths: PhotonPaths::ImageSpace, fresnel_branches: 0, gpu: None },
     Variant {
         name: "maps-combine-last",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: FIXED,
         paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
         gpu: None,
     },
     Variant {
@@ -56,6 +76,7 @@ pub const VARIANTS: [Variant; 7] = [
         gather: Gather::Hierarchical { clustering: Clustering::AllLevels },
         splats: FIXED,
         paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
         gpu: None,
     },
     Variant {
@@ -63,6 +84,7 @@ pub const VARIANTS: [Variant; 7] = [
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
         paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
         gpu: Some(Method::MapsImageSpace),
     },
     Variant {
@@ -70,6 +92,7 @@ pub const VARIANTS: [Variant; 7] = [
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Discard },
         paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
         gpu: None,
     },
     Variant {
@@ -77,6 +100,7 @@ pub const VARIANTS: [Variant; 7] = [
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
         splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
         paths: PhotonPaths::Traced,
+        fresnel_branches: HierarchicalMapsSettings::TRACED.fresnel_branches,
         gpu: Some(Method::Maps),
     },
 ];
@@ -119,7 +143,8 @@ struct Traced {
     view: LightView,
     intensity: f32,
     maps: LightMaps,
-    photons: PhotonBuffer,
+    /// The transmitted light's photon buffer, then the Fresnel branches'.
+    buffers: Vec<PhotonBuffer>,
 }
 
 /// Runs every variant at every photon count on `scene`, adding its rows to `rows`
@@ -140,11 +165,12 @@ pub fn bench_scene(
     let mut stages = Vec::new();
     for p in photon_resolutions(quick) {
         let mut buffers = Vec::new();
-        for paths in [PhotonPaths::ImageSpace, PhotonPaths::Traced] {
-            let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, p, paths, &|_| true)?;
+        for paths in [&VARIANTS[0], TRACED] {
+            let settings = paths.settings(p, MAP_RESOLUTION);
+            let (traced, maps_seconds, tracing_seconds) = trace_light_views(&scene.scene, &settings, &|_| true)?;
             eprintln!("{name:>8} caustic maps {p:>5}²: {} light views ray cast in {maps_seconds:.3} s", traced.len());
-            eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced ({paths:?}) in {tracing_seconds:.3} s");
-            buffers.push((paths, traced, maps_seconds, tracing_seconds));
+            eprintln!("{name:>8} caustic maps {p:>5}²: photon buffers traced ({:?}) in {tracing_seconds:.3} s", settings.paths);
+            buffers.push((settings.paths, traced, maps_seconds, tracing_seconds));
         }
         for variant in &VARIANTS {
             let Some((_, traced, maps_seconds, tracing_seconds)) = buffers.iter().find(|b| b.0 == variant.paths) else { continue };
@@ -168,12 +194,12 @@ pub fn bench_scene(
             let mut irradiance = vec![0.0f32; points.len()];
             let (mut flux_in, mut flux_capped) = (0.0, 0.0);
             for t in traced {
-                let g = gather_view(t, variant, p, &points, &mut irradiance);
+                let g = gather_view(t, &variant.settings(p, MAP_RESOLUTION), &points, &mut irradiance);
                 row.pyramid += g.seconds[0];
                 row.gather += g.seconds[1];
                 row.splat += g.seconds[2];
-                row.texels += t.photons.photons.len() as u64;
-                row.valid += t.photons.stats.caustic;
+                row.texels += t.buffers.iter().map(|b| b.photons.len() as u64).sum::<u64>();
+                row.valid += t.buffers.iter().map(|b| b.stats.caustic).sum::<u64>();
                 row.processed += g.stats.total_processed();
                 row.splats += g.stats.splats();
                 row.clustered += g.stats.clustered_photons;
@@ -215,53 +241,50 @@ fn up(scene: &BenchScene) -> Vec3 {
     if n.y < 0.0 { -n } else { n }
 }
 
-/// Caustic irradiance per cell of the region (the mean of `samples`² points) from
-/// `scene`'s generators by `variant` at `photons`² photons per light view, and the
+/// Caustic irradiance per cell of `scene`'s region (the mean of `samples`² points) from
+/// `scene`'s generators by the caustic maps' CPU twin under `settings`, and the
 /// photons processed.
-pub fn irradiance(scene: &BenchScene, photons: u32, variant: &Variant, samples: usize) -> Result<(Vec<f32>, u64), String> {
-    drawn_irradiance(scene, photons, variant, samples, &|_| true)
+pub fn irradiance(scene: &BenchScene, settings: &CausticMapSettings, samples: usize) -> Result<(Vec<f32>, u64), String> {
+    drawn_irradiance(scene, settings, samples, &|_| true)
 }
 
 /// [`irradiance`] from the generators `drawn(index)` picks; the others still shadow,
 /// reflect and refract the photons that reach them along traced paths.
 pub fn drawn_irradiance(
     scene: &BenchScene,
-    photons: u32,
-    variant: &Variant,
+    settings: &CausticMapSettings,
     samples: usize,
     drawn: &dyn Fn(usize) -> bool,
 ) -> Result<(Vec<f32>, u64), String> {
     let up = up(scene);
     let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
-    let (irradiance, processed) = drawn_irradiance_at(scene, photons, variant, &points, drawn)?;
+    let (irradiance, processed) = drawn_irradiance_at(scene, settings, &points, drawn)?;
     Ok((cell_means(&irradiance, samples), processed))
 }
 
 /// Caustic irradiance at receiver points `(position, normal)` from `scene`'s
-/// generators by `variant` at `photons`² photons per light view, and the photons
-/// processed.
-pub fn irradiance_at(scene: &BenchScene, photons: u32, variant: &Variant, points: &[(Vec3, Vec3)]) -> Result<(Vec<f32>, u64), String> {
-    drawn_irradiance_at(scene, photons, variant, points, &|_| true)
+/// generators under `settings`, and the photons processed.
+pub fn irradiance_at(scene: &BenchScene, settings: &CausticMapSettings, points: &[(Vec3, Vec3)]) -> Result<(Vec<f32>, u64), String> {
+    drawn_irradiance_at(scene, settings, points, &|_| true)
 }
 
 /// [`irradiance_at`] from the generators `drawn(index)` picks.
 fn drawn_irradiance_at(
     scene: &BenchScene,
-    photons: u32,
-    variant: &Variant,
+    settings: &CausticMapSettings,
     points: &[(Vec3, Vec3)],
     drawn: &dyn Fn(usize) -> bool,
 ) -> Result<(Vec<f32>, u64), String> {
-    let (traced, ..) = trace_light_views(&scene.scene, photons, variant.paths, drawn)?;
+    let (traced, ..) = trace_light_views(&scene.scene, settings, drawn)?;
     let mut irradiance = vec![0.0f32; points.len()];
-    let processed = traced.iter().map(|t| gather_view(t, variant, photons, points, &mut irradiance).stats.total_processed()).sum();
+    let processed = traced.iter().map(|t| gather_view(t, settings, points, &mut irradiance).stats.total_processed()).sum();
     Ok((irradiance, processed))
 }
 
-/// Every light view of `scene` with its light maps (ray cast) and photon buffer at
-/// `photons`² texels (of the light the generators `drawn` picks meet first, along
-/// `paths`), and the seconds the maps and the photon trace took.
-fn trace_light_views(scene: &Scene, photons: u32, paths: PhotonPaths, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<Traced>, f64, f64), String> {
+/// Every light view of `scene` with its light maps (ray cast) and photon buffers under
+/// `settings` (of the light the generators `drawn` picks meet first), and the seconds
+/// the maps and the photon trace took.
+fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<Traced>, f64, f64), String> {
     let generators = scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
     let receivers = scene
         .receivers
@@ -274,20 +297,21 @@ fn trace_light_views(scene: &Scene, photons: u32, paths: PhotonPaths, drawn: &dy
     let mut views = Vec::new();
     for light in &scene.lights {
         for view in LightView::for_light(light, generators, receivers) {
-            let maps = LightMaps::ray_cast(scene, &view, photons, MAP_RESOLUTION);
+            let maps = LightMaps::ray_cast(scene, &view, settings.photon_resolution, settings.map_resolution);
             let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
             views.push((view, light, intensity, maps));
         }
     }
     let maps_seconds = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
-    let settings = CausticMapSettings { paths, ..CausticMapSettings::default() };
-    let bvh = (paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
+    let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
     let traced = views
         .into_iter()
         .map(|(view, light, intensity, maps)| {
-            let photons = PhotonBuffer::trace(&maps, &view, &materials, light, settings.path_tracer(bvh.as_ref()));
-            Traced { view, intensity, maps, photons }
+            let buffers = (0..settings.photon_buffers())
+                .map(|branch| PhotonBuffer::trace(&maps, &view, &materials, light, settings.path_tracer(bvh.as_ref(), branch)))
+                .collect();
+            Traced { view, intensity, maps, buffers }
         })
         .collect();
     Ok((traced, maps_seconds, clock.elapsed().as_secs_f64()))
@@ -303,21 +327,29 @@ struct Gathered {
 
 /// Gathers and splats one light view's photons by `variant` and adds the resolved
 /// map's irradiance at `points` (receivers facing `up`) into `irradiance`.
-fn gather_view(t: &Traced, variant: &Variant, photons: u32, points: &[(Vec3, Vec3)], irradiance: &mut [f32]) -> Gathered {
-    let clock = Instant::now();
-    let pyramid = PhotonPyramid::for_gather(&t.photons, MAP_RESOLUTION, variant.gather);
-    let pyramid_seconds = clock.elapsed().as_secs_f64();
-    let clock = Instant::now();
-    let (entries, stats) = hierarchy::gather(&pyramid, variant.gather);
-    let gather_seconds = clock.elapsed().as_secs_f64();
-    let clock = Instant::now();
-    let (map, splat_stats) = CausticMap::splat_all(&t.photons, &pyramid, &entries, variant.splats, MAP_RESOLUTION);
-    let resolved = map.resolve();
-    let splat_seconds = clock.elapsed().as_secs_f64();
-    for (e, &(q, n)) in irradiance.iter_mut().zip(points) {
-        *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, photons, t.intensity, q, n);
+fn gather_view(t: &Traced, settings: &CausticMapSettings, points: &[(Vec3, Vec3)], irradiance: &mut [f32]) -> Gathered {
+    let mut map = CausticMap::for_splats(settings.splats, settings.map_resolution);
+    let (mut stats, mut splat_stats) = (hierarchy::GatherStats::default(), caustic_map::SplatStats::default());
+    let mut seconds = [0.0; 3];
+    for photons in &t.buffers {
+        let clock = Instant::now();
+        let pyramid = PhotonPyramid::for_gather(photons, settings.map_resolution, settings.gather);
+        seconds[0] += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        let (entries, gathered) = hierarchy::gather(&pyramid, settings.gather);
+        stats.add(&gathered);
+        seconds[1] += clock.elapsed().as_secs_f64();
+        let clock = Instant::now();
+        map.splat_entries(photons, &pyramid, &entries, settings.splats, &mut splat_stats);
+        seconds[2] += clock.elapsed().as_secs_f64();
     }
-    Gathered { stats, splat_stats, seconds: [pyramid_seconds, gather_seconds, splat_seconds] }
+    let clock = Instant::now();
+    let resolved = map.resolve();
+    seconds[2] += clock.elapsed().as_secs_f64();
+    for (e, &(q, n)) in irradiance.iter_mut().zip(points) {
+        *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, settings.photon_resolution, t.intensity, q, n);
+    }
+    Gathered { stats, splat_stats, seconds }
 }
 
 /// Photons processed against photons in the buffer, one line per gather.

@@ -132,7 +132,7 @@ pub fn bench_scenes(quick: bool, cpu_only: bool, rows: &mut Vec<Measurement>) ->
             rows.push(Measurement { scene: name.clone(), method: "textures".into(), quality, work, seconds, gpu, error, error_vs_limit: None });
         }
         let clock = Instant::now();
-        let maps = crate::hierarchical::irradiance_at(&bench, 1024, &crate::hierarchical::VARIANTS[4], &surface.points)?;
+        let maps = crate::hierarchical::irradiance_at(&bench, &crate::hierarchical::VARIANTS[4].settings(1024, crate::hierarchical::MAP_RESOLUTION), &surface.points)?;
         let seconds = clock.elapsed().as_secs_f64();
         let error = Errors::between(&surface.cells(&maps.0), &truth);
         eprintln!("{name:>8} {:>16} {:>10}: {seconds:8.3} s, relative L2 {:.4}", "maps (surface)", "1024", error.l2);

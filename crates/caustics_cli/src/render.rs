@@ -218,9 +218,8 @@ fn twin_plane(method: Method, name: &str, bench: &BenchScene) -> Result<Vec<f32>
             }
             run.map_err(|e| format!("--method convolution does not apply to {name}: {e}"))?
         }
-        Method::Maps => crate::hierarchical::irradiance(bench, 1024, crate::hierarchical::TRACED, SUPERSAMPLE)?,
-        Method::MapsImageSpace => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[4], SUPERSAMPLE)?,
-        Method::MapsFlat => crate::hierarchical::irradiance(bench, 1024, &crate::hierarchical::VARIANTS[0], SUPERSAMPLE)?,
+        // The plugin's settings of the method, on its CPU twin.
+        Method::Maps | Method::MapsImageSpace | Method::MapsFlat => crate::hierarchical::irradiance(bench, &method.settings().1.core(), SUPERSAMPLE)?,
         Method::IlluminationTextures => crate::illumination::irradiance(bench, &Default::default(), SUPERSAMPLE)?,
         Method::Auto => Auto.run(name, bench, 2, SUPERSAMPLE)?,
     };

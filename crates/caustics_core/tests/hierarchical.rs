@@ -26,7 +26,7 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 const VARIABLE: Splats = Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp };
 
 fn settings(photons: u32, map: u32, gather: Gather, splats: Splats) -> CausticMapSettings {
-    CausticMapSettings { photon_resolution: photons, map_resolution: map, gather, splats, exit_iterations: 4, paths: PhotonPaths::ImageSpace }
+    CausticMapSettings { photon_resolution: photons, map_resolution: map, gather, splats, exit_iterations: 4, paths: PhotonPaths::ImageSpace, fresnel_branches: 0 }
 }
 
 const HIERARCHICAL: Gather = Gather::Hierarchical { clustering: Clustering::Off };
@@ -180,6 +180,42 @@ fn a_glass_slab_transmits_the_fresnel_fractions_of_both_faces() {
     for e in floor_samples(&view, 1.5, 0.0, 16) {
         assert!((e / expected - 1.0).abs() < 2e-3, "{e} against {expected}");
     }
+}
+
+/// A glass window standing on the floor beside a point light: its front face reflects
+/// the Fresnel fraction `R(θ)` onto the floor on the light's side, as a mirror image of
+/// the light would shine (`R I cos θ_floor / d²` from the light mirrored in the face).
+/// Without Fresnel branches the caustic maps carry none of it; with one, they carry it.
+#[test]
+fn a_fresnel_branch_carries_the_light_a_window_reflects() {
+    let light_at = Vec3::new(0.0, 2.0, 0.0);
+    let window = TriMesh::cuboid(Vec3::new(0.5, 0.0, -1.5), Vec3::new(0.52, 3.0, 1.5));
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Point { position: light_at, intensity: 20.0 })],
+        generators: vec![glass(window, 1.5)],
+        receivers: vec![floor(4.0, 0.0)],
+    };
+    let mirrored = Vec3::new(1.0, 2.0, 0.0);
+    let points: Vec<Vec3> = (0..300).map(|i| Vec3::new(-0.8 + 0.06 * (i % 20) as f32, 0.0, -0.6 + 0.08 * (i / 20) as f32)).collect();
+    let expected: Vec<f32> = points
+        .iter()
+        .map(|&p| {
+            let d = p - mirrored;
+            let reflectance = 1.0 - fresnel_transmittance(d.x.abs() / d.length(), 1.0 / 1.5);
+            reflectance * 20.0 * (d.y.abs() / d.length()) / d.length_squared()
+        })
+        .collect();
+    let traced = |fresnel_branches| CausticMapSettings { paths: PhotonPaths::Traced, fresnel_branches, ..settings(512, 512, CLUSTERED, VARIABLE) };
+    let irradiance = |views: &[ViewCaustics]| -> Vec<f32> { points.iter().map(|&p| caustics_core::hierarchical::irradiance_at(views, p, Vec3::Y)).collect() };
+    let without = irradiance(&scene_caustics(&scene, &traced(0)));
+    let mean = |v: &[f32]| v.iter().map(|&e| e as f64).sum::<f64>() / v.len() as f64;
+    assert!(mean(&without) < 1e-3 * mean(&expected), "no branch, no reflected light: {}", mean(&without));
+    let views = scene_caustics(&scene, &traced(1));
+    views.iter().for_each(assert_all_finite);
+    let with = irradiance(&views);
+    let (error, ratio) = (caustics_core::metrics::relative_l2(&with, &expected), mean(&with) / mean(&expected));
+    eprintln!("a window's reflection: relative L2 {error:.4}, mean ratio {ratio:.4}");
+    assert!(error < 2e-3 && (ratio - 1.0).abs() < 2e-3, "relative L2 {error}, mean ratio {ratio}");
 }
 
 #[test]

@@ -17,7 +17,7 @@
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, EMPTY, DRAWN_HERE, ONE_SIDED, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
     SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
-    map_uv, light_ray, texel_center, texel_measure, relative_beam, cone_attenuation, range_attenuation, texel_of, reflect_about,
+    map_uv, light_ray, photon_texel_center, photon_measure, photon_texel, relative_beam, cone_attenuation, range_attenuation, texel_of, reflect_about,
     refract_through, fresnel_transmittance, oct_decode, bilinear_taps, bilinear_mix,
 }
 
@@ -34,6 +34,9 @@ struct Step {
     fixed_count: u32,
     // This view's first counter.
     counter_base: u32,
+    // The photon buffer `trace_photons` traces: 0 the transmitted light, k ≥ 1 the
+    // Fresnel branch that reflects at a photon's k-th refraction.
+    branch: u32,
 }
 
 // Counters, from `Step::counter_base`: the lengths of lists 0, 1 and 2, the clusters
@@ -133,7 +136,7 @@ fn exit_distance(p1: vec3<f32>, z1: f32, t: vec3<f32>, back: Sample) -> vec4<f32
         if uv.z == 0.0 {
             break;
         }
-        let texel = texel_of(uv.xy, view.photon_resolution);
+        let texel = photon_texel(view, uv.xy);
         if texel.z == 0u {
             break;
         }
@@ -390,6 +393,7 @@ struct Landing {
 // `photons::traced_path`.
 fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_in: vec3<f32>, flux_in: f32) -> Landing {
     var lost = Landing(vec3(0.0), vec3(0.0), 0.0, 0.0, false);
+    var refractions = 0u;
     var p = p1;
     var dir = dir_in;
     var flux = flux_in;
@@ -418,8 +422,15 @@ fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_
             if t.w == 0.0 {
                 dir = reflect_about(dir, n);
             } else {
-                flux *= fresnel_transmittance(dot(dir, n), eta);
-                dir = t.xyz;
+                refractions += 1u;
+                let transmitted = fresnel_transmittance(dot(dir, n), eta);
+                if refractions == step.branch {
+                    flux *= 1.0 - transmitted;
+                    dir = reflect_about(dir, n);
+                } else {
+                    flux *= transmitted;
+                    dir = t.xyz;
+                }
             }
         } else {
             dir = reflect_about(dir, n);
@@ -435,6 +446,10 @@ fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_
             reach = next.t;
         }
         let hit = march_receivers(origin, dir, reach);
+        // A Fresnel branch whose path ends before its refraction: branch 0 has it.
+        if refractions < step.branch && (hit.w != 0.0 || next.t < 0.0) {
+            return lost;
+        }
         if hit.w != 0.0 {
             return Landing(hit.xyz, origin, flux, travelled, true);
         }
@@ -501,7 +516,7 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     if (material_flags(front.material) & DRAWN_HERE) == 0u {
         return;
     }
-    let uv0 = texel_center(id.x, id.y, n);
+    let uv0 = photon_texel_center(view, id.x, id.y);
     // `photons::trace_photon`: a surface nearer the light than the generator hides it.
     let m = view.map_resolution;
     let shadow_texel = min(vec2<u32>(uv0 * f32(m)), vec2(m - 1u));
@@ -534,7 +549,7 @@ fn trace_photons(@builtin(global_invocation_id) id: vec3<u32>) {
     // at a perspective view's origin).
     let path = length(p1 - view.origin.xyz) + landing.travelled + length(landing.hit - landing.last);
     photon_uv[index] = min(uv.xy, vec2(ONE_BELOW));
-    photon_flux[index] = vec2(landing.flux * range_attenuation(view, path), beam * texel_measure(view, n));
+    photon_flux[index] = vec2(landing.flux * range_attenuation(view, path), beam * photon_measure(view));
 }
 
 // ---------------------------------------------------------------- pyramid
@@ -628,8 +643,13 @@ fn write_args() {
     args[slot] = x;
     args[slot + 1u] = select(1u, (groups + 65534u) / 65535u, groups > 0u);
     args[slot + 2u] = 1u;
+    // Every photon buffer's gather counts into the view's totals, and each starts a
+    // gathered list of its own.
     if step.source != 2u {
-        atomicStore(&counters[step.counter_base + COUNT_PROCESSED + step.level], n);
+        atomicAdd(&counters[step.counter_base + COUNT_PROCESSED + step.level], n);
+    }
+    if step.source == ALL_NODES {
+        atomicStore(&counters[step.counter_base + 2u], 0u);
     }
     if step.destination < 2u {
         atomicStore(&counters[step.counter_base + step.destination], 0u);

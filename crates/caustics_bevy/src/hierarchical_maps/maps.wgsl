@@ -1,6 +1,6 @@
 // The light maps (`caustics_core::hierarchical::light_maps`): the generators' nearest
 // front faces and farthest back faces, and the receivers' nearest surfaces, rasterised
-// from a light view. Each texel stores the view depth of its surface and, for the
+// from a light view (the generators over the photons' part of it). Each texel stores the view depth of its surface and, for the
 // generators, its smooth normal (octahedral) and generator index.
 
 #import bevy_caustics::caustic_maps::{LightView, depth_of, oct_encode}
@@ -32,7 +32,7 @@ fn generator_vertex(
     let i = instances[instance];
     let world = (i.world_from_local * vec4(position, 1.0)).xyz;
     let n = (i.normal_from_local * vec4(normal, 0.0)).xyz;
-    return SurfaceOutput(view.clip_from_world * vec4(world, 1.0), world, n, i.material.x);
+    return SurfaceOutput(view.photon_clip_from_world * vec4(world, 1.0), world, n, i.material.x);
 }
 
 // Depth, the normal as the mesh orients it, and the generator.

@@ -13,7 +13,9 @@
 //!    casts shadows, and every [`crate::CausticReceiver`]) rasterised from the light
 //!    with Bevy's own meshes;
 //! 2. **photon buffer**: a compute pass traces each texel's photon through the
-//!    generator in image space (both faces of a closed refractor) onto the receivers;
+//!    generator in image space (both faces of a closed refractor), or through the
+//!    generators' triangles, onto the receivers; with Fresnel branches, stages 2–4 run
+//!    again for each into the same map;
 //! 3. **gather**: the validity pyramid, then the breadth-first traversal (§3.1) with
 //!    indirect dispatches and compaction, clustering converging photons (§3.2), or the
 //!    flat gather of every photon;
@@ -69,6 +71,11 @@ pub struct HierarchicalMapsSettings {
     /// interface of a concave body, light from one generator onto another) instead of
     /// the image-space pair of front and back maps (Wyman 2005).
     pub traced_paths: bool,
+    /// Fresnel-reflected branches traced paths follow beside the transmitted light
+    /// (past the paper, at most 3): each traces, gathers and splats one more photon
+    /// buffer into the same map. Branch `k` takes the reflection at a photon's `k`-th
+    /// refraction: 1 carries what glass throws back off its first face.
+    pub fresnel_branches: u32,
 }
 
 /// How the photon buffer is gathered.
@@ -96,6 +103,7 @@ impl HierarchicalMapsSettings {
         drop_splats_above_top_level: false,
         exit_iterations: 4,
         traced_paths: false,
+        fresnel_branches: 0,
     };
     /// The traversal, fixed splats: the same map as [`Self::FLAT`], from fewer photons processed.
     pub const HIERARCHICAL: Self = Self { gather: CausticMapGather::Hierarchical, ..Self::FLAT };
@@ -103,9 +111,10 @@ impl HierarchicalMapsSettings {
     pub const FULL: Self = Self { gather: CausticMapGather::ClusterLastLevel, variable_splats: true, ..Self::FLAT };
     /// [`Self::FULL`] with photons traced through the generators' triangles (past the
     /// paper): right through concave glass and from one generator onto another, where
-    /// the image-space pair sees one entry and the farthest exit (README, "Choosing a
+    /// the image-space pair sees one entry and the farthest exit, and the light glass
+    /// reflects off its first face as one Fresnel branch (README, "Choosing a
     /// technique", has the measurements).
-    pub const TRACED: Self = Self { traced_paths: true, ..Self::FULL };
+    pub const TRACED: Self = Self { traced_paths: true, fresnel_branches: 1, ..Self::FULL };
 
     /// The core crate's settings.
     pub fn core(&self) -> CausticMapSettings {
@@ -128,6 +137,7 @@ impl HierarchicalMapsSettings {
             splats,
             exit_iterations: self.exit_iterations,
             paths: if self.traced_paths { PhotonPaths::Traced } else { PhotonPaths::ImageSpace },
+            fresnel_branches: self.fresnel_branches,
         }
     }
 }

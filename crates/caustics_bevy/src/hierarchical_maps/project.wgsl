@@ -8,7 +8,7 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::receiver::{exposed, world_at}
 #import bevy_caustics::caustic_maps::{
-    LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, bilinear_taps,
+    LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, map_texels_per_photon, bilinear_taps,
     bilinear_mix,
 }
 
@@ -57,7 +57,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     // `caustic_map::bilinear` of the resolved map.
     let b = bilinear_taps(uv.xy * f32(m) - 0.5, m);
     let c = bilinear_mix(b, resolved_at(b.low.x, b.low.y), resolved_at(b.high.x, b.low.y), resolved_at(b.low.x, b.high.y), resolved_at(b.high.x, b.high.y));
-    let ratio = f32(m) / f32(light.photon_resolution);
+    let ratio = map_texels_per_photon(light);
     let e = c * ratio * ratio * receiver_jacobian(light, p, n);
     return exposed(light.color.rgb * e, view.exposure);
 }

@@ -30,6 +30,7 @@ use caustics_core::hierarchical::{
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuLightView {
     clip_from_world: Mat4,
+    photon_clip_from_world: Mat4,
     origin: Vec4,
     right: Vec4,
     up: Vec4,
@@ -60,6 +61,7 @@ pub(super) struct GpuLightView {
     path_epsilon: f32,
     /// Where the BVH's triangles start in its buffer (vec4s), 0 without a BVH.
     bvh_triangles: u32,
+    emission: f32,
 }
 
 /// `DRAWN_HERE` and `ONE_SIDED` in `types.wgsl`.
@@ -79,6 +81,7 @@ struct GpuStep {
     args_slot: u32,
     fixed_count: u32,
     counter_base: u32,
+    branch: u32,
 }
 
 /// `Instance` in `maps.wgsl`.
@@ -156,6 +159,7 @@ impl GpuLightView {
         let perspective = matches!(v.projection, Projection::Perspective { .. }) as u32 as f32;
         let gpu = Self {
             clip_from_world: Mat4::from_cols_array(&v.clip_from_world().to_cols_array()),
+            photon_clip_from_world: Mat4::from_cols_array(&v.photon_clip_from_world().to_cols_array()),
             origin: to_vec3(v.origin).extend(perspective),
             right: to_vec3(v.right).extend(half.x),
             up: to_vec3(v.up).extend(half.y),
@@ -187,6 +191,7 @@ impl GpuLightView {
             traced_paths: bvh.is_some() as u32,
             path_epsilon: bvh.map_or(0.0, GeneratorBvh::ray_offset),
             bvh_triangles: bvh.filter(|b| !b.triangles.is_empty()).map_or(0, |b| 2 * b.nodes.len() as u32),
+            emission: v.emission,
         };
         (gpu, pyramid_nodes, map_texels)
     }
@@ -326,15 +331,15 @@ pub(super) struct Dispatch {
     pub(super) groups: Groups,
 }
 
-/// The dispatches of one light view and the steps they read, in order: the photon
-/// buffer, the pyramid levels, the gather (flat, or the traversal level by level), the
-/// splats and the resolve.
+/// The dispatches of one light view and the steps they read, in order: for each photon
+/// buffer (the transmitted light's, then each Fresnel branch's) the trace, the pyramid
+/// levels, the gather (flat, or the traversal level by level) and the splats into the
+/// one caustic map; then its resolve.
 fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dispatch>, Vec<GpuStep>) {
     let p = settings.photon_resolution;
     let m = settings.map_resolution;
-    let mut steps = vec![GpuStep { counter_base, ..default() }];
-    let mut dispatches = vec![Dispatch { kernel: Kernel::TracePhotons, step: 0, groups: Groups::Direct(p.div_ceil(8), p.div_ceil(8)) }];
-    let mut push = |kernel: Kernel, step: GpuStep, groups: Groups, steps: &mut Vec<GpuStep>| {
+    let (mut steps, mut dispatches) = (Vec::new(), Vec::new());
+    let mut push = |kernel: Kernel, step: GpuStep, groups: Groups| {
         steps.push(GpuStep { counter_base, ..step });
         dispatches.push(Dispatch { kernel, step: steps.len() - 1, groups });
     };
@@ -343,24 +348,28 @@ fn plan_dispatches(settings: &CausticMapSettings, counter_base: u32) -> (Vec<Dis
         Gather::Flat => (0, 0),
         Gather::Hierarchical { .. } => (start_level(p, caustics_core::hierarchical::START_RESOLUTION), p.ilog2()),
     };
-    for level in 1..=pyramid_levels {
-        let w = (p >> level).div_ceil(8);
-        push(Kernel::BuildPyramid, GpuStep { level, ..default() }, Groups::Direct(w, w), &mut steps);
-    }
-    let mut slot = 0;
-    let mut source = ALL_NODES;
     let fixed_count = (p >> start) * (p >> start);
-    for level in (0..=start).rev() {
-        let destination = if level == 0 { NO_TARGET } else { (start - level) % 2 };
-        let step = GpuStep { level, source, destination, args_slot: slot, fixed_count, ..default() };
-        push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
-        push(Kernel::Traverse, step, Groups::Indirect(slot), &mut steps);
-        (slot, source) = (slot + 1, destination);
+    let mut slot = 0;
+    for branch in 0..settings.photon_buffers() {
+        push(Kernel::TracePhotons, GpuStep { branch, ..default() }, Groups::Direct(p.div_ceil(8), p.div_ceil(8)));
+        for level in 1..=pyramid_levels {
+            let w = (p >> level).div_ceil(8);
+            push(Kernel::BuildPyramid, GpuStep { level, ..default() }, Groups::Direct(w, w));
+        }
+        let mut source = ALL_NODES;
+        for level in (0..=start).rev() {
+            let destination = if level == 0 { NO_TARGET } else { (start - level) % 2 };
+            let step = GpuStep { level, source, destination, args_slot: slot, fixed_count, ..default() };
+            push(Kernel::WriteArgs, step, Groups::Direct(1, 1));
+            push(Kernel::Traverse, step, Groups::Indirect(slot));
+            (slot, source) = (slot + 1, destination);
+        }
+        let step = GpuStep { source: LIST_GATHERED, destination: NO_TARGET, args_slot: slot, ..default() };
+        push(Kernel::WriteArgs, step, Groups::Direct(1, 1));
+        push(Kernel::Splat, step, Groups::Indirect(slot));
+        slot += 1;
     }
-    let step = GpuStep { source: LIST_GATHERED, destination: NO_TARGET, args_slot: slot, ..default() };
-    push(Kernel::WriteArgs, step, Groups::Direct(1, 1), &mut steps);
-    push(Kernel::Splat, step, Groups::Indirect(slot), &mut steps);
-    push(Kernel::Resolve, GpuStep::default(), Groups::Direct(m.div_ceil(8), m.div_ceil(8)), &mut steps);
+    push(Kernel::Resolve, GpuStep::default(), Groups::Direct(m.div_ceil(8), m.div_ceil(8)));
     (dispatches, steps)
 }
 

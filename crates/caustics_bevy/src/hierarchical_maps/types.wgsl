@@ -23,6 +23,8 @@ const ONE_BELOW: f32 = 0.99999994;
 
 struct LightView {
     clip_from_world: mat4x4<f32>,
+    // `LightView::photon_clip_from_world`: the front and back maps' part of the image.
+    photon_clip_from_world: mat4x4<f32>,
     origin: vec4<f32>,        // w: 1 in perspective, 0 orthographic
     right: vec4<f32>,         // w: half the image plane's width
     up: vec4<f32>,            // w: half its height
@@ -60,6 +62,8 @@ struct LightView {
     path_epsilon: f32,
     // Where the BVH's triangles start in `generator_bvh` (vec4s); 0: no BVH.
     bvh_triangles: u32,
+    // `LightView::emission`: the central fraction of the image the photons cover.
+    emission: f32,
 }
 
 // `PhotonMaterial::drawn_here` and `PhotonMaterial::one_sided`.
@@ -130,11 +134,21 @@ fn texel_center(x: u32, y: u32, resolution: u32) -> vec2<f32> {
     return (vec2(f32(x), f32(y)) + 0.5) / f32(resolution);
 }
 
-// `LightView::texel_measure`.
-fn texel_measure(view: LightView, resolution: u32) -> f32 {
-    let h = half_extent(view);
-    let n = f32(resolution);
+// `LightView::photon_uv`.
+fn photon_texel_center(view: LightView, x: u32, y: u32) -> vec2<f32> {
+    return 0.5 + (texel_center(x, y, view.photon_resolution) - 0.5) * view.emission;
+}
+
+// `LightView::photon_measure`.
+fn photon_measure(view: LightView) -> f32 {
+    let h = half_extent(view) * view.emission;
+    let n = f32(view.photon_resolution);
     return 4.0 * h.x * h.y / (n * n);
+}
+
+// `LightView::map_texels_per_photon`.
+fn map_texels_per_photon(view: LightView) -> f32 {
+    return f32(view.map_resolution) * view.emission / f32(view.photon_resolution);
 }
 
 // `LightView::relative_beam`.
@@ -190,6 +204,11 @@ fn texel_size(view: LightView, z: f32, resolution: u32) -> f32 {
 }
 
 // `photons::texel_of`: the texel `uv` falls in, z 1 inside the map.
+// `LightView::photon_texel`.
+fn photon_texel(view: LightView, uv: vec2<f32>) -> vec3<u32> {
+    return texel_of(0.5 + (uv - 0.5) / view.emission, view.photon_resolution);
+}
+
 fn texel_of(uv: vec2<f32>, resolution: u32) -> vec3<u32> {
     let t = uv * f32(resolution);
     let n = f32(resolution);

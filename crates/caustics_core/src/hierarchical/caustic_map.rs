@@ -76,8 +76,9 @@ pub fn splat_level(diameter: f32) -> u32 {
 }
 
 /// Diameter of a variable splat for photon `(x, y)`: twice the largest distance to its
-/// valid 4-neighbours in caustic-map texels, or twice the photon spacing of an
-/// unoccluded beam where it has none; at least [`MIN_SPLAT_DIAMETER`].
+/// valid 4-neighbours in caustic-map texels, or where it has none twice `M/P` texels
+/// (the spacing of a photon buffer spread over the whole map); at least
+/// [`MIN_SPLAT_DIAMETER`].
 pub fn divergence_diameter(photons: &PhotonBuffer, x: u32, y: u32, map_resolution: u32) -> f32 {
     let n = photons.resolution;
     let here = photons.photon(x, y).uv;
@@ -126,17 +127,31 @@ impl CausticMap {
         Self { resolution, levels }
     }
 
-    /// Splats every entry. Fixed splats use level 0; variable ones the level their
-    /// diameter picks, up to `max_level`.
-    pub fn splat_all(photons: &PhotonBuffer, pyramid: &PhotonPyramid, entries: &[GatherEntry], splats: Splats, resolution: u32) -> (Self, SplatStats) {
+    /// An empty map with the levels `splats` write to: level 0 for fixed splats, up to
+    /// `max_level` for variable ones.
+    pub fn for_splats(splats: Splats, resolution: u32) -> Self {
         let top = match splats {
             Splats::Fixed { .. } => 0,
             Splats::Variable { max_level, .. } => max_level.min(resolution.ilog2()),
         };
-        let mut map = Self::new(resolution, top);
-        let mut stats = SplatStats { per_level: vec![0; top as usize + 1], ..SplatStats::default() };
+        Self::new(resolution, top)
+    }
+
+    /// Splats every entry into a new map ([`Self::splat_entries`]).
+    pub fn splat_all(photons: &PhotonBuffer, pyramid: &PhotonPyramid, entries: &[GatherEntry], splats: Splats, resolution: u32) -> (Self, SplatStats) {
+        let mut map = Self::for_splats(splats, resolution);
+        let mut stats = SplatStats::default();
+        map.splat_entries(photons, pyramid, entries, splats, &mut stats);
+        (map, stats)
+    }
+
+    /// Adds the splat of every entry, and counts it in `stats`. Fixed splats use level
+    /// 0; variable ones the level their diameter picks, up to the map's top level.
+    pub fn splat_entries(&mut self, photons: &PhotonBuffer, pyramid: &PhotonPyramid, entries: &[GatherEntry], splats: Splats, stats: &mut SplatStats) {
+        let top = self.levels.len() as u32 - 1;
+        stats.per_level.resize(self.levels.len(), 0);
         for &entry in entries {
-            let splat = entry_splat(photons, pyramid, entry, splats, resolution);
+            let splat = entry_splat(photons, pyramid, entry, splats, self.resolution);
             stats.flux_in += splat.flux as f64;
             let mut level = splat_level(splat.diameter);
             if level > top {
@@ -149,9 +164,8 @@ impl CausticMap {
                 }
             }
             stats.per_level[level as usize] += 1;
-            stats.flux_off_map += map.splat(splat, level);
+            stats.flux_off_map += self.splat(splat, level);
         }
-        (map, stats)
     }
 
     /// Adds one splat to `level`; returns the flux that fell off the map.
@@ -267,7 +281,7 @@ pub fn visible_from_light(view: &LightView, maps: &LightMaps, p: Vec3, n: Vec3) 
 /// `view` (photons traced at `photon_resolution`, a light of `intensity`: irradiance
 /// for parallel light, intensity per steradian for a point light): zero where the light
 /// does not see `p`. Photon units per texel become flux per image-plane area by
-/// `(M/P)²` (a photon's measure over a texel's), and irradiance by the receiver's
+/// `(M·emission/P)²` (a photon's measure over a texel's), and irradiance by the receiver's
 /// Jacobian.
 pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photon_resolution: u32, intensity: f32, p: Vec3, n: Vec3) -> f32 {
     if !visible_from_light(view, maps, p, n) {
@@ -276,7 +290,7 @@ pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photo
     let m = maps.map_resolution;
     let Some(uv) = view.uv(p) else { return 0.0 };
     let c = bilinear(uv * m as f32 - 0.5, m, |x, y| resolved[(y * m + x) as usize]);
-    let ratio = m as f32 / photon_resolution as f32;
+    let ratio = view.map_texels_per_photon(photon_resolution, m);
     c * intensity * ratio * ratio * view.receiver_jacobian(p, n)
 }
 

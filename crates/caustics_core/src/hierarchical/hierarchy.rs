@@ -191,6 +191,17 @@ impl GatherStats {
     pub fn splats(&self) -> u64 {
         self.photons + self.clusters
     }
+
+    /// Adds `other`'s counts (another photon buffer's gather into the same map).
+    pub fn add(&mut self, other: &Self) {
+        if self.processed.len() < other.processed.len() {
+            self.processed.resize(other.processed.len(), 0);
+        }
+        self.processed.iter_mut().zip(&other.processed).for_each(|(a, b)| *a += b);
+        self.photons += other.photons;
+        self.clusters += other.clusters;
+        self.clustered_photons += other.clustered_photons;
+    }
 }
 
 /// The photons and clusters to splat, in traversal order, with what the traversal

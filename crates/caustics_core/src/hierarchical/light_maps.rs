@@ -69,13 +69,13 @@ impl LightMaps {
         let texels = |resolution: u32| (0..resolution * resolution).into_par_iter().map(move |i| (i % resolution, i / resolution));
         let front = texels(photon_resolution)
             .map(|(x, y)| {
-                let (origin, dir) = view.ray(LightView::texel_center(x, y, photon_resolution));
+                let (origin, dir) = view.ray(view.photon_uv(x, y, photon_resolution));
                 first_facing(scene, &generators, view, (origin, dir), false, &both_sides)
             })
             .collect();
         let back = texels(photon_resolution)
             .map(|(x, y)| {
-                let (origin, dir) = view.ray(LightView::texel_center(x, y, photon_resolution));
+                let (origin, dir) = view.ray(view.photon_uv(x, y, photon_resolution));
                 // From the far plane back towards the light: the first surface met that
                 // faces away from the light is the farthest one.
                 let t_far = (view.far - view.depth(origin)) / dir.dot(view.forward).max(1e-6);

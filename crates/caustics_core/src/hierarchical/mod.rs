@@ -114,7 +114,17 @@ pub struct CausticMapSettings {
     /// Refinements of a photon's exit point from a closed refractor (image space).
     pub exit_iterations: u32,
     pub paths: PhotonPaths,
+    /// Past the paper: Fresnel-reflected branches a traced path follows beside the
+    /// transmitted light, each a photon buffer of its own splatted into the same map —
+    /// branch `k` reflects at a photon's `k`-th refraction, as the tracer's reflected
+    /// branch there (the light a glass body throws back, or reflects once inside). Up to
+    /// [`MAX_FRESNEL_BRANCHES`]; image-space paths have none.
+    pub fresnel_branches: u32,
 }
+
+/// Most Fresnel-reflected branches a caustic map follows: the fourth and later carry
+/// well under 1 % of a glass body's caustic flux (`mirror_bunny`).
+pub const MAX_FRESNEL_BRANCHES: u32 = 3;
 
 impl Default for CausticMapSettings {
     /// 1024² photons into a 1024² map, hierarchical with clustering at the last level
@@ -128,18 +138,26 @@ impl Default for CausticMapSettings {
             splats: Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp },
             exit_iterations: 4,
             paths: PhotonPaths::ImageSpace,
+            fresnel_branches: 0,
         }
     }
 }
 
 impl CausticMapSettings {
-    /// How [`PhotonBuffer::trace`] follows photons under these settings: through `bvh`
-    /// (the scene's [`GeneratorBvh`]) when they are traced and it is given.
-    pub fn path_tracer<'a>(&self, bvh: Option<&'a GeneratorBvh>) -> PathTracer<'a> {
+    /// How [`PhotonBuffer::trace`] follows the photons of `branch` under these
+    /// settings: through `bvh` (the scene's [`GeneratorBvh`]) when they are traced and
+    /// it is given.
+    pub fn path_tracer<'a>(&self, bvh: Option<&'a GeneratorBvh>, branch: u32) -> PathTracer<'a> {
         match (self.paths, bvh) {
-            (PhotonPaths::Traced, Some(bvh)) => PathTracer::traced(bvh),
+            (PhotonPaths::Traced, Some(bvh)) => PathTracer::traced(bvh, branch),
             _ => PathTracer::ImageSpace { exit_iterations: self.exit_iterations },
         }
+    }
+
+    /// The photon buffers a light view traces: the transmitted light's, then the
+    /// Fresnel branches' of traced paths.
+    pub fn photon_buffers(&self) -> u32 {
+        1 + if self.paths == PhotonPaths::Traced { self.fresnel_branches } else { 0 }
     }
 
     /// Checks the resolutions (powers of two within range) and the fixed splat size.
@@ -158,6 +176,9 @@ impl CausticMapSettings {
             && max_level > 8
         {
             return Err(ParamError::OutOfRange { name: "top splat level", value: max_level as f32, expected: "at most 8" });
+        }
+        if self.fresnel_branches > MAX_FRESNEL_BRANCHES {
+            return Err(ParamError::OutOfRange { name: "Fresnel branches", value: self.fresnel_branches as f32, expected: "at most 3" });
         }
         Ok(())
     }
@@ -194,9 +215,14 @@ pub struct ViewCaustics {
     pub view: LightView,
     pub settings: CausticMapSettings,
     pub maps: LightMaps,
+    /// The transmitted light's photons, with their pyramid and gather.
     pub photons: PhotonBuffer,
+    /// The Fresnel branches' photons ([`CausticMapSettings::fresnel_branches`]),
+    /// gathered and splatted into the same map.
+    pub branches: Vec<PhotonBuffer>,
     pub pyramid: PhotonPyramid,
     pub entries: Vec<GatherEntry>,
+    /// Every photon buffer's gather, summed.
     pub gather_stats: GatherStats,
     pub map: CausticMap,
     pub splat_stats: SplatStats,
@@ -220,24 +246,37 @@ impl ViewCaustics {
         let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
         let clock = Instant::now();
         let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
-        let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.path_tracer(bvh.as_ref()));
-        let traced = clock.elapsed().as_secs_f64();
-        Self::from_photons(light, view, settings, maps, photons, StageTimes { light_maps, photons: traced, ..StageTimes::default() })
-    }
-
-    /// Runs the stages after the photon buffer.
-    pub fn from_photons(light: &Light, view: &LightView, settings: &CausticMapSettings, maps: LightMaps, photons: PhotonBuffer, mut times: StageTimes) -> Self {
+        let mut times = StageTimes { light_maps, photons: clock.elapsed().as_secs_f64(), ..StageTimes::default() };
+        let mut buffers = (0..settings.photon_buffers()).map(|branch| {
+            let clock = Instant::now();
+            let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.path_tracer(bvh.as_ref(), branch));
+            times.photons += clock.elapsed().as_secs_f64();
+            photons
+        });
+        let photons = buffers.next().expect("a view traces at least one photon buffer");
+        let branches: Vec<PhotonBuffer> = buffers.collect();
+        let mut map = CausticMap::for_splats(settings.splats, settings.map_resolution);
+        let mut splat_stats = SplatStats::default();
+        let mut gather = |photons: &PhotonBuffer, times: &mut StageTimes| {
+            let clock = Instant::now();
+            let pyramid = PhotonPyramid::for_gather(photons, settings.map_resolution, settings.gather);
+            times.pyramid += clock.elapsed().as_secs_f64();
+            let clock = Instant::now();
+            let (entries, stats) = hierarchy::gather(&pyramid, settings.gather);
+            times.gather += clock.elapsed().as_secs_f64();
+            let clock = Instant::now();
+            map.splat_entries(photons, &pyramid, &entries, settings.splats, &mut splat_stats);
+            times.splat += clock.elapsed().as_secs_f64();
+            (pyramid, entries, stats)
+        };
+        let (pyramid, entries, mut gather_stats) = gather(&photons, &mut times);
+        for branch in &branches {
+            gather_stats.add(&gather(branch, &mut times).2);
+        }
         let clock = Instant::now();
-        let pyramid = PhotonPyramid::for_gather(&photons, settings.map_resolution, settings.gather);
-        times.pyramid = clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let (entries, gather_stats) = hierarchy::gather(&pyramid, settings.gather);
-        times.gather = clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let (map, splat_stats) = CausticMap::splat_all(&photons, &pyramid, &entries, settings.splats, settings.map_resolution);
         let resolved = map.resolve();
-        times.splat = clock.elapsed().as_secs_f64();
-        Self { light: *light, view: *view, settings: *settings, maps, photons, pyramid, entries, gather_stats, map, splat_stats, resolved, times }
+        times.splat += clock.elapsed().as_secs_f64();
+        Self { light: *light, view: *view, settings: *settings, maps, photons, branches, pyramid, entries, gather_stats, map, splat_stats, resolved, times }
     }
 
     /// Caustic irradiance (the light's colour mean) at receiver point `p` with unit normal `n`.

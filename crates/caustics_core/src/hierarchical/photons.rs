@@ -38,7 +38,7 @@ pub struct Photon {
     /// Caustic-map coordinates of its hit on a receiver, in `[0, 1)²`.
     pub uv: Vec2,
     /// Flux in units of an unoccluded photon at the view's centre (the light's
-    /// intensity times the photon texel's [`LightView::texel_measure`]): the beam's
+    /// intensity times the photon texel's [`LightView::photon_measure`]): the beam's
     /// relative measure, the spot's cone and the Fresnel transmittances. Zero: no photon.
     pub flux: f32,
     /// The beam it stands for, ωᵢ: a perspective texel's solid angle (sr), a parallel
@@ -75,6 +75,8 @@ pub enum PhotonFate {
     Absorbed,
     /// A traced path met more than [`MAX_PATH_EVENTS`] interfaces.
     Trapped,
+    /// A Fresnel branch's path ends before the refraction it reflects at.
+    NoBranch,
 }
 
 /// Counts and flux (in photon units, f64) of a photon buffer by fate.
@@ -122,7 +124,7 @@ impl PhotonStats {
                 self.flux_lost_on_path += carried as f64;
             }
             PhotonFate::Shadowed => self.shadowed += 1,
-            PhotonFate::NoGenerator | PhotonFate::OutsideCone | PhotonFate::DrawnElsewhere => {}
+            PhotonFate::NoGenerator | PhotonFate::OutsideCone | PhotonFate::DrawnElsewhere | PhotonFate::NoBranch => {}
         }
         self
     }
@@ -194,14 +196,17 @@ pub enum PathTracer<'a> {
     /// refined `exit_iterations` times.
     ImageSpace { exit_iterations: u32 },
     /// Traced through the generators' triangles; `epsilon` lifts each new ray off the
-    /// surface it leaves.
-    Traced { bvh: &'a GeneratorBvh, epsilon: f32 },
+    /// surface it leaves. `branch` 0 follows the light each refracting interface
+    /// transmits; branch `k ≥ 1` the light the `k`-th reflects (its Fresnel
+    /// reflectance), transmitted at the others.
+    Traced { bvh: &'a GeneratorBvh, epsilon: f32, branch: u32 },
 }
 
 impl<'a> PathTracer<'a> {
-    /// A traced path through `bvh`, lifted off surfaces by [`GeneratorBvh::ray_offset`].
-    pub fn traced(bvh: &'a GeneratorBvh) -> Self {
-        Self::Traced { bvh, epsilon: bvh.ray_offset() }
+    /// Branch `branch` of a traced path through `bvh`, lifted off surfaces by
+    /// [`GeneratorBvh::ray_offset`].
+    pub fn traced(bvh: &'a GeneratorBvh, branch: u32) -> Self {
+        Self::Traced { bvh, epsilon: bvh.ray_offset(), branch }
     }
 }
 
@@ -279,7 +284,7 @@ pub fn trace_photon(maps: &LightMaps, view: &LightView, materials: &[PhotonMater
     if !material.drawn_here {
         return TracedPhoton::lost(PhotonFate::DrawnElsewhere, 0.0, 0.0);
     }
-    let uv = LightView::texel_center(x, y, resolution);
+    let uv = view.photon_uv(x, y, resolution);
     // Past the paper, whose front map sees generators alone: a surface nearer the light
     // than the generator (a roof over the water) keeps the light off it.
     let m = maps.map_resolution;
@@ -296,7 +301,9 @@ pub fn trace_photon(maps: &LightMaps, view: &LightView, materials: &[PhotonMater
     let p1 = ray_origin + dir * ((front.depth - view.depth(ray_origin)) / dir.dot(view.forward));
     let landing = match paths {
         PathTracer::ImageSpace { exit_iterations } => image_space_path(maps, view, material, (x, y), p1, dir, weight, exit_iterations),
-        PathTracer::Traced { bvh, epsilon } => traced_path(maps, view, materials, bvh, epsilon, (p1, front.material, front.normal), dir, weight),
+        PathTracer::Traced { bvh, epsilon, branch } => {
+            traced_path(maps, view, materials, (bvh, epsilon, branch), (p1, front.material, front.normal), dir, weight)
+        }
     };
     let (hit, last, flux, travelled) = match landing {
         Ok(landed) => landed,
@@ -312,7 +319,7 @@ pub fn trace_photon(maps: &LightMaps, view: &LightView, materials: &[PhotonMater
                 uv: uv.min(Vec2::splat(ONE_BELOW)),
                 flux_at_generator: weight,
                 flux: flux * light.range_attenuation(path),
-                solid_angle: beam * view.texel_measure(resolution),
+                solid_angle: beam * view.photon_measure(resolution),
             }
         }
         _ => TracedPhoton::lost(PhotonFate::LeftMap, weight, flux),
@@ -359,29 +366,31 @@ fn image_space_path(
     }
 }
 
-/// A traced path from `p1` on generator `material` (smooth normal `normal` there, as
-/// the front map holds it, standing in for the geometric one at this first surface):
-/// at every interface a mirror reflects, a refractor transmits its Fresnel fraction or,
-/// past the critical angle, reflects all of it inside (the tracer's transmitted branch
-/// and, at total internal reflection, its only one). The photon lands where its ray
-/// reaches a receiver in the receiver map before any generator triangle.
+/// Branch `branch` of a traced path from `p1` on generator `material` (smooth normal
+/// `normal` there, as the front map holds it, standing in for the geometric one at this
+/// first surface): at every interface a mirror reflects, a refractor transmits its
+/// Fresnel fraction or, past the critical angle, reflects all of it inside (the
+/// tracer's transmitted branch and, at total internal reflection, its only one); at
+/// its `branch`-th refraction the path takes the reflected fraction instead (the
+/// tracer's reflected branch there). The photon lands where its ray reaches a receiver
+/// in the receiver map before any generator triangle. A branch whose path ends before
+/// its refraction is [`PhotonFate::NoBranch`]: branch 0 carries that light.
 #[allow(clippy::too_many_arguments)]
 fn traced_path(
     maps: &LightMaps,
     view: &LightView,
     materials: &[PhotonMaterial],
-    bvh: &GeneratorBvh,
-    epsilon: f32,
+    (bvh, epsilon, branch): (&GeneratorBvh, f32, u32),
     (p1, material, normal): (Vec3, u32, Vec3),
     mut dir: Vec3,
     mut flux: f32,
 ) -> Landing {
-    let (mut p, mut travelled) = (p1, 0.0f32);
+    let (mut p, mut travelled, mut refractions) = (p1, 0.0f32, 0u32);
     let (mut material, mut ns, mut ng) = (material, normal, normal);
     for _ in 0..MAX_PATH_EVENTS {
         let Some(m) = materials.get(material as usize) else { return Err((PhotonFate::NoGenerator, flux)) };
         if m.one_sided && dir.dot(ng) > 0.0 {
-            return Err((PhotonFate::Absorbed, flux));
+            return Err(branch_fate(PhotonFate::Absorbed, flux, refractions, branch));
         }
         let n = if ns.dot(dir) > 0.0 { -ns } else { ns };
         dir = match m.ior {
@@ -390,8 +399,15 @@ fn traced_path(
                 let eta = if dir.dot(ng) < 0.0 { 1.0 / ior } else { ior };
                 match refract(dir, n, eta) {
                     Refraction::Transmitted(t) => {
-                        flux *= fresnel_transmittance(dir.dot(n), eta);
-                        t
+                        refractions += 1;
+                        let transmitted = fresnel_transmittance(dir.dot(n), eta);
+                        if refractions == branch {
+                            flux *= 1.0 - transmitted;
+                            reflect(dir, n)
+                        } else {
+                            flux *= transmitted;
+                            t
+                        }
                     }
                     Refraction::TotalInternalReflection => reflect(dir, n),
                 }
@@ -401,14 +417,24 @@ fn traced_path(
         let side = if dir.dot(ng) >= 0.0 { ng } else { -ng };
         let origin = p + side * epsilon;
         let next = bvh.intersect(origin, dir, 0.0, f32::INFINITY);
-        if let Some(hit) = march_receivers(maps, view, origin, dir, next.map_or(f32::INFINITY, |h| h.t)) {
+        let landed = march_receivers(maps, view, origin, dir, next.map_or(f32::INFINITY, |h| h.t));
+        if refractions < branch && (landed.is_some() || next.is_none()) {
+            return Err((PhotonFate::NoBranch, 0.0));
+        }
+        if let Some(hit) = landed {
             return Ok((hit, origin, flux, travelled));
         }
         let Some(next) = next else { return Err((PhotonFate::LeftMap, flux)) };
         (p, travelled) = (origin + dir * next.t, travelled + next.t);
         (material, ns, ng) = (next.generator, next.normal, next.geometric_normal);
     }
-    Err((PhotonFate::Trapped, flux))
+    Err(branch_fate(PhotonFate::Trapped, flux, refractions, branch))
+}
+
+/// A path lost with `flux` after `refractions`: lost on branch `branch`, or no path of
+/// it where the branch's refraction never came.
+fn branch_fate(fate: PhotonFate, flux: f32, refractions: u32, branch: u32) -> (PhotonFate, f32) {
+    if refractions < branch { (PhotonFate::NoBranch, 0.0) } else { (fate, flux) }
 }
 
 /// How much nearer the light than a generator a receiver must be to shadow it (view
@@ -445,7 +471,7 @@ fn exit_distance(
     let mut d = (back.depth - z1) / dz;
     for _ in 0..iterations {
         let Some(uv) = view.uv(p1 + t * d) else { break };
-        let Some((x, y)) = texel_of(uv, resolution) else { break };
+        let Some((x, y)) = view.photon_texel(uv, resolution) else { break };
         let next = maps.back(x, y);
         if !next.is_surface() || next.depth <= z1 {
             break;
