@@ -5,7 +5,9 @@
 //! pass report (an unchanged scene keeps its maps; no generators, no work), and the
 //! stiff cases: total internal reflection, photons leaving the map, photons converging
 //! on a few texels, a refractor filling the light's view, a light inside a generator,
-//! 4096² photons and an empty photon buffer.
+//! 4096² photons and an empty photon buffer; traced paths from a ball onto a mirror
+//! with their Fresnel branch, and a window's reflection under a point light against
+//! its analytic value.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 

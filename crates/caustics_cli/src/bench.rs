@@ -43,6 +43,17 @@ pub struct BenchArgs {
     /// Leave out the GPU runs (their columns say "CPU only").
     #[arg(long)]
     pub cpu_only: bool,
+    /// Methods to run, comma-separated, by their names in the CSV (`auto`, `volumes`,
+    /// `maps` for every caustic-map gather, `textures`...); all when not given.
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+}
+
+impl BenchArgs {
+    /// Whether the bench runs the method named `name` (`maps` names every gather).
+    fn runs(&self, name: &str) -> bool {
+        self.methods.is_empty() || self.methods.iter().any(|m| m == name || (m == "maps" && name.starts_with("maps")))
+    }
 }
 
 /// One quality setting of one method on one scene.
@@ -72,10 +83,11 @@ pub struct GpuColumns {
     pub times: Option<GpuTimes>,
 }
 
-/// Runs `method` on the plugin's GPU passes for the bench's GPU columns; a failure is
-/// reported and leaves them empty.
-pub fn gpu_columns(method: Method, scene: &BenchScene, photons: Option<u32>) -> Option<GpuColumns> {
-    match crate::render::gpu_run(method, scene, photons) {
+/// Runs `method` on the plugin's GPU passes for the bench's GPU columns (`maps`: the
+/// caustic maps' photon buffer and map sides); a failure is reported and leaves them
+/// empty.
+pub fn gpu_columns(method: Method, scene: &BenchScene, maps: Option<(u32, u32)>) -> Option<GpuColumns> {
+    match crate::render::gpu_run(method, scene, maps) {
         Ok(run) => Some(GpuColumns { adapter: run.adapter, times: run.times }),
         Err(e) => {
             eprintln!("{:>8} {method:?}: no GPU run: {e}", scene.name);
@@ -229,7 +241,6 @@ pub struct Auto;
 
 impl Auto {
     /// `(tessellation, photons per side)` per step; tessellation 0 keeps the scene's own.
-    /// The caustic maps are 1024² but for 4096² photons, which splat into 2048² maps.
     fn steps(scene: &str) -> [(usize, u32); 4] {
         match scene {
             "pool" | "roofed_pool" | "boxed_pool" | "ball_pool" => [(32, 256), (64, 512), (128, 1024), (256, 2048)],
@@ -237,6 +248,12 @@ impl Auto {
             "ring" | "mirror_bunny" => [(64, 512), (128, 1024), (256, 2048), (1024, 4096)],
             _ => [(0, 256), (0, 512), (0, 1024), (0, 2048)],
         }
+    }
+
+    /// The caustic map side for `photons` per side: the bench's 1024², and 2048² for
+    /// 4096² photons.
+    fn map_side(photons: u32) -> u32 {
+        crate::hierarchical::MAP_RESOLUTION.max(photons / 2)
     }
 }
 
@@ -274,7 +291,7 @@ impl BenchMethod for Auto {
                     let generators: Vec<usize> = (0..choices.len()).filter(followed).collect();
                     let maps_scene = Scene { generators: generators.iter().map(|&i| own.scene.generators[i].clone()).collect(), ..own.scene.clone() };
                     let bench = BenchScene { scene: maps_scene, ..scene.clone() };
-                    let settings = crate::hierarchical::TRACED.settings(photons, crate::hierarchical::MAP_RESOLUTION.max(photons / 2));
+                    let settings = crate::hierarchical::TRACED.settings(photons, Self::map_side(photons));
                     crate::hierarchical::drawn_irradiance(&bench, &settings, samples, &|k| drawn(generators[k]))?
                 }
                 Technique::IlluminationTextures => {
@@ -552,6 +569,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     methods.extend(VOLUME_METHODS.iter().map(|m| m as &dyn BenchMethod));
     methods.extend(CONVOLUTION_METHODS.iter().map(|m| m as &dyn BenchMethod));
     methods.push(&Auto);
+    methods.retain(|m| args.runs(m.name()));
     let mut notes = String::new();
     let reference_photons: u64 = if args.quick { 1 << 21 } else { 1 << 26 };
     let samples = if args.quick { SUPERSAMPLE } else { BENCH_SAMPLES };
@@ -603,7 +621,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                     "volumes" => gpu_columns(Method::Volumes, &tessellated(name, scene, quality as usize)?, None),
                     "auto" => {
                         let (tessellation, photons) = Auto::steps(name)[quality as usize];
-                        gpu_columns(Method::Auto, &tessellated(name, scene, tessellation)?, Some(photons))
+                        gpu_columns(Method::Auto, &tessellated(name, scene, tessellation)?, Some((photons, Auto::map_side(photons))))
                     }
                     _ => None,
                 };
@@ -621,8 +639,10 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         }
         // Caustic maps run on the scene's own tessellation, measured on its region.
         let modes = (args.quick, args.cpu_only, samples);
-        notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, modes, &args.out, &mut rows)?);
-        if name == "sphere" {
+        if args.runs("maps") {
+            notes.push_str(&crate::hierarchical::bench_scene(name, own, &truth, modes, &args.out, &mut rows)?);
+        }
+        if name == "sphere" && args.runs("textures") {
             notes.push_str(&crate::illumination::bench_scenes(args.quick, args.cpu_only, &mut rows)?);
         }
         if name == "pool" {

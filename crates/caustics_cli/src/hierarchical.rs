@@ -224,7 +224,7 @@ pub fn bench_scene(
                 gpu: variant
                     .gpu
                     .filter(|_| !cpu_only && (!quick || p == photon_resolutions(true)[0]))
-                    .and_then(|method| gpu_columns(method, scene, Some(p))),
+                    .and_then(|method| gpu_columns(method, scene, Some((p, MAP_RESOLUTION)))),
                 error: row.errors,
                 error_vs_limit: None,
             });

@@ -255,11 +255,12 @@ const TIMING_FRAMES: u32 = 4;
 
 /// A method's caustic irradiance on the region by the plugin's GPU passes in the
 /// headless renderer, and their GPU time: the scene spawned with every generator
-/// asking for the method's technique (`photons` per side for the caustic maps), a
+/// asking for the method's technique (`maps`: the caustic maps' photon buffer and map
+/// sides, the plugin's when not given), a
 /// top-down orthographic view of the region [`SUPERSAMPLE`]² pixels per cell, its
 /// caustic irradiance buffer read back with the exposure divided out and averaged per
 /// cell (the estimator of the twins and the tracer: cell means).
-pub fn gpu_run(method: Method, bench: &BenchScene, photons: Option<u32>) -> Result<GpuRun, String> {
+pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> Result<GpuRun, String> {
     use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy::prelude::{Camera3d, OrthographicProjection, Projection, Transform};
     let technique = method.technique().ok_or("the reference is traced on the CPU")?;
@@ -269,12 +270,12 @@ pub fn gpu_run(method: Method, bench: &BenchScene, photons: Option<u32>) -> Resu
     let mut renderer = HeadlessRenderer::timed(pixels, pixels).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
     let world = renderer.world_mut();
-    let (volumes, mut maps) = method.settings();
-    if let Some(photons) = photons {
-        maps.photon_resolution = photons;
+    let (volumes, mut maps_settings) = method.settings();
+    if let Some((photons, map)) = maps {
+        (maps_settings.photon_resolution, maps_settings.map_resolution) = (photons, map);
     }
     world.insert_resource(volumes);
-    world.insert_resource(maps);
+    world.insert_resource(maps_settings);
     spawn_scene_content(world, &bench.scene, Some(technique));
     let size = region.edge_u.length();
     let centre = region.origin + 0.5 * (region.edge_u + region.edge_v);

@@ -99,6 +99,16 @@ fn bench_writes_csv_table_and_plot() {
 }
 
 #[test]
+fn bench_runs_only_the_methods_asked_for() {
+    let dir = out_dir("bench-methods");
+    let out = caustics(&["bench", "--quick", "--cpu-only", "--scenes", "sphere", "--methods", "auto,volumes", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(dir.join("bench.csv")).unwrap();
+    let methods: std::collections::BTreeSet<&str> = csv.lines().skip(1).filter_map(|r| r.split(',').nth(1)).collect();
+    assert_eq!(methods.into_iter().collect::<Vec<_>>(), ["auto", "volumes"], "{csv}");
+}
+
+#[test]
 fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
     // From cargo's environment at run time: a target directory shared between clones
     // may hold this binary as another clone built it.
