@@ -596,8 +596,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     for (name, scene, own) in &scenes {
         let label = format!("{name}: reference with {reference_photons} photons");
         let (truth, _) = trace_grid(scene, reference_photons, 1, &progress(&label))?;
+        let volumes_run = VOLUME_METHODS.iter().any(|v| args.runs(v.name));
         let volumes_limit = match VOLUME_METHODS[2].qualities(name, args.quick).last() {
-            Some(&finest) if finest > 0 => Some(VOLUME_METHODS[2].run(name, scene, 4 * finest, samples)?.0),
+            Some(&finest) if finest > 0 && volumes_run => Some(VOLUME_METHODS[2].run(name, scene, 4 * finest, samples)?.0),
             _ => None,
         };
         for method in &methods {
