@@ -53,7 +53,10 @@ use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelO
 pub struct HierarchicalMapsSettings {
     /// Photon buffer side per light view (a power of two, 16 to 4096).
     pub photon_resolution: u32,
-    /// Caustic map side (a power of two, 16 to 4096).
+    /// Caustic map side (a power of two, 16 to 4096). A point light's cube face that
+    /// the scene extends past spreads its maps over four times its own image (they
+    /// reach 63°, `caustics_core::hierarchical::light_view::CUBE_FACE_REACH`): twice the
+    /// side keeps the sharpness of a face that does not.
     pub map_resolution: u32,
     pub gather: CausticMapGather,
     /// Splat sizes from photon divergence into a multi-resolution map (§3.3); off:
