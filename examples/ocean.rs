@@ -5,8 +5,9 @@
 //!
 //! `cargo run --example ocean` opens a window (or writes `target/ocean.png` without a
 //! display; `--headless --out PATH` to force it). `--resolution N` sets the ocean grid
-//! (a power of two, default 32) and `--wind M/S` the wind speed (default 7). On a CPU
-//! rasteriser (lavapipe) the light shafts cost minutes a frame at 64².
+//! (a power of two, default 32), `--wind M/S` the wind speed (default 7) and
+//! `--shaft-downsample N` the pixels across each light-shaft sample (1, 2 or 4, default
+//! 2; `WarpedVolumesSettings::shaft_downsample`).
 
 #[path = "support/mod.rs"]
 mod support;
@@ -27,10 +28,14 @@ fn main() -> ExitCode {
 }
 
 fn run() -> Result<(), String> {
-    let args = support::Args::parse("ocean", &["resolution", "wind"], &[])?;
+    let args = support::Args::parse("ocean", &["resolution", "wind", "shaft-downsample"], &[])?;
     let resolution: u32 = args.number("resolution", 32)?;
     let wind: f32 = args.number("wind", 7.0)?;
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_sea(world, target, resolution, wind);
+    let shaft_downsample: u32 = args.number("shaft-downsample", WarpedVolumesSettings::default().shaft_downsample)?;
+    let spawn = move |world: &mut World, target: RenderTarget| {
+        world.insert_resource(WarpedVolumesSettings { shaft_downsample, ..default() });
+        spawn_sea(world, target, resolution, wind)
+    };
     support::show(&args, "ocean", (800, 450), 8, spawn, || {})
 }
 

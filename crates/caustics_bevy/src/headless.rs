@@ -103,7 +103,9 @@ impl RenderedImage {
 }
 
 /// A Bevy app that renders into an offscreen HDR image (`Rgba16Float`, linear, no
-/// tonemapping unless the camera asks for it), with [`CausticsPlugin`] added.
+/// tonemapping unless the camera asks for it), with [`CausticsPlugin`] added. Time
+/// advances 1/60 s a frame, whatever the frame takes: an animated scene renders the
+/// same image on any machine.
 pub struct HeadlessRenderer {
     pub app: App,
     /// The adapter it renders on.
@@ -154,6 +156,7 @@ impl HeadlessRenderer {
             app.add_plugins(plugins);
         }
         app.add_plugins(CausticsPlugin);
+        app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(std::time::Duration::from_secs_f64(1.0 / 60.0)));
         if timed {
             app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
         }

@@ -157,8 +157,13 @@ impl ViewCausticIrradiance {
     /// Restricts `pass` (on the buffer or on the view's target-sized textures) to the
     /// camera's viewport, as Bevy's main passes do.
     pub fn set_viewport(&self, pass: &mut wgpu::RenderPass) {
+        self.set_scaled_viewport(pass, 1);
+    }
+
+    /// [`Self::set_viewport`] on a texture `scale` times smaller than the target.
+    pub fn set_scaled_viewport(&self, pass: &mut wgpu::RenderPass, scale: u32) {
         if let Some(v) = &self.viewport {
-            let (position, size) = (v.physical_position.as_vec2(), v.physical_size.as_vec2());
+            let (position, size) = (v.physical_position.as_vec2() / scale as f32, v.physical_size.as_vec2() / scale as f32);
             pass.set_viewport(position.x, position.y, size.x, size.y, v.depth.start, v.depth.end);
         }
     }

@@ -17,7 +17,9 @@
 //! 2. **volumetric pass** (after the main pass), only for views that see a
 //!    [`crate::ParticipatingMedium`] and show shafts (`CausticsSettings::shafts`): the
 //!    same prisms, with the eye ray's exact path through each warped volume and the
-//!    single-scattering term of §3.5 added to the view's HDR image.
+//!    single-scattering term of §3.5 added to the view's HDR image — at one pixel in
+//!    every `shaft_downsample`² block, into a smaller texture that a fullscreen pass
+//!    then adds to the image bilinearly ([`WarpedVolumesSettings::shaft_downsample`]).
 //!
 //! Both read Bevy's `DepthPrepass` and `NormalPrepass`, which
 //! [`crate::CausticsSettings`] requires on the camera. The WGSL in `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU test
@@ -40,12 +42,18 @@ pub struct WarpedVolumesSettings {
     /// Upper bound of the magnification `a/A(α)` near focal points; see
     /// [`VolumeSettings::max_magnification`].
     pub max_magnification: f32,
+    /// Light shafts are integrated at the centre of every `shaft_downsample`² block of
+    /// the view's pixels and upsampled bilinearly onto it (1, 2 or 4; others round
+    /// down to one of these): 2 shades a quarter of the pixels the volumetric pass
+    /// would, as Bevy's volumetric fog also works below screen resolution. 1 integrates
+    /// every pixel.
+    pub shaft_downsample: u32,
 }
 
 impl Default for WarpedVolumesSettings {
     fn default() -> Self {
         let core = VolumeSettings::default();
-        Self { intensity: VolumeIntensity::Conserving, max_magnification: core.max_magnification }
+        Self { intensity: VolumeIntensity::Conserving, max_magnification: core.max_magnification, shaft_downsample: 2 }
     }
 }
 
@@ -62,6 +70,15 @@ pub enum VolumeIntensity {
 }
 
 impl WarpedVolumesSettings {
+    /// The pixels a shaft sample stands for, across: [`Self::shaft_downsample`] as 1, 2 or 4.
+    pub fn shaft_scale(&self) -> u32 {
+        match self.shaft_downsample {
+            0..=1 => 1,
+            2..=3 => 2,
+            _ => 4,
+        }
+    }
+
     /// The core crate's settings.
     pub fn core(&self) -> VolumeSettings {
         let intensity = match self.intensity {
@@ -75,6 +92,7 @@ impl WarpedVolumesSettings {
 
 pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "volumes.wgsl");
+    bevy::asset::embedded_asset!(app, "upsample.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
     build::build(app);
     render::build(app);

@@ -1,6 +1,6 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
-use super::render::{VolumeBuffers, VolumesPipeline, ViewSeesMedium, ViewVolumePipelines};
+use super::render::{VolumeBuffers, VolumesPipeline, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -25,17 +25,17 @@ pub(super) struct VolumeDraw<'w> {
 
 impl VolumeDraw<'_> {
     /// Draws every volume's bounding prism, 36 vertices an instance, into `target`
-    /// (target-sized, within the camera's viewport) with the view's pipeline
-    /// `pipeline_id`, times it as the span `caustics/{pass}` and records `pass` in the
-    /// report.
+    /// (the view's target size over `scale`, within the camera's viewport over `scale`;
+    /// cleared first when `clear`) with the view's pipeline `pipeline_id`, times it as
+    /// the span `caustics/{pass}` and records `pass` in the report. Whether it drew.
     fn draw(
         &self,
         ctx: &mut RenderContext,
         pass: &'static str,
-        target: &TextureView,
+        (target, scale, clear): (&TextureView, u32, bool),
         pipeline_id: CachedRenderPipelineId,
         (irradiance, work, pipelines, prepass, view_offset): VolumeView,
-    ) {
+    ) -> bool {
         let (Some(pipeline), Some(depth), Some(normal), Some(view), Some(volumes), Some(settings)) = (
             self.cache.get_render_pipeline(pipeline_id),
             prepass.depth_view(),
@@ -44,10 +44,10 @@ impl VolumeDraw<'_> {
             self.buffers.volumes.binding(),
             self.buffers.settings.binding(),
         ) else {
-            return;
+            return false;
         };
         if self.buffers.count == 0 {
-            return;
+            return false;
         }
         let bind_group = ctx.render_device().create_bind_group(
             "caustic_volumes_bind_group",
@@ -62,11 +62,11 @@ impl VolumeDraw<'_> {
                 view: target,
                 depth_slice: None,
                 resolve_target: None,
-                ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+                ops: Operations { load: if clear { LoadOp::Clear(default()) } else { LoadOp::Load }, store: StoreOp::Store },
             })],
             ..default()
         });
-        irradiance.set_viewport(&mut render_pass);
+        irradiance.set_scaled_viewport(&mut render_pass, scale);
         let span = diagnostics.pass_span(&mut render_pass, format!("caustics/{pass}"));
         render_pass.set_pipeline(pipeline);
         let intensity = f64::from(work.0.applied_intensity());
@@ -75,6 +75,7 @@ impl VolumeDraw<'_> {
         render_pass.draw(0..36, 0..self.buffers.count);
         span.end(&mut render_pass);
         self.recorder.record(pass);
+        true
     }
 }
 
@@ -86,18 +87,47 @@ type VolumeView<'a> =
 pub(super) fn surface_pass(view: ViewQuery<VolumeView<'static>>, draw: VolumeDraw, mut ctx: RenderContext) {
     let view = view.into_inner();
     let target = &view.0.texture.default_view;
-    draw.draw(&mut ctx, "volumes", target, view.2.surface, view);
+    draw.draw(&mut ctx, "volumes", (target, 1, false), view.2.surface, view);
 }
 
 /// Caustics views that see a medium.
 type MediumViews = (With<ViewSeesMedium>, With<ViewCausticWork>);
 
-/// Adds the light scattered out of the caustic beams in media to the view's HDR image.
+/// Adds the light scattered out of the caustic beams in media to the view's HDR image:
+/// straight, or integrated into the view's smaller shaft texture and spread over the
+/// image by a fullscreen pass.
 pub(super) fn volumetric_pass(
-    view: ViewQuery<(&ViewTarget, VolumeView<'static>), MediumViews>,
+    view: ViewQuery<(&ViewTarget, Option<&ViewShafts>, VolumeView<'static>), MediumViews>,
     draw: VolumeDraw,
     mut ctx: RenderContext,
 ) {
-    let (target, view) = view.into_inner();
-    draw.draw(&mut ctx, "volumetric", target.main_texture_view(), view.2.volumetric, view);
+    let (target, shafts, view) = view.into_inner();
+    let (Some(shafts), Some(upsample)) = (shafts, view.2.upsample) else {
+        draw.draw(&mut ctx, "volumetric", (target.main_texture_view(), 1, false), view.2.volumetric, view);
+        return;
+    };
+    let Some(pipeline) = draw.cache.get_render_pipeline(upsample) else { return };
+    if !draw.draw(&mut ctx, "volumetric", (&shafts.texture.default_view, shafts.scale, true), view.2.volumetric, view) {
+        return;
+    }
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+        label: Some("volumetric_upsample"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: target.main_texture_view(),
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+        })],
+        ..default()
+    });
+    view.0.set_viewport(&mut render_pass);
+    let span = diagnostics.pass_span(&mut render_pass, "caustics/volumetric_upsample");
+    render_pass.set_pipeline(pipeline);
+    let intensity = f64::from(view.1.0.applied_intensity());
+    render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
+    render_pass.set_bind_group(0, &shafts.bind_group, &[]);
+    render_pass.draw(0..3, 0..1);
+    span.end(&mut render_pass);
 }

@@ -4,21 +4,24 @@ use super::{CausticVolumes, WarpedVolumesSettings, pass};
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticWork};
 use bevy::camera::primitives::{Aabb, Frustum};
-use bevy::core_pipeline::{Core3dSystems, prepass::ViewPrepassTextures, schedule::Core3d};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     render_resource::{
         binding_types::{
-            storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
+            sampler, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
             texture_depth_2d_multisampled, uniform_buffer,
         },
         *,
     },
     renderer::{RenderDevice, RenderQueue},
     sync_world::RenderEntity,
+    texture::{CachedTexture, TextureCache},
+    camera::ExtractedCamera,
     view::{ExtractedView, Msaa, ViewUniform},
 };
+use bevy::shader::ShaderDefVal;
 use caustics_core::volumes::{CausticVolume, IntensityMode};
 use std::sync::Arc;
 
@@ -111,9 +114,25 @@ pub(super) struct ViewSeesMedium;
 #[derive(Component)]
 pub(super) struct ViewVolumePipelines {
     pub surface: CachedRenderPipelineId,
+    /// The volumetric pass: straight into the view's image, or with `upsample` into its
+    /// [`ViewShafts`] texture first.
     pub volumetric: CachedRenderPipelineId,
+    pub upsample: Option<CachedRenderPipelineId>,
     pub multisampled: bool,
 }
+
+/// Render world: the smaller texture a view's shafts are integrated into, one texel
+/// for every `scale`² block of its pixels ([`WarpedVolumesSettings::shaft_downsample`]),
+/// and what the upsampling reads it with.
+#[derive(Component)]
+pub(super) struct ViewShafts {
+    pub texture: CachedTexture,
+    pub scale: u32,
+    pub bind_group: BindGroup,
+}
+
+/// The shaft texture's format: the view's HDR image's precision.
+const SHAFT_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
 pub(super) fn build(app: &mut App) {
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
@@ -123,12 +142,14 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<ExtractedVolumes>()
         .init_resource::<VolumeBuffers>()
         .init_resource::<SpecializedRenderPipelines<VolumesPipeline>>()
+        .init_resource::<SpecializedRenderPipelines<ShaftUpsamplePipeline>>()
         .add_systems(RenderStartup, init_pipeline)
         .add_systems(ExtractSchedule, (extract_volumes, mark_views_seeing_media))
         .add_systems(
             Render,
             (
                 prepare_buffers.in_set(RenderSystems::PrepareResources),
+                prepare_shaft_textures.in_set(RenderSystems::PrepareResources),
                 prepare_pipelines.in_set(RenderSystems::Prepare),
             ),
         )
@@ -221,12 +242,14 @@ pub(super) struct VolumesPipeline {
 pub(super) struct VolumesPipelineKey {
     volumetric: bool,
     multisampled: bool,
+    /// The volumetric pass's pixels per shaft sample, across (1: every pixel).
+    shaft_scale: u32,
     /// The colour target: the irradiance buffer's format for the surface pass, the
     /// view's (resolved, single-sampled) HDR image for the volumetric pass.
     target_format: TextureFormat,
 }
 
-fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
+fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>, device: Res<RenderDevice>, fullscreen: Res<FullscreenShader>) {
     let layout = |multisampled: bool| {
         BindGroupLayoutDescriptor::new(
             if multisampled { "caustic_volumes_layout_msaa" } else { "caustic_volumes_layout" },
@@ -250,6 +273,25 @@ fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>) {
         layouts: [layout(false), layout(true)],
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl"),
     });
+    let layout = BindGroupLayoutDescriptor::new(
+        "caustic_shafts_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (texture_2d(TextureSampleType::Float { filterable: true }), sampler(SamplerBindingType::Filtering)),
+        ),
+    );
+    let sampler = device.create_sampler(&SamplerDescriptor {
+        label: Some("caustic_shafts_sampler"),
+        mag_filter: FilterMode::Linear,
+        min_filter: FilterMode::Linear,
+        ..default()
+    });
+    commands.insert_resource(ShaftUpsamplePipeline {
+        layout,
+        sampler,
+        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "upsample.wgsl"),
+        fullscreen: fullscreen.clone(),
+    });
 }
 
 impl SpecializedRenderPipeline for VolumesPipeline {
@@ -260,12 +302,16 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         if key.multisampled {
             shader_defs.push("MULTISAMPLED".into());
         }
+        if key.shaft_scale > 1 {
+            shader_defs.push(ShaderDefVal::UInt("SHAFT_SCALE".into(), key.shaft_scale));
+        }
         let (label, entry) =
             if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
-        // Shafts go straight into the view's image, scaled by the view's
-        // `CausticsSettings::intensity` as the blend constant; the composite scales
-        // the surface pass's buffer.
-        let src_factor = if key.volumetric { BlendFactor::Constant } else { BlendFactor::One };
+        // Shafts go into the view's image scaled by the view's
+        // `CausticsSettings::intensity` as the blend constant (straight, or when they
+        // are upsampled from their own texture); the composite scales the surface
+        // pass's buffer.
+        let src_factor = if key.volumetric && key.shaft_scale == 1 { BlendFactor::Constant } else { BlendFactor::One };
         let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some(label.into()),
@@ -295,23 +341,117 @@ impl SpecializedRenderPipeline for VolumesPipeline {
     }
 }
 
+#[expect(clippy::too_many_arguments)]
 fn prepare_pipelines(
     mut commands: Commands,
     views: Query<(Entity, &ExtractedView, &Msaa, &ViewPrepassTextures), With<ViewCausticWork>>,
     pipeline: Res<VolumesPipeline>,
     mut pipelines: ResMut<SpecializedRenderPipelines<VolumesPipeline>>,
+    upsample: Res<ShaftUpsamplePipeline>,
+    mut upsample_pipelines: ResMut<SpecializedRenderPipelines<ShaftUpsamplePipeline>>,
+    extracted: Res<ExtractedVolumes>,
     cache: Res<PipelineCache>,
 ) {
+    let scale = extracted.settings.shaft_scale();
     for (entity, view, msaa, prepass) in &views {
         if prepass.depth.is_none() || prepass.normal.is_none() {
             continue;
         }
         let multisampled = msaa.samples() > 1;
-        let mut specialize = |volumetric, target_format| {
-            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, target_format })
+        let mut specialize = |volumetric, target_format, shaft_scale| {
+            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, shaft_scale, target_format })
         };
-        let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT);
-        let volumetric = specialize(true, view.target_format);
-        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, multisampled });
+        let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT, 1);
+        let (volumetric, upsample) = if scale > 1 {
+            let key = ShaftUpsampleKey { target_format: view.target_format, scale };
+            (specialize(true, SHAFT_FORMAT, scale), Some(upsample_pipelines.specialize(&cache, &upsample, key)))
+        } else {
+            (specialize(true, view.target_format, 1), None)
+        };
+        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, upsample, multisampled });
+    }
+}
+
+/// Gives every view that runs the volumetric pass below full resolution its shaft
+/// texture (`ceil(size / scale)` texels across and down), and takes it from the others.
+#[expect(clippy::too_many_arguments)]
+fn prepare_shaft_textures(
+    mut commands: Commands,
+    views: Query<(Entity, &ExtractedCamera), With<ViewSeesMedium>>,
+    others: Query<Entity, (With<ViewShafts>, Without<ViewSeesMedium>)>,
+    extracted: Res<ExtractedVolumes>,
+    upsample: Res<ShaftUpsamplePipeline>,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    cache: Res<PipelineCache>,
+) {
+    for entity in &others {
+        commands.entity(entity).remove::<ViewShafts>();
+    }
+    let scale = extracted.settings.shaft_scale();
+    for (entity, camera) in &views {
+        let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0 && scale > 1) else {
+            commands.entity(entity).remove::<ViewShafts>();
+            continue;
+        };
+        let texture = texture_cache.get(
+            &device,
+            TextureDescriptor {
+                label: Some("caustic_shafts"),
+                size: Extent3d { width: size.x.div_ceil(scale), height: size.y.div_ceil(scale), depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: SHAFT_FORMAT,
+                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            },
+        );
+        let bind_group = device.create_bind_group(
+            "caustic_shafts_bind_group",
+            &cache.get_bind_group_layout(&upsample.layout),
+            &BindGroupEntries::sequential((&texture.default_view, &upsample.sampler)),
+        );
+        commands.entity(entity).insert(ViewShafts { texture, scale, bind_group });
+    }
+}
+
+/// The fullscreen pass that spreads a view's shaft texture over its image.
+#[derive(Resource)]
+pub(super) struct ShaftUpsamplePipeline {
+    layout: BindGroupLayoutDescriptor,
+    sampler: Sampler,
+    shader: Handle<Shader>,
+    fullscreen: FullscreenShader,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub(super) struct ShaftUpsampleKey {
+    target_format: TextureFormat,
+    scale: u32,
+}
+
+impl SpecializedRenderPipeline for ShaftUpsamplePipeline {
+    type Key = ShaftUpsampleKey;
+
+    fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
+        // Scaled by the view's `CausticsSettings::intensity` as the blend constant.
+        let additive = BlendComponent { src_factor: BlendFactor::Constant, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        RenderPipelineDescriptor {
+            label: Some("caustic_shaft_upsample_pipeline".into()),
+            layout: vec![self.layout.clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                shader_defs: vec![ShaderDefVal::UInt("SHAFT_SCALE".into(), key.scale)],
+                entry_point: Some("upsample".into()),
+                targets: vec![Some(ColorTargetState {
+                    format: key.target_format,
+                    blend: Some(BlendState { color: additive, alpha: additive }),
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            ..default()
+        }
     }
 }

@@ -302,17 +302,27 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
     return radiance;
 }
 
+// The view's pixel a volumetric fragment integrates: itself, or with SHAFT_SCALE the
+// centre of the block its texel of the smaller shaft texture stands for.
+fn shaft_pixel(position: vec2<f32>) -> vec2<f32> {
+#ifdef SHAFT_SCALE
+    return (floor(position) + 0.5) * f32(#{SHAFT_SCALE});
+#else
+    return position;
+#endif
+}
+
 @fragment
 fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(in.position.xy);
-    let depth = load_depth(pixel);
+    let at = shaft_pixel(in.position.xy);
+    let depth = load_depth(vec2<i32>(at));
     // The eye ray starts on the near plane (any projection) and ends at the surface,
     // or far away where the pixel sees the sky.
-    let eye = world_at(view, in.position.xy, 1.0);
-    let dir = normalize(world_at(view, in.position.xy, 0.5) - eye);
+    let eye = world_at(view, at, 1.0);
+    let dir = normalize(world_at(view, at, 0.5) - eye);
     var len = 1.0e5;
     if depth > 0.0 {
-        len = distance(world_at(view, in.position.xy, depth), eye);
+        len = distance(world_at(view, at, depth), eye);
     }
     let v = volumes[in.volume];
     var radiance = vec3(0.0);
