@@ -44,8 +44,9 @@ pub struct LightView {
 /// reach when the scene extends past the face (63°), where its photons leave within
 /// 45°: light bent across a face's edge lands on the map of the face it left from, and
 /// each photon is on one map. Measured on `mirror_bunny` (a light 1.6 m over the
-/// floor's edge, 2048² photons): with tan 1 the faces' maps carry 0.925 of the
-/// tracer's caustic flux, with tan 2 0.990. A power of two: the photon buffer then
+/// floor's edge, 2048² photons landed exactly): with tan 1 the faces' maps carry 0.898
+/// of the tracer's caustic flux, with tan 2 0.937 (0.925 and 0.983 with one Fresnel
+/// branch). A power of two: the photon buffer then
 /// covers half the map, and photons of a `2ᵏ` buffer land on a lattice of a `2ʲ` map's
 /// texels, where tent splats sum to a constant.
 pub const CUBE_FACE_REACH: f32 = 2.0;
