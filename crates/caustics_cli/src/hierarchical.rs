@@ -11,10 +11,10 @@ use crate::bench::{Errors, Measurement, cell_means, cell_sample_points, gpu_colu
 use crate::render::Method;
 use crate::plot::{Axes, Series, plot_log_log};
 use caustics_core::hierarchical::caustic_map::{self, CausticMap};
-use caustics_core::hierarchical::hierarchy::{self, PhotonPyramid};
+use caustics_core::hierarchical::hierarchy;
 use caustics_core::hierarchical::{
     CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
-    PhotonPaths, Splats, light_intensity,
+    PhotonPaths, Splats, StageTimes, gather_into, light_intensity, trace_buffers,
 };
 use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
 use caustics_core::glam::Vec3;
@@ -308,9 +308,7 @@ fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn F
     let traced = views
         .into_iter()
         .map(|(view, light, intensity, maps)| {
-            let buffers = (0..settings.photon_buffers())
-                .map(|branch| PhotonBuffer::trace(&maps, &view, &materials, light, settings.path_tracer(bvh.as_ref(), branch)))
-                .collect();
+            let buffers = trace_buffers(&maps, &view, &materials, light, settings, bvh.as_ref());
             Traced { view, intensity, maps, buffers }
         })
         .collect();
@@ -330,26 +328,17 @@ struct Gathered {
 fn gather_view(t: &Traced, settings: &CausticMapSettings, points: &[(Vec3, Vec3)], irradiance: &mut [f32]) -> Gathered {
     let mut map = CausticMap::for_splats(settings.splats, settings.map_resolution);
     let (mut stats, mut splat_stats) = (hierarchy::GatherStats::default(), caustic_map::SplatStats::default());
-    let mut seconds = [0.0; 3];
+    let mut times = StageTimes::default();
     for photons in &t.buffers {
-        let clock = Instant::now();
-        let pyramid = PhotonPyramid::for_gather(photons, settings.map_resolution, settings.gather);
-        seconds[0] += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let (entries, gathered) = hierarchy::gather(&pyramid, settings.gather);
-        stats.add(&gathered);
-        seconds[1] += clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        map.splat_entries(photons, &pyramid, &entries, settings.splats, &mut splat_stats);
-        seconds[2] += clock.elapsed().as_secs_f64();
+        stats.add(&gather_into(&mut map, photons, settings, &mut splat_stats, &mut times).2);
     }
     let clock = Instant::now();
     let resolved = map.resolve();
-    seconds[2] += clock.elapsed().as_secs_f64();
+    times.splat += clock.elapsed().as_secs_f64();
     for (e, &(q, n)) in irradiance.iter_mut().zip(points) {
         *e += caustic_map::irradiance_at(&t.view, &t.maps, &resolved, settings.photon_resolution, t.intensity, q, n);
     }
-    Gathered { stats, splat_stats, seconds }
+    Gathered { stats, splat_stats, seconds: [times.pyramid, times.gather, times.splat] }
 }
 
 /// Photons processed against photons in the buffer, one line per gather.

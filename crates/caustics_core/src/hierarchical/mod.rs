@@ -246,32 +246,15 @@ impl ViewCaustics {
         let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
         let clock = Instant::now();
         let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
+        let mut buffers = trace_buffers(&maps, view, &materials, light, settings, bvh.as_ref()).into_iter();
         let mut times = StageTimes { light_maps, photons: clock.elapsed().as_secs_f64(), ..StageTimes::default() };
-        let mut buffers = (0..settings.photon_buffers()).map(|branch| {
-            let clock = Instant::now();
-            let photons = PhotonBuffer::trace(&maps, view, &materials, light, settings.path_tracer(bvh.as_ref(), branch));
-            times.photons += clock.elapsed().as_secs_f64();
-            photons
-        });
         let photons = buffers.next().expect("a view traces at least one photon buffer");
         let branches: Vec<PhotonBuffer> = buffers.collect();
         let mut map = CausticMap::for_splats(settings.splats, settings.map_resolution);
         let mut splat_stats = SplatStats::default();
-        let mut gather = |photons: &PhotonBuffer, times: &mut StageTimes| {
-            let clock = Instant::now();
-            let pyramid = PhotonPyramid::for_gather(photons, settings.map_resolution, settings.gather);
-            times.pyramid += clock.elapsed().as_secs_f64();
-            let clock = Instant::now();
-            let (entries, stats) = hierarchy::gather(&pyramid, settings.gather);
-            times.gather += clock.elapsed().as_secs_f64();
-            let clock = Instant::now();
-            map.splat_entries(photons, &pyramid, &entries, settings.splats, &mut splat_stats);
-            times.splat += clock.elapsed().as_secs_f64();
-            (pyramid, entries, stats)
-        };
-        let (pyramid, entries, mut gather_stats) = gather(&photons, &mut times);
+        let (pyramid, entries, mut gather_stats) = gather_into(&mut map, &photons, settings, &mut splat_stats, &mut times);
         for branch in &branches {
-            gather_stats.add(&gather(branch, &mut times).2);
+            gather_stats.add(&gather_into(&mut map, branch, settings, &mut splat_stats, &mut times).2);
         }
         let clock = Instant::now();
         let resolved = map.resolve();
@@ -284,6 +267,42 @@ impl ViewCaustics {
         let intensity = light_intensity(&self.light) * self.light.color.element_sum() / 3.0;
         caustic_map::irradiance_at(&self.view, &self.maps, &self.resolved, self.settings.photon_resolution, intensity, p, n)
     }
+}
+
+/// The photon buffers of one light view under `settings`
+/// ([`CausticMapSettings::photon_buffers`]): the transmitted light's, then each Fresnel
+/// branch's, traced through `bvh` (the scene's) where the paths are traced.
+pub fn trace_buffers(
+    maps: &LightMaps,
+    view: &LightView,
+    materials: &[PhotonMaterial],
+    light: &Light,
+    settings: &CausticMapSettings,
+    bvh: Option<&GeneratorBvh>,
+) -> Vec<PhotonBuffer> {
+    (0..settings.photon_buffers()).map(|branch| PhotonBuffer::trace(maps, view, materials, light, settings.path_tracer(bvh, branch))).collect()
+}
+
+/// Gathers one photon buffer (§3.1–3.2) and splats it into `map` (§3.3), counting the
+/// splats in `splat_stats` and each stage's seconds in `times`: its pyramid, the
+/// entries gathered and the gather's counts.
+pub fn gather_into(
+    map: &mut CausticMap,
+    photons: &PhotonBuffer,
+    settings: &CausticMapSettings,
+    splat_stats: &mut SplatStats,
+    times: &mut StageTimes,
+) -> (PhotonPyramid, Vec<GatherEntry>, GatherStats) {
+    let clock = Instant::now();
+    let pyramid = PhotonPyramid::for_gather(photons, settings.map_resolution, settings.gather);
+    times.pyramid += clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let (entries, stats) = hierarchy::gather(&pyramid, settings.gather);
+    times.gather += clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    map.splat_entries(photons, &pyramid, &entries, settings.splats, splat_stats);
+    times.splat += clock.elapsed().as_secs_f64();
+    (pyramid, entries, stats)
 }
 
 /// Every light view of every light of `scene` with its caustic map; empty without
