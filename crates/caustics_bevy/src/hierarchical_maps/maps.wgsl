@@ -32,7 +32,9 @@ fn generator_vertex(
     let i = instances[instance];
     let world = (i.world_from_local * vec4(position, 1.0)).xyz;
     let n = (i.normal_from_local * vec4(normal, 0.0)).xyz;
-    return SurfaceOutput(view.photon_clip_from_world * vec4(world, 1.0), world, n, i.material.x);
+    // The photons' part of the view (`LightView::emission`) fills the front and back maps.
+    let clip = view.clip_from_world * vec4(world, 1.0);
+    return SurfaceOutput(vec4(clip.xy / view.emission, clip.zw), world, n, i.material.x);
 }
 
 // Depth, the normal as the mesh orients it, and the generator.

@@ -30,7 +30,6 @@ use caustics_core::hierarchical::{
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuLightView {
     clip_from_world: Mat4,
-    photon_clip_from_world: Mat4,
     origin: Vec4,
     right: Vec4,
     up: Vec4,
@@ -159,7 +158,6 @@ impl GpuLightView {
         let perspective = matches!(v.projection, Projection::Perspective { .. }) as u32 as f32;
         let gpu = Self {
             clip_from_world: Mat4::from_cols_array(&v.clip_from_world().to_cols_array()),
-            photon_clip_from_world: Mat4::from_cols_array(&v.photon_clip_from_world().to_cols_array()),
             origin: to_vec3(v.origin).extend(perspective),
             right: to_vec3(v.right).extend(half.x),
             up: to_vec3(v.up).extend(half.y),

@@ -23,8 +23,6 @@ const ONE_BELOW: f32 = 0.99999994;
 
 struct LightView {
     clip_from_world: mat4x4<f32>,
-    // `LightView::photon_clip_from_world`: the front and back maps' part of the image.
-    photon_clip_from_world: mat4x4<f32>,
     origin: vec4<f32>,        // w: 1 in perspective, 0 orthographic
     right: vec4<f32>,         // w: half the image plane's width
     up: vec4<f32>,            // w: half its height

@@ -225,12 +225,6 @@ impl LightView {
         projection * view
     }
 
-    /// [`Self::clip_from_world`] of the photon buffer's part of the image: what the
-    /// front and back maps are rasterised with.
-    pub fn photon_clip_from_world(&self) -> Mat4 {
-        Mat4::from_scale(Vec3::new(1.0 / self.emission, 1.0 / self.emission, 1.0)) * self.clip_from_world()
-    }
-
     /// The views of `light` that can see generators within `generators` and receivers
     /// within `scene` (both `(min, max)` world bounds): one orthographic view of a
     /// directional light across the generators' shadow grown by half its size on each
