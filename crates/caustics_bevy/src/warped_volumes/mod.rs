@@ -93,6 +93,7 @@ impl WarpedVolumesSettings {
 pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "volumes.wgsl");
     bevy::asset::embedded_asset!(app, "upsample.wgsl");
+    bevy::asset::embedded_asset!(app, "receiver_depth.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
     build::build(app);
     render::build(app);

@@ -1,6 +1,6 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
-use super::render::{VolumeBuffers, VolumesPipeline, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
+use super::render::{ReceiverDepthPipeline, VolumeBuffers, VolumesPipeline, ViewReceiverDepth, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -26,13 +26,14 @@ pub(super) struct VolumeDraw<'w> {
 impl VolumeDraw<'_> {
     /// Draws every volume's bounding prism, 36 vertices an instance, into `target`
     /// (the view's target size over `scale`, within the camera's viewport over `scale`;
-    /// cleared first when `clear`) with the view's pipeline `pipeline_id`, times it as
-    /// the span `caustics/{pass}` and records `pass` in the report. Whether it drew.
+    /// cleared first when `clear`; tested against `depth`, read only, when given) with
+    /// the view's pipeline `pipeline_id`, times it as the span `caustics/{pass}` and
+    /// records `pass` in the report. Whether it drew.
     fn draw(
         &self,
         ctx: &mut RenderContext,
         pass: &'static str,
-        (target, scale, clear): (&TextureView, u32, bool),
+        (target, depth_test, scale, clear): (&TextureView, Option<&TextureView>, u32, bool),
         pipeline_id: CachedRenderPipelineId,
         (irradiance, work, pipelines, prepass, view_offset): VolumeView,
     ) -> bool {
@@ -64,6 +65,7 @@ impl VolumeDraw<'_> {
                 resolve_target: None,
                 ops: Operations { load: if clear { LoadOp::Clear(default()) } else { LoadOp::Load }, store: StoreOp::Store },
             })],
+            depth_stencil_attachment: depth_test.map(|view| RenderPassDepthStencilAttachment { view, depth_ops: None, stencil_ops: None }),
             ..default()
         });
         irradiance.set_scaled_viewport(&mut render_pass, scale);
@@ -83,11 +85,35 @@ impl VolumeDraw<'_> {
 type VolumeView<'a> =
     (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
 
-/// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer.
-pub(super) fn surface_pass(view: ViewQuery<VolumeView<'static>>, draw: VolumeDraw, mut ctx: RenderContext) {
-    let view = view.into_inner();
+/// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer:
+/// first copies the view's depth prepass into its [`ViewReceiverDepth`], then draws
+/// the prisms tested against it.
+pub(super) fn surface_pass(
+    view: ViewQuery<(&ViewReceiverDepth, VolumeView<'static>)>,
+    draw: VolumeDraw,
+    depth_copy: Res<ReceiverDepthPipeline>,
+    mut ctx: RenderContext,
+) {
+    let (depth, view) = view.into_inner();
+    let Some(copy) = draw.cache.get_render_pipeline(depth_copy.pipelines[view.2.multisampled as usize]) else {
+        return;
+    };
+    let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+        label: Some("caustic_receiver_depth"),
+        depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
+            view: &depth.texture.default_view,
+            depth_ops: Some(Operations { load: LoadOp::Clear(0.0), store: StoreOp::Store }),
+            stencil_ops: None,
+        }),
+        ..default()
+    });
+    view.0.set_viewport(&mut render_pass);
+    render_pass.set_pipeline(copy);
+    render_pass.set_bind_group(0, &depth.bind_group, &[]);
+    render_pass.draw(0..3, 0..1);
+    drop(render_pass);
     let target = &view.0.texture.default_view;
-    draw.draw(&mut ctx, "volumes", (target, 1, false), view.2.surface, view);
+    draw.draw(&mut ctx, "volumes", (target, Some(&depth.texture.default_view), 1, false), view.2.surface, view);
 }
 
 /// Caustics views that see a medium.
@@ -103,11 +129,11 @@ pub(super) fn volumetric_pass(
 ) {
     let (target, shafts, view) = view.into_inner();
     let (Some(shafts), Some(upsample)) = (shafts, view.2.upsample) else {
-        draw.draw(&mut ctx, "volumetric", (target.main_texture_view(), 1, false), view.2.volumetric, view);
+        draw.draw(&mut ctx, "volumetric", (target.main_texture_view(), None, 1, false), view.2.volumetric, view);
         return;
     };
     let Some(pipeline) = draw.cache.get_render_pipeline(upsample) else { return };
-    if !draw.draw(&mut ctx, "volumetric", (&shafts.texture.default_view, shafts.scale, true), view.2.volumetric, view) {
+    if !draw.draw(&mut ctx, "volumetric", (&shafts.texture.default_view, None, shafts.scale, true), view.2.volumetric, view) {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();

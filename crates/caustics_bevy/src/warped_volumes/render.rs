@@ -2,7 +2,7 @@
 
 use super::{CausticVolumes, WarpedVolumesSettings, pass};
 use crate::components::CausticsSettings;
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticWork};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::prelude::*;
@@ -134,6 +134,28 @@ pub(super) struct ViewShafts {
 /// The shaft texture's format: the view's HDR image's precision.
 const SHAFT_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
+/// Render world: a single-sampled copy of a view's depth prepass, the size of its
+/// irradiance buffer, which the surface pass tests its prisms' back faces against
+/// (read only): a prism whose back face lies in front of the receiver at a pixel
+/// cannot contain that pixel's receiver point, and shades nothing there.
+#[derive(Component)]
+pub(super) struct ViewReceiverDepth {
+    pub texture: CachedTexture,
+    /// Reads the view's depth prepass for the copy.
+    pub bind_group: BindGroup,
+}
+
+/// The receiver depth's format and the surface pass's depth test.
+const RECEIVER_DEPTH_FORMAT: TextureFormat = TextureFormat::Depth32Float;
+
+/// The fullscreen pass that fills a view's [`ViewReceiverDepth`]: for a single-sampled
+/// and a multisampled prepass.
+#[derive(Resource)]
+pub(super) struct ReceiverDepthPipeline {
+    layouts: [BindGroupLayoutDescriptor; 2],
+    pub pipelines: [CachedRenderPipelineId; 2],
+}
+
 pub(super) fn build(app: &mut App) {
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -150,6 +172,7 @@ pub(super) fn build(app: &mut App) {
             (
                 prepare_buffers.in_set(RenderSystems::PrepareResources),
                 prepare_shaft_textures.in_set(RenderSystems::PrepareResources),
+                prepare_receiver_depth.in_set(RenderSystems::PrepareBindGroups),
                 prepare_pipelines.in_set(RenderSystems::Prepare),
             ),
         )
@@ -249,7 +272,13 @@ pub(super) struct VolumesPipelineKey {
     target_format: TextureFormat,
 }
 
-fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>, device: Res<RenderDevice>, fullscreen: Res<FullscreenShader>) {
+fn init_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    device: Res<RenderDevice>,
+    fullscreen: Res<FullscreenShader>,
+    cache: Res<PipelineCache>,
+) {
     let layout = |multisampled: bool| {
         BindGroupLayoutDescriptor::new(
             if multisampled { "caustic_volumes_layout_msaa" } else { "caustic_volumes_layout" },
@@ -292,6 +321,38 @@ fn init_pipeline(mut commands: Commands, asset_server: Res<AssetServer>, device:
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "upsample.wgsl"),
         fullscreen: fullscreen.clone(),
     });
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "receiver_depth.wgsl");
+    let layouts = [false, true].map(|multisampled| {
+        BindGroupLayoutDescriptor::new(
+            "caustic_receiver_depth_layout",
+            &BindGroupLayoutEntries::single(
+                ShaderStages::FRAGMENT,
+                if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+            ),
+        )
+    });
+    let pipelines = [false, true].map(|multisampled| {
+        cache.queue_render_pipeline(RenderPipelineDescriptor {
+            label: Some("caustic_receiver_depth_pipeline".into()),
+            layout: vec![layouts[multisampled as usize].clone()],
+            vertex: fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: shader.clone(),
+                shader_defs: if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] },
+                entry_point: Some("copy_depth".into()),
+                targets: vec![],
+            }),
+            depth_stencil: Some(DepthStencilState {
+                format: RECEIVER_DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(CompareFunction::Always),
+                stencil: default(),
+                bias: default(),
+            }),
+            ..default()
+        })
+    });
+    commands.insert_resource(ReceiverDepthPipeline { layouts, pipelines });
 }
 
 impl SpecializedRenderPipeline for VolumesPipeline {
@@ -332,10 +393,18 @@ impl SpecializedRenderPipeline for VolumesPipeline {
                     write_mask: ColorWrites::ALL,
                 })],
             }),
-            // Back faces only, no depth test: each pixel whose ray crosses a volume's
-            // convex bounding prism runs the exact test once (§4.3).
+            // Back faces only: each pixel whose ray crosses a volume's convex bounding
+            // prism runs the exact test once (§4.3). The surface pass also skips back
+            // faces in front of the receiver ([`ViewReceiverDepth`]; reversed z: the
+            // back face's depth must not exceed the receiver's).
             primitive: PrimitiveState { cull_mode: Some(Face::Front), front_face: FrontFace::Ccw, ..default() },
-            depth_stencil: None,
+            depth_stencil: (!key.volumetric).then(|| DepthStencilState {
+                format: RECEIVER_DEPTH_FORMAT,
+                depth_write_enabled: Some(false),
+                depth_compare: Some(CompareFunction::LessEqual),
+                stencil: default(),
+                bias: default(),
+            }),
             ..default()
         }
     }
@@ -413,6 +482,44 @@ fn prepare_shaft_textures(
             &BindGroupEntries::sequential((&texture.default_view, &upsample.sampler)),
         );
         commands.entity(entity).insert(ViewShafts { texture, scale, bind_group });
+    }
+}
+
+/// Gives every caustics view that reads a depth prepass its [`ViewReceiverDepth`],
+/// the size of its irradiance buffer.
+fn prepare_receiver_depth(
+    mut commands: Commands,
+    views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa)>,
+    pipeline: Res<ReceiverDepthPipeline>,
+    buffers: Res<VolumeBuffers>,
+    mut texture_cache: ResMut<TextureCache>,
+    device: Res<RenderDevice>,
+    cache: Res<PipelineCache>,
+) {
+    for (entity, irradiance, prepass, msaa) in &views {
+        let Some(depth) = prepass.depth_view().filter(|_| buffers.count > 0) else {
+            commands.entity(entity).remove::<ViewReceiverDepth>();
+            continue;
+        };
+        let texture = texture_cache.get(
+            &device,
+            TextureDescriptor {
+                label: Some("caustic_receiver_depth"),
+                size: irradiance.texture.texture.size(),
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: RECEIVER_DEPTH_FORMAT,
+                usage: TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            },
+        );
+        let bind_group = device.create_bind_group(
+            "caustic_receiver_depth_bind_group",
+            &cache.get_bind_group_layout(&pipeline.layouts[(msaa.samples() > 1) as usize]),
+            &BindGroupEntries::single(depth),
+        );
+        commands.entity(entity).insert(ViewReceiverDepth { texture, bind_group });
     }
 }
 
