@@ -52,6 +52,10 @@ const TIMESTAMP_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
     .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
     .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
 
+/// The prefixes of the caustics passes' timestamp spans: every technique's passes, the
+/// projections into the irradiance buffer and the volumetric pass.
+pub const CAUSTIC_SPANS: [&str; 3] = ["caustics/", "caustic_maps/", "illumination_textures/"];
+
 /// Checks that wgpu finds an adapter on the backends Bevy would use.
 pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
@@ -187,6 +191,14 @@ impl HeadlessRenderer {
             .collect();
         let newest = spans.iter().map(|(_, time, _)| *time).max();
         spans.into_iter().filter(|(_, time, _)| Some(*time) == newest).map(|(span, _, ms)| (span, ms)).collect()
+    }
+
+    /// The plugin's CPU time (ms) in the main and in the render world, in the last
+    /// frame the diagnostics published ([`crate::CausticsCpuTime`]).
+    pub fn plugin_cpu_times(&self) -> Option<(f64, f64)> {
+        let store = self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>()?;
+        let last = |path| store.get(path).and_then(|d| d.measurement()).map(|m| m.value);
+        Some((last(&crate::CausticsCpuTime::MAIN)?, last(&crate::CausticsCpuTime::RENDER)?))
     }
 
     /// The render target to put on the camera.

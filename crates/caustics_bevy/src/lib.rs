@@ -6,6 +6,7 @@
 //! `caustics_core`; this crate is a thin layer of components, systems and passes.
 
 pub mod components;
+pub mod cpu_time;
 #[cfg(feature = "convolution")]
 pub mod convolution;
 #[cfg(feature = "egui")]
@@ -38,10 +39,12 @@ pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, I
 pub use convolution::{DropPebble, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
+pub use cpu_time::CausticsCpuTime;
 pub use report::CausticPassReport;
 pub use technique::{AvailableCausticTechniques, CausticTechniqueChoice};
 
 use bevy::prelude::*;
+use cpu_time::timed;
 
 /// Where the plugin's main-world systems run.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
@@ -59,13 +62,14 @@ pub struct CausticsPlugin;
 
 impl Plugin for CausticsPlugin {
     fn build(&self, app: &mut App) {
+        let cpu = CausticsCpuTime::of(app).main;
         app.register_type::<CausticGenerator>()
             .register_type::<CausticReceiver>()
             .register_type::<CausticsSettings>()
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
-            .add_systems(Update, gltf_tagging::tag_from_materials)
-            .add_systems(PostUpdate, (components::validate_caustic_params, lights::warn_unsupported_lights))
+            .add_systems(Update, timed(&cpu, gltf_tagging::tag_from_materials))
+            .add_systems(PostUpdate, (timed(&cpu, components::validate_caustic_params), timed(&cpu, lights::warn_unsupported_lights)))
             .configure_sets(
                 PostUpdate,
                 CausticsSystems::ReadScene

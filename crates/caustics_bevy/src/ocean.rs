@@ -5,6 +5,7 @@
 //! `Mesh` asset behind a `Mesh3d` in place (`Assets<Mesh>::get_mut`), and Bevy
 //! re-uploads it and recomputes the entity's `Aabb`.
 
+use crate::cpu_time::timed;
 use crate::grid_mesh::{grid_mesh, rewrite_grid};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
@@ -90,7 +91,8 @@ pub struct OceanPlugin;
 
 impl Plugin for OceanPlugin {
     fn build(&self, app: &mut App) {
-        app.register_type::<Ocean>().add_systems(Update, (draw_waves, animate_oceans).chain());
+        let cpu = crate::CausticsCpuTime::of(app).main;
+        app.register_type::<Ocean>().add_systems(Update, (timed(&cpu, draw_waves), timed(&cpu, animate_oceans)).chain());
     }
 }
 

@@ -62,9 +62,10 @@ impl CausticTechnique {
 }
 
 pub(crate) fn build(app: &mut App) {
+    let cpu = crate::CausticsCpuTime::of(app).main;
     app.init_resource::<AvailableCausticTechniques>().add_systems(
         PostUpdate,
-        choose_techniques
+        crate::cpu_time::timed(&cpu, choose_techniques)
             .after(crate::components::validate_caustic_params)
             .after(bevy::transform::TransformSystems::Propagate)
             .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)

@@ -1,6 +1,7 @@
 //! Render world: extraction, GPU buffers, the compute passes of the convolution and
 //! the projection of the floor irradiance into each view's caustic irradiance buffer.
 
+use crate::cpu_time::timed;
 use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
@@ -19,7 +20,7 @@ use bevy::render::{
         binding_types::{storage_buffer, storage_buffer_read_only, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
         *,
     },
-    renderer::{RenderContext, RenderDevice, RenderGraph, RenderQueue, ViewQuery},
+    renderer::{RenderContext, RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue, ViewQuery},
     sync_world::MainEntity,
     view::{ViewUniform, ViewUniformOffset, ViewUniforms},
 };
@@ -121,7 +122,8 @@ pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "convolution.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
-    app.add_systems(PostUpdate, (mark_active, aim_kernels.after(bevy::transform::TransformSystems::Propagate)));
+    let cpu = crate::CausticsCpuTime::of(app);
+    app.add_systems(PostUpdate, (timed(&cpu.main, mark_active), timed(&cpu.main, aim_kernels).after(bevy::transform::TransformSystems::Propagate)));
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -130,20 +132,20 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<PoolGpu>()
         .init_resource::<SpecializedRenderPipelines<ConvolutionPipelines>>()
         .add_systems(RenderStartup, init_pipelines)
-        .add_systems(ExtractSchedule, extract_pools)
+        .add_systems(ExtractSchedule, timed(&cpu.render, extract_pools))
         .add_systems(
             Render,
             (
-                prepare_buffers.in_set(RenderSystems::PrepareResources),
-                crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>
+                timed(&cpu.render, prepare_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu.render, crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>)
                     .run_if(|gpu: Res<PoolGpu>| !gpu.0.is_empty())
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, compute_floor_irradiance.before(camera_driver))
+        .add_systems(RenderGraph, timed(&cpu.render, compute_floor_irradiance).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Core3d,
-            project_floor_irradiance
+            timed(&cpu.render, project_floor_irradiance)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),
@@ -402,6 +404,10 @@ fn compute_floor_irradiance(
     let Some(kernels) = pipelines.compute.map(|id| cache.get_compute_pipeline(id)).into_iter().collect::<Option<Vec<_>>>() else {
         return;
     };
+    // No pools: no pass (and no span in the GPU timings).
+    if gpu.0.values().all(|buffers| buffers.compute.is_none()) {
+        return;
+    }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });

@@ -1,5 +1,6 @@
 //! Main world: the pool's water, simulated from its impulses and written into its mesh.
 
+use crate::cpu_time::timed;
 use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
 use bevy::platform::collections::HashSet;
@@ -89,7 +90,8 @@ impl PoolSurface {
 }
 
 pub(super) fn build(app: &mut App) {
-    app.add_systems(Update, (configure_pools, drop_pebbles, animate_pools).chain());
+    let cpu = crate::CausticsCpuTime::of(app).main;
+    app.add_systems(Update, (timed(&cpu, configure_pools), timed(&cpu, drop_pebbles), timed(&cpu, animate_pools)).chain());
 }
 
 /// Starts the water of pools that are new or whose grid or waves changed (a still

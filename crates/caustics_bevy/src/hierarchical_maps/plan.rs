@@ -71,7 +71,9 @@ pub struct CausticMapPlan {
 }
 
 pub(super) fn build(app: &mut App) {
-    app.init_resource::<CausticMapPlan>().add_systems(PostUpdate, plan_caustic_maps.in_set(crate::CausticsSystems::ReadScene));
+    let cpu = crate::CausticsCpuTime::of(app).main;
+    app.init_resource::<CausticMapPlan>()
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).in_set(crate::CausticsSystems::ReadScene));
 }
 
 /// The occluders' BVH, by `occluders` of [`CausticMapPlan`], for the shadow test.

@@ -1,6 +1,7 @@
 //! Render world: extraction of the plan, and the GPU buffers, pipelines and bind groups
 //! the passes (`pass.rs`) draw with.
 
+use crate::cpu_time::timed;
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
@@ -18,7 +19,7 @@ use bevy::render::{
         },
         *,
     },
-    renderer::{RenderDevice, RenderGraph, RenderQueue},
+    renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
 use caustics_core::hierarchical::hierarchy::start_level;
@@ -486,6 +487,7 @@ impl CausticMapsGpu {
 }
 
 pub(super) fn build(app: &mut App) {
+    let cpu = crate::CausticsCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -495,20 +497,20 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<SpecializedMeshPipelines<LightMapPipeline>>()
         .init_resource::<SpecializedRenderPipelines<CausticMapPipelines>>()
         .add_systems(RenderStartup, init_pipelines)
-        .add_systems(ExtractSchedule, extract_plan)
+        .add_systems(ExtractSchedule, timed(&cpu, extract_plan))
         .add_systems(
             Render,
             (
-                prepare_maps.in_set(RenderSystems::PrepareResources),
-                crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>
+                timed(&cpu, prepare_maps).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>)
                     .run_if(|gpu: Res<CausticMapsGpu>| !gpu.views.is_empty())
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, super::pass::make_caustic_maps.before(camera_driver))
+        .add_systems(RenderGraph, timed(&cpu, super::pass::make_caustic_maps).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Core3d,
-            super::pass::project_caustic_maps
+            timed(&cpu, super::pass::project_caustic_maps)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),

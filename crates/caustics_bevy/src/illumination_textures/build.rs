@@ -67,9 +67,10 @@ pub struct IlluminationFrames {
 }
 
 pub(super) fn build(app: &mut App) {
+    let cpu = crate::CausticsCpuTime::of(app).main;
     app.init_resource::<LightTransportTables>()
         .init_resource::<IlluminationFrames>()
-        .add_systems(PostUpdate, set_up_planes.in_set(crate::CausticsSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).in_set(crate::CausticsSystems::ReadScene));
 }
 
 /// One generator as the build reads it.
@@ -128,6 +129,7 @@ fn set_up_planes(
     mut frames: ResMut<IlluminationFrames>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<BuildState>,
+    cpu: Res<crate::CausticsCpuTime>,
 ) {
     let core_settings = match settings.core() {
         Ok(s) => {
@@ -258,8 +260,9 @@ fn set_up_planes(
         .collect();
     let lights = next.lights;
     let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
+    let clock = cpu.main.clone();
     state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
-        make_frames(inputs, &lights, &receivers, &core_settings, (directions, max_bytes, cache_dir))
+        clock.time(|| make_frames(inputs, &lights, &receivers, &core_settings, (directions, max_bytes, cache_dir)))
     }));
 }
 

@@ -1,6 +1,7 @@
 //! Render world: extraction of the frames, and the GPU buffers, textures, pipelines and
 //! bind groups the passes (`pass.rs`) draw with.
 
+use crate::cpu_time::timed;
 use super::{IlluminationFrames, IlluminationTexturesSettings, MAX_PLANES, pass};
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
@@ -14,7 +15,7 @@ use bevy::render::{
         },
         *,
     },
-    renderer::{RenderDevice, RenderGraph, RenderQueue},
+    renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
 use caustics_core::illumination_textures::{
@@ -176,6 +177,7 @@ pub(super) struct IlluminationPipelines {
 }
 
 pub(super) fn build(app: &mut App) {
+    let cpu = crate::CausticsCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -184,20 +186,20 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<IlluminationTexturesGpu>()
         .init_resource::<SpecializedRenderPipelines<IlluminationPipelines>>()
         .add_systems(RenderStartup, init_pipelines)
-        .add_systems(ExtractSchedule, extract_frames)
+        .add_systems(ExtractSchedule, timed(&cpu, extract_frames))
         .add_systems(
             Render,
             (
-                prepare_frames.in_set(RenderSystems::PrepareResources),
-                crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>
+                timed(&cpu, prepare_frames).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>)
                     .run_if(|gpu: Res<IlluminationTexturesGpu>| !gpu.frames.is_empty())
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, pass::draw_illumination_textures.before(camera_driver))
+        .add_systems(RenderGraph, timed(&cpu, pass::draw_illumination_textures).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Core3d,
-            pass::project_illumination_textures
+            timed(&cpu, pass::project_illumination_textures)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),

@@ -18,6 +18,7 @@
 
 mod composite;
 
+use crate::cpu_time::timed;
 use crate::components::{CausticReceiver, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
@@ -305,9 +306,10 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "composite.wgsl");
     bevy::asset::embedded_asset!(app, "inject.wgsl");
     bevy::shader::load_shader_library!(app, "receiver.wgsl");
+    let cpu = crate::CausticsCpuTime::of(app);
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
-        .add_systems(PostUpdate, warn_receivers_with_unread_material)
+        .add_systems(PostUpdate, timed(&cpu.main, warn_receivers_with_unread_material))
         .add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default())
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
@@ -320,16 +322,16 @@ pub(crate) fn build(app: &mut App) {
             RenderStartup,
             (composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems), init_inject_pipeline),
         )
-        .add_systems(ExtractSchedule, (start_receivers, extract_media, mark_views_with_work))
+        .add_systems(ExtractSchedule, (timed(&cpu.render, start_receivers), timed(&cpu.render, extract_media), timed(&cpu.render, mark_views_with_work)))
         .add_systems(
             Render,
             (
-                composite::queue.in_set(RenderSystems::Queue),
-                prepare_irradiance_buffers.in_set(RenderSystems::PrepareResources),
-                composite::prepare_receiver_bind_groups.in_set(RenderSystems::PrepareBindGroups),
+                timed(&cpu.render, composite::queue).in_set(RenderSystems::Queue),
+                timed(&cpu.render, prepare_irradiance_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu.render, composite::prepare_receiver_bind_groups).in_set(RenderSystems::PrepareBindGroups),
             ),
         )
-        .add_systems(Core3d, inject_irradiance.after(Core3dSystems::Prepass).before(Core3dSystems::MainPass));
+        .add_systems(Core3d, timed(&cpu.render, inject_irradiance).after(Core3dSystems::Prepass).before(Core3dSystems::MainPass));
     composite::build(render_app);
 }
 
@@ -368,8 +370,9 @@ impl<M: ReceiverMaterial> Plugin for CausticReceiverMaterialPlugin<M> {
     fn build(&self, app: &mut App) {
         let component = app.world_mut().register_component::<MeshMaterial3d<M>>();
         app.init_resource::<ReadableReceiverMaterials>().world_mut().resource_mut::<ReadableReceiverMaterials>().0.push(component);
+        let cpu = crate::CausticsCpuTime::of(app).render;
         if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
-            render_app.add_systems(ExtractSchedule, extract_receiver_albedo::<M>.after(start_receivers));
+            render_app.add_systems(ExtractSchedule, timed(&cpu, extract_receiver_albedo::<M>).after(start_receivers));
         }
     }
 }

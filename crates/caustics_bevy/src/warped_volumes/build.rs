@@ -15,7 +15,7 @@ use caustics_core::bvh::SceneBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
-use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, build_generator_volumes, channels, occluders_of};
+use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, VolumeSettings, build_generator_volumes, channels, occluders_of};
 use std::sync::Arc;
 
 /// The caustic volumes of the current scene, shared with the render world. A new
@@ -29,7 +29,9 @@ pub struct CausticVolumes {
 }
 
 pub(super) fn build(app: &mut App) {
-    app.init_resource::<CausticVolumes>().add_systems(PostUpdate, build_volumes.in_set(crate::CausticsSystems::ReadScene));
+    let cpu = crate::CausticsCpuTime::of(app).main;
+    app.init_resource::<CausticVolumes>()
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, build_volumes).in_set(crate::CausticsSystems::ReadScene));
 }
 
 type LightChanged = Or<(
@@ -105,6 +107,7 @@ fn build_volumes(
     mut volumes: ResMut<CausticVolumes>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<BuildState>,
+    cpu: Res<crate::CausticsCpuTime>,
 ) {
     let mesh_changed = mesh_events.read().any(|e| match e {
         AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => {
@@ -189,41 +192,57 @@ fn build_volumes(
             }
         }
     }
-    let mut fans = std::mem::take(&mut state.fans);
-    state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
-        let mut built = Vec::new();
-        let mut stats = BuildStats::default();
-        let mut kept = HashMap::new();
-        let Some(bounds) = bounds else {
-            return (built, stats, kept);
-        };
-        for input in inputs {
-            let others = other_generators.iter().filter(|(e, _)| *e != input.entity).map(|(_, m)| m.clone());
-            let occluders = SceneBvh::build(&occluders_of(shadowing.iter().cloned(), others));
-            let mut fan = fans.remove(&input.entity).unwrap_or_default();
-            if !fan.fits(&input.mesh) {
-                fan = VertexFans::new(&input.mesh);
-            }
-            for light in &lights {
-                for (ior, color) in channels(&input.interaction, light.color) {
-                    let s = build_generator_volumes(
-                        &input.mesh,
-                        &fan,
-                        &input.interaction,
-                        input.sides,
-                        ior,
-                        light,
-                        color,
-                        bounds,
-                        Some(&occluders),
-                        &core_settings,
-                        &mut built,
-                    );
-                    stats = stats + s;
-                }
-            }
-            kept.insert(input.entity, fan);
+    let fans = std::mem::take(&mut state.fans);
+    let clock = cpu.main.clone();
+    let scene = BuildScene { inputs, other_generators, shadowing, lights, bounds };
+    state.running = Some(AsyncComputeTaskPool::get().spawn(async move { clock.time(|| build_all(scene, fans, &core_settings)) }));
+}
+
+/// What one build reads: the generators the volumes draw, the others (which only
+/// shadow them), the other shadowing meshes, the lights and the receivers' bounds.
+struct BuildScene {
+    inputs: Vec<GeneratorInput>,
+    other_generators: Vec<(Entity, TriMesh)>,
+    shadowing: Vec<TriMesh>,
+    lights: Vec<Light>,
+    bounds: Option<(caustics_core::glam::Vec3, caustics_core::glam::Vec3)>,
+}
+
+/// Builds every volume of `scene`, reusing the fans of the last build.
+fn build_all(scene: BuildScene, mut fans: HashMap<Entity, VertexFans>, core_settings: &VolumeSettings) -> BuildOutput {
+    let BuildScene { inputs, other_generators, shadowing, lights, bounds } = scene;
+    let mut built = Vec::new();
+    let mut stats = BuildStats::default();
+    let mut kept = HashMap::new();
+    let Some(bounds) = bounds else {
+        return (built, stats, kept);
+    };
+    for input in inputs {
+        let others = other_generators.iter().filter(|(e, _)| *e != input.entity).map(|(_, m)| m.clone());
+        let occluders = SceneBvh::build(&occluders_of(shadowing.iter().cloned(), others));
+        let mut fan = fans.remove(&input.entity).unwrap_or_default();
+        if !fan.fits(&input.mesh) {
+            fan = VertexFans::new(&input.mesh);
         }
-        (built, stats, kept)
-    }));
+        for light in &lights {
+            for (ior, color) in channels(&input.interaction, light.color) {
+                let s = build_generator_volumes(
+                    &input.mesh,
+                    &fan,
+                    &input.interaction,
+                    input.sides,
+                    ior,
+                    light,
+                    color,
+                    bounds,
+                    Some(&occluders),
+                    core_settings,
+                    &mut built,
+                );
+                stats = stats + s;
+            }
+        }
+        kept.insert(input.entity, fan);
+    }
+    (built, stats, kept)
 }

@@ -1,6 +1,7 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
 use super::{CausticVolumes, WarpedVolumesSettings, pass};
+use crate::cpu_time::timed;
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
 use bevy::camera::primitives::{Aabb, Frustum};
@@ -157,6 +158,7 @@ pub(super) struct ReceiverDepthPipeline {
 }
 
 pub(super) fn build(app: &mut App) {
+    let cpu = crate::CausticsCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -166,24 +168,24 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<SpecializedRenderPipelines<VolumesPipeline>>()
         .init_resource::<SpecializedRenderPipelines<ShaftUpsamplePipeline>>()
         .add_systems(RenderStartup, init_pipeline)
-        .add_systems(ExtractSchedule, (extract_volumes, mark_views_seeing_media))
+        .add_systems(ExtractSchedule, (timed(&cpu, extract_volumes), timed(&cpu, mark_views_seeing_media)))
         .add_systems(
             Render,
             (
-                prepare_buffers.in_set(RenderSystems::PrepareResources),
-                prepare_shaft_textures.in_set(RenderSystems::PrepareResources),
-                prepare_receiver_depth.in_set(RenderSystems::PrepareBindGroups),
-                prepare_pipelines.in_set(RenderSystems::Prepare),
+                timed(&cpu, prepare_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, prepare_shaft_textures).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, prepare_receiver_depth).in_set(RenderSystems::PrepareBindGroups),
+                timed(&cpu, prepare_pipelines).in_set(RenderSystems::Prepare),
             ),
         )
         .add_systems(
             Core3d,
             (
-                pass::surface_pass
+                timed(&cpu, pass::surface_pass)
                     .after(crate::irradiance::inject_irradiance)
                     .after(Core3dSystems::Prepass)
                     .before(Core3dSystems::MainPass),
-                pass::volumetric_pass.after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess),
+                timed(&cpu, pass::volumetric_pass).after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess),
             ),
         );
 }
