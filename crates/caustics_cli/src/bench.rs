@@ -47,6 +47,17 @@ pub struct BenchArgs {
     /// `maps` for every caustic-map gather, `textures`...); all when not given.
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
+    /// The frame-cost bench instead: every technique on scenes of growing size in the
+    /// headless renderer at 1280 × 720, GPU time per pass and the plugin's CPU time per
+    /// frame (`frames.csv`, `frames.md`, `frames-gpu.png`, `frames-cpu.png`). With
+    /// `--quick`, the two smallest sizes of each.
+    #[arg(long)]
+    pub frames: bool,
+    /// With `--frames`: a family stops growing once one of its frames took longer than
+    /// this many seconds (wall time; a software adapter cannot render the largest
+    /// sizes in reasonable time).
+    #[arg(long, default_value_t = 60.0)]
+    pub frame_budget: f64,
 }
 
 impl BenchArgs {
@@ -565,6 +576,9 @@ fn trace_grid(
 }
 
 pub fn run(args: BenchArgs) -> Result<(), String> {
+    if args.frames {
+        return crate::frames::run(&args.out, |t| args.runs(t), args.quick.then_some(2), args.frame_budget);
+    }
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];
     methods.extend(VOLUME_METHODS.iter().map(|m| m as &dyn BenchMethod));
     methods.extend(CONVOLUTION_METHODS.iter().map(|m| m as &dyn BenchMethod));

@@ -2,6 +2,7 @@
 //! error-against-run-time bench. Errors are one line on stderr and a non-zero exit.
 
 mod bench;
+mod frames;
 mod gltf;
 mod hierarchical;
 mod illumination;
@@ -26,7 +27,8 @@ enum Command {
     /// Render a view of a scene (or its caustic irradiance plane) with one method.
     Render(render::RenderArgs),
     /// Run every method at several quality settings on the built-in scenes and write
-    /// a CSV, a Markdown table and a PNG plot of error against run time.
+    /// a CSV, a Markdown table and a PNG plot of error against run time; with
+    /// `--frames`, each technique's cost per frame as its work grows instead.
     Bench(bench::BenchArgs),
 }
 

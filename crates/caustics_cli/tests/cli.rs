@@ -109,6 +109,35 @@ fn bench_runs_only_the_methods_asked_for() {
 }
 
 #[test]
+fn the_frame_bench_times_every_pass_of_a_moving_generator_and_the_plugins_cpu() {
+    let dir = out_dir("frames");
+    let out = caustics(&["bench", "--frames", "--quick", "--methods", "maps", "--out", dir.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
+    // The adapter's name is quoted and may hold commas: the columns start after it.
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|r| r.rsplit_once("\",").unwrap().1.split(',').collect()).collect();
+    assert_eq!(rows.len(), 4, "two sizes of the ring and of the ball: {csv}");
+    for pair in rows.chunks(2) {
+        let size = |r: &[&str]| r[3].parse::<u64>().unwrap();
+        assert!(size(&pair[1]) > size(&pair[0]), "{csv}");
+    }
+    for row in &rows {
+        let number = |i: usize| row[i].parse::<f64>().unwrap();
+        assert!(number(4) > 0.0 && number(5) > 0.0, "caustics and main pass GPU times: {csv}");
+        assert!(number(7) + number(8) > 0.0, "the plugin's CPU time: {csv}");
+        // The turning generator's maps are remade every frame, and every stage is timed.
+        for stage in ["caustic_maps/photon_buffer", "caustic_maps/gather", "caustic_maps/splat", "caustic_maps/projection"] {
+            assert!(row[10].contains(stage), "{stage} missing: {csv}");
+        }
+    }
+    let md = std::fs::read_to_string(dir.join("frames.md")).unwrap();
+    assert_eq!(md.matches("k = ").count(), 4, "a GPU and a CPU growth exponent per line: {md}");
+    for plot in ["frames-gpu.png", "frames-cpu.png"] {
+        assert!(std::fs::metadata(dir.join(plot)).unwrap().len() > 1000, "{plot}");
+    }
+}
+
+#[test]
 fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
     // From cargo's environment at run time: a target directory shared between clones
     // may hold this binary as another clone built it.
