@@ -17,9 +17,11 @@
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, EMPTY, DRAWN_HERE, ONE_SIDED, DIVERSE, MANY, FLUX_UNITS, MAX_SPLAT_RADIUS, MIN_SPLAT_DIAMETER,
     SPLAT_LEVEL_THRESHOLD, ONE_BELOW, pyramid_offset, level_offset, is_perspective, half_extent, to_view,
-    map_uv, light_ray, photon_texel_center, photon_measure, photon_texel, relative_beam, cone_attenuation, range_attenuation, texel_of, reflect_about,
-    refract_through, fresnel_transmittance, oct_decode, bilinear_taps, bilinear_mix,
+    map_uv, light_ray, photon_texel_center, photon_measure, photon_texel, relative_beam, cone_attenuation, range_attenuation, texel_of,
+    oct_decode, bilinear_taps, bilinear_mix,
 }
+#import bevy_caustics::optics::{reflect_about, refract_through, fresnel_transmittance}
+#import bevy_caustics::triangle_bvh::{TriangleHit, intersect_triangles}
 
 // One step of the traversal (`GpuStep` in `render.rs`).
 struct Step {
@@ -63,9 +65,7 @@ const WORKGROUP: u32 = 64u;
 @group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(12) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
 @group(0) @binding(13) var<storage, read_write> resolved: array<f32>;
-// `GeneratorBvh`: its nodes (two vec4s each), then from `view.bvh_triangles` its
-// triangles (six vec4s each: three corners, w the generator's bits, three normals).
-@group(0) @binding(14) var<storage, read> generator_bvh: array<vec4<f32>>;
+// Binding 14: the generators' `GeneratorBvh` (`bevy_caustics::triangle_bvh`).
 // Only `write_args` binds the indirect arguments: a dispatch may not read the buffer it
 // is dispatched from as storage.
 @group(1) @binding(0) var<storage, read_write> args: array<u32>;
@@ -268,8 +268,7 @@ fn march_receivers(origin: vec3<f32>, dir: vec3<f32>, reach: f32) -> vec4<f32> {
 
 // ---------------------------------------------------------------- traced paths
 
-// `generator_bvh::STACK_DEPTH` and `photons::MAX_PATH_EVENTS`.
-const BVH_STACK_DEPTH: u32 = 32u;
+// `photons::MAX_PATH_EVENTS`.
 const MAX_PATH_EVENTS: u32 = 8u;
 
 fn material_ior(m: u32) -> f32 {
@@ -278,106 +277,6 @@ fn material_ior(m: u32) -> f32 {
 
 fn material_flags(m: u32) -> u32 {
     return view.material_flags[m / 4u][m % 4u];
-}
-
-// `generator_bvh::slab`.
-fn slab(origin: vec3<f32>, inv: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>, t_min: f32, t_max: f32) -> bool {
-    let t0 = (lo - origin) * inv;
-    let t1 = (hi - origin) * inv;
-    let near = max(max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z)), t_min);
-    let far = min(min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z)), t_max);
-    return near <= far;
-}
-
-fn bvh_corner(triangle: u32, i: u32) -> vec4<f32> {
-    return generator_bvh[view.bvh_triangles + 6u * triangle + i];
-}
-
-// `generator_bvh::möller_trumbore`: x t, yz (u, v), w 1 for a hit.
-fn moller_trumbore(triangle: u32, origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> vec4<f32> {
-    let v0 = bvh_corner(triangle, 0u).xyz;
-    let e1 = bvh_corner(triangle, 1u).xyz - v0;
-    let e2 = bvh_corner(triangle, 2u).xyz - v0;
-    let p = cross(dir, e2);
-    let det = dot(e1, p);
-    if det == 0.0 {
-        return vec4(0.0);
-    }
-    let inv = 1.0 / det;
-    let s = origin - v0;
-    let u = dot(s, p) * inv;
-    let q = cross(s, e1);
-    let v = dot(dir, q) * inv;
-    let t = dot(e2, q) * inv;
-    if u >= 0.0 && v >= 0.0 && u + v <= 1.0 && t > t_min && t < t_max {
-        return vec4(t, u, v, 1.0);
-    }
-    return vec4(0.0);
-}
-
-struct GeneratorHit {
-    t: f32,  // negative: no hit
-    generator: u32,
-    normal: vec3<f32>,
-    geometric_normal: vec3<f32>,
-}
-
-// `GeneratorBvh::intersect`.
-fn intersect_generators(origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> GeneratorHit {
-    var none = GeneratorHit(-1.0, 0u, vec3(0.0), vec3(0.0));
-    if view.bvh_triangles == 0u {
-        return none;
-    }
-    let inv = 1.0 / dir;
-    var t_far = t_max;
-    var best = 0u;
-    var best_uv = vec2(0.0);
-    var found = false;
-    var stack: array<u32, BVH_STACK_DEPTH>;
-    stack[0] = 0u;
-    var len = 1u;
-    while len > 0u {
-        len -= 1u;
-        let node = stack[len];
-        let lo = generator_bvh[2u * node];
-        let hi = generator_bvh[2u * node + 1u];
-        if !slab(origin, inv, lo.xyz, hi.xyz, t_min, t_far) {
-            continue;
-        }
-        let first = bitcast<u32>(lo.w);
-        let count = bitcast<u32>(hi.w);
-        if count > 0u {
-            for (var i = first; i < first + count; i++) {
-                let r = moller_trumbore(i, origin, dir, t_min, t_far);
-                if r.w > 0.0 {
-                    t_far = r.x;
-                    best = i;
-                    best_uv = r.yz;
-                    found = true;
-                }
-            }
-        } else if len + 2u <= BVH_STACK_DEPTH {
-            stack[len] = first;
-            stack[len + 1u] = first + 1u;
-            len += 2u;
-        }
-    }
-    if !found {
-        return none;
-    }
-    let c0 = bvh_corner(best, 0u);
-    let geometric = cross(bvh_corner(best, 1u).xyz - c0.xyz, bvh_corner(best, 2u).xyz - c0.xyz);
-    var g = vec3(0.0);
-    if dot(geometric, geometric) > 0.0 {
-        g = normalize(geometric);
-    }
-    let n = bvh_corner(best, 3u).xyz * (1.0 - best_uv.x - best_uv.y) + bvh_corner(best, 4u).xyz * best_uv.x
-        + bvh_corner(best, 5u).xyz * best_uv.y;
-    var normal = g;
-    if dot(n, n) > 0.0 {
-        normal = normalize(n);
-    }
-    return GeneratorHit(t_far, bitcast<u32>(c0.w), normal, g);
 }
 
 // Where a photon lands (`photons::Landing`): the receiver point, the last generator
@@ -440,7 +339,7 @@ fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_
             side = ng;
         }
         let origin = p + side * view.path_epsilon;
-        let next = intersect_generators(origin, dir, 0.0, 3.4028235e38);
+        let next = intersect_triangles(view.bvh_triangles, origin, dir, 0.0, 3.4028235e38);
         var reach = 3.4028235e38;
         if next.t >= 0.0 {
             reach = next.t;
