@@ -21,7 +21,7 @@
     oct_decode, bilinear_taps, bilinear_mix,
 }
 #import bevy_caustics::optics::{reflect_about, refract_through, fresnel_transmittance}
-#import bevy_caustics::triangle_bvh::{TriangleHit, intersect_triangles}
+#import bevy_caustics::triangle_bvh::{NO_MESH, TriangleHit, intersect_triangles}
 
 // One step of the traversal (`GpuStep` in `render.rs`).
 struct Step {
@@ -339,7 +339,7 @@ fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_
             side = ng;
         }
         let origin = p + side * view.path_epsilon;
-        let next = intersect_triangles(view.bvh_triangles, origin, dir, 0.0, 3.4028235e38);
+        let next = intersect_triangles(view.bvh_triangles, NO_MESH, origin, dir, 0.0, 3.4028235e38);
         var reach = 3.4028235e38;
         if next.t >= 0.0 {
             reach = next.t;

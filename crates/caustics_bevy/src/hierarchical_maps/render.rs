@@ -189,7 +189,7 @@ impl GpuLightView {
             inverse_range_squared: planned.inverse_range_squared,
             traced_paths: bvh.is_some() as u32,
             path_epsilon: bvh.map_or(0.0, GeneratorBvh::ray_offset),
-            bvh_triangles: bvh.filter(|b| !b.triangles.is_empty()).map_or(0, |b| 2 * b.nodes.len() as u32),
+            bvh_triangles: bvh.map_or(0, GeneratorBvh::gpu_triangle_offset),
             emission: v.emission,
         };
         (gpu, pyramid_nodes, map_texels)
@@ -759,14 +759,9 @@ fn prepare_maps(
     let mut generators: Vec<GpuInstance> = plan.generators.iter().enumerate().map(|(k, i)| instance(i, k as u32)).collect();
     let mut occluders: Vec<GpuInstance> = plan.occluders.iter().map(|i| instance(i, 0)).collect();
     let bvh = plan.bvh.as_deref().filter(|_| settings.paths == PhotonPaths::Traced);
-    // Nodes then triangles, as `generator_bvh` reads them; a binding may not be empty.
-    let mut bvh_bytes: Vec<u8> = bvh.map_or(Vec::new(), |b| [bytemuck::cast_slice(&b.nodes), bytemuck::cast_slice(&b.triangles)].concat());
-    if bvh_bytes.is_empty() {
-        bvh_bytes = vec![0; 16];
-    }
     gpu.bvh = Some(device.create_buffer_with_data(&BufferInitDescriptor {
         label: Some("caustic_map_generator_bvh"),
-        contents: &bvh_bytes,
+        contents: &bvh.map_or(vec![0; 16], GeneratorBvh::gpu_bytes),
         usage: BufferUsages::STORAGE,
     }));
     // A binding may not be empty.

@@ -10,6 +10,8 @@
 
 // `generator_bvh::STACK_DEPTH`.
 const BVH_STACK_DEPTH: u32 = 32u;
+// A mesh index no triangle has: `intersect_triangles` skips none.
+const NO_MESH: u32 = 0xffffffffu;
 
 // `generator_bvh::slab`.
 fn slab(origin: vec3<f32>, inv: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>, t_min: f32, t_max: f32) -> bool {
@@ -53,8 +55,9 @@ struct TriangleHit {
     geometric_normal: vec3<f32>,
 }
 
-// `GeneratorBvh::intersect` on the BVH whose triangles start at `triangles` (0: no BVH).
-fn intersect_triangles(triangles: u32, origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> TriangleHit {
+// `GeneratorBvh::intersect` on the BVH whose triangles start at `triangles` (0: no BVH),
+// passing through the triangles of mesh `skip` (`NO_MESH`: none).
+fn intersect_triangles(triangles: u32, skip: u32, origin: vec3<f32>, dir: vec3<f32>, t_min: f32, t_max: f32) -> TriangleHit {
     var none = TriangleHit(-1.0, 0u, vec3(0.0), vec3(0.0));
     if triangles == 0u {
         return none;
@@ -79,6 +82,9 @@ fn intersect_triangles(triangles: u32, origin: vec3<f32>, dir: vec3<f32>, t_min:
         let count = bitcast<u32>(hi.w);
         if count > 0u {
             for (var i = first; i < first + count; i++) {
+                if bitcast<u32>(bvh_corner(triangles, i, 0u).w) == skip {
+                    continue;
+                }
                 let r = moller_trumbore(triangles, i, origin, dir, t_min, t_far);
                 if r.w > 0.0 {
                     t_far = r.x;

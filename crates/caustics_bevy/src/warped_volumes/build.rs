@@ -1,37 +1,94 @@
-//! Main world: caustic volumes from the ECS, rebuilt only when something they depend
-//! on changed.
+//! Main world: what the GPU build of the caustic volumes reads, gathered from the ECS
+//! whenever something it depends on changed: the generators the volumes draw (their
+//! meshes' topology, kept across frames, and placement), the lights, the receivers'
+//! bounds and the occluders' BVH (rebuilt only when an occluder changed). The render
+//! world uploads the generators' vertices and builds the volumes (`compute.rs`); the
+//! counts of the last build come back into [`CausticVolumes`].
 
 use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, InvalidCausticParams};
-use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb};
+use crate::technique::CausticTechniqueChoice;
 use bevy::camera::primitives::Aabb;
+use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
-use caustics_core::scene::{Light, Sides};
-use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
-use caustics_core::bvh::SceneBvh;
+use caustics_core::glam;
+use caustics_core::hierarchical::GeneratorBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
+use caustics_core::scene::Light;
 use caustics_core::technique::Technique;
-use caustics_core::volumes::{BuildStats, CausticVolume, VertexFans, VolumeSettings, build_generator_volumes, channels, occluders_of};
-use std::sync::Arc;
+use caustics_core::volumes::{BuildStats, VertexFans, VolumeSettings};
+use std::sync::{Arc, Mutex};
 
-/// The caustic volumes of the current scene, shared with the render world. A new
-/// `generation` means new contents.
+/// What the last GPU build of the caustic volumes kept and dropped (unlit, shadowed,
+/// TIR, grazing, degenerate) and the flux on each side, read back from the GPU a frame
+/// or two later. A new `generation` means a newer build.
 #[derive(Resource, Clone, Default)]
 pub struct CausticVolumes {
-    pub volumes: Arc<Vec<CausticVolume>>,
-    /// What the last build kept and dropped (TIR, grazing, degenerate), and the flux.
     pub stats: BuildStats,
+    pub generation: u64,
+}
+
+/// The counts of a GPU build on their way from the render world.
+#[derive(Resource, Clone, Default)]
+pub(super) struct BuildStatsChannel(pub Arc<Mutex<Option<BuildStats>>>);
+
+/// A mesh's triangles and what the build derives from them alone: the fans of §3.4
+/// and the sides each triangle owns (bits, `VertexFans::owned_edges`).
+pub(super) struct Topology {
+    pub vertices: usize,
+    pub triangles: Vec<u32>,
+    pub fans: VertexFans,
+    pub owned_sides: Vec<u32>,
+}
+
+/// The mesh index of an occluder that is no generator (`BvhTriangle::generator`):
+/// no generator's build passes through it.
+pub(super) const SHADOW_CASTER: u32 = u32::MAX - 1;
+
+/// A mesh index no triangle has (`triangle_bvh.wgsl`'s `NO_MESH`).
+pub(super) const NO_MESH: u32 = u32::MAX;
+
+/// One generator the volumes draw, as its build reads it.
+#[derive(Clone)]
+pub(super) struct VolumeGenerator {
+    pub mesh: AssetId<Mesh>,
+    pub world_from_local: Mat4,
+    pub interaction: SpecularInteraction,
+    /// Lit from behind too ([`caustics_core::scene::Sides::lit_from_behind`]).
+    pub two_sided: bool,
+    pub topology: Arc<Topology>,
+    /// Its own mesh index in the occluders' BVH, which its rays pass through.
+    pub occluder_index: u32,
+}
+
+/// Everything the GPU build reads but the generators' vertices. A new `generation`
+/// means a new build.
+#[derive(Resource, Clone, Default)]
+pub(super) struct VolumeSources {
+    pub generators: Vec<(Entity, VolumeGenerator)>,
+    pub lights: Vec<Light>,
+    /// Receivers, shadow casters and, with two or more generators, every generator.
+    pub occluders: Arc<GeneratorBvh>,
+    /// The receivers' world bounds: every volume ends beyond them.
+    pub bounds: Option<(glam::Vec3, glam::Vec3)>,
+    pub settings: VolumeSettings,
     pub generation: u64,
 }
 
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticsCpuTime::of(app).main;
     app.init_resource::<CausticVolumes>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, build_volumes).in_set(crate::CausticsSystems::ReadScene));
+        .init_resource::<VolumeSources>()
+        .init_resource::<BuildStatsChannel>()
+        .add_systems(
+            PostUpdate,
+            (crate::cpu_time::timed(&cpu, gather_sources), crate::cpu_time::timed(&cpu, receive_stats))
+                .in_set(crate::CausticsSystems::ReadScene),
+        );
 }
 
 type LightChanged = Or<(
@@ -58,40 +115,58 @@ type Generators<'w, 's> = Query<
     Without<InvalidCausticParams>,
 >;
 
-/// One generator's input to a build: its world-space mesh, interaction and sides.
-struct GeneratorInput {
-    entity: Entity,
-    mesh: TriMesh,
-    interaction: SpecularInteraction,
-    sides: Sides,
-}
-
-/// What a build produced: the volumes, their stats and the fans it kept.
-type BuildOutput = (Vec<CausticVolume>, BuildStats, HashMap<Entity, VertexFans>);
-
-/// The build state across frames.
+/// What the gathering keeps across frames.
 #[derive(Default)]
-struct BuildState {
-    /// Fans by generator, handed to each build and back.
-    fans: HashMap<Entity, VertexFans>,
-    /// The generators' meshes at the last build, to notice their changes.
-    meshes: HashSet<AssetId<Mesh>>,
+struct GatherState {
+    /// Topology by generator, with the indices it was made from.
+    topologies: HashMap<Entity, Arc<Topology>>,
+    /// The meshes of occluders and of generators at the last gathering, to notice
+    /// their changes.
+    occluder_meshes: HashSet<AssetId<Mesh>>,
+    generator_meshes: HashSet<AssetId<Mesh>>,
     warned: HashSet<Entity>,
-    /// Something changed since the running build started.
-    pending: bool,
-    running: Option<Task<BuildOutput>>,
 }
 
-/// Rebuilds every caustic volume when a generator, light, receiver, shadow caster or
-/// the settings changed, or a generator's or occluder's mesh asset was modified (an
+/// The triangle indices of a mesh, `None` without triangles or with an index past its
+/// vertices.
+fn triangle_indices(mesh: &Mesh) -> Result<(usize, Vec<u32>), String> {
+    let vertices = mesh.count_vertices();
+    let indices: Vec<u32> = match mesh.indices() {
+        Some(Indices::U16(i)) => i.iter().map(|&i| u32::from(i)).collect(),
+        Some(Indices::U32(i)) => i.clone(),
+        None => (0..vertices as u32).collect(),
+    };
+    let triangles = indices.len() / 3 * 3;
+    if triangles == 0 {
+        return Err("has no triangles".into());
+    }
+    if let Some(&bad) = indices[..triangles].iter().find(|&&i| i as usize >= vertices) {
+        return Err(format!("has index {bad} past its {vertices} vertices"));
+    }
+    Ok((vertices, indices[..triangles].to_vec()))
+}
+
+impl Topology {
+    /// The topology of a mesh's triangles, checked.
+    fn of(vertices: usize, triangles: Vec<u32>) -> Result<Self, String> {
+        let corners: Vec<[u32; 3]> = triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+        // Positions do not matter to the fans: the topology's mesh stands at the origin.
+        let mesh = TriMesh::new(vec![glam::Vec3::ZERO; vertices], vec![glam::Vec3::Y; vertices], corners).map_err(|e| e.to_string())?;
+        let fans = VertexFans::new(&mesh);
+        let owned_sides = (0..mesh.triangles().len())
+            .map(|t| fans.owned_edges(&mesh, t).iter().enumerate().map(|(i, &owned)| u32::from(owned) << i).sum())
+            .collect();
+        Ok(Self { vertices, triangles, fans, owned_sides })
+    }
+}
+
+/// Gathers the build's sources again when a generator, light, receiver, shadow caster
+/// or the settings changed, or a generator's or occluder's mesh asset was modified (an
 /// animated ocean: every frame). Receivers, shadow casters and the other generators
-/// hide generator vertices from the light and end their rays (`build_generator_volumes`,
-/// `occluders_of`). The build runs on the async compute
-/// pool, in parallel over triangles, while the frames go on with the previous volumes:
-/// no frame waits for it. Changes that arrive during a build start one more when it
-/// ends.
+/// hide generator vertices from the light and end their rays: their BVH is rebuilt
+/// only when one of them changed.
 #[allow(clippy::too_many_arguments)]
-fn build_volumes(
+fn gather_sources(
     generators: Generators<'_, '_>,
     changed_generators: Query<(), (With<CausticGenerator>, GeneratorChanged)>,
     lights: Query<LightComponents, AnyLight>,
@@ -104,86 +179,85 @@ fn build_volumes(
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
-    mut volumes: ResMut<CausticVolumes>,
+    mut sources: ResMut<VolumeSources>,
     mut active: ResMut<ActiveCausticTechniques>,
-    mut state: Local<BuildState>,
-    cpu: Res<crate::CausticsCpuTime>,
+    mut state: Local<GatherState>,
 ) {
-    let mesh_changed = mesh_events.read().any(|e| match e {
-        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => {
-            state.meshes.contains(id)
+    let (mut occluder_mesh_changed, mut generator_mesh_changed) = (false, false);
+    for event in mesh_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } = event {
+            occluder_mesh_changed |= state.occluder_meshes.contains(id);
+            generator_mesh_changed |= state.generator_meshes.contains(id);
         }
-        _ => false,
-    });
-    state.pending |= mesh_changed
-        || settings.is_changed()
+    }
+    let several_generators = generators.iter().filter(|(.., visible)| visible.get()).count() > 1;
+    let generators_changed = generator_mesh_changed
         || !changed_generators.is_empty()
-        || !changed_lights.is_empty()
-        || !changed_occluders.is_empty()
         || removed.read().count() > 0
         || removed_invalid.read().count() > 0
+        // A mesh that had not loaded at the last gathering.
+        || generators.iter().any(|(_, _, _, m, ..)| !state.generator_meshes.contains(&m.id()));
+    let occluders_changed = occluder_mesh_changed
+        || !changed_occluders.is_empty()
         || removed_meshes.read().count() > 0
         || removed_receivers.read().count() > 0
-        // A mesh that had not loaded at the last build.
-        || generators.iter().any(|(_, _, _, m, ..)| !state.meshes.contains(&m.id()));
-
-    if let Some(task) = state.running.as_mut() {
-        let Some((built, stats, fans)) = block_on(poll_once(task)) else {
-            return;
-        };
-        state.running = None;
-        state.fans = fans;
-        active.warped_volumes = !built.is_empty();
-        *volumes = CausticVolumes { volumes: Arc::new(built), stats, generation: volumes.generation + 1 };
-    }
-    if !state.pending {
+        || (several_generators && generators_changed);
+    if !(occluders_changed || generators_changed || settings.is_changed() || !changed_lights.is_empty()) {
         return;
     }
-    state.pending = false;
-
-    let core_settings = settings.core();
-    let lights: Vec<Light> = lights
+    sources.settings = settings.core();
+    sources.lights = lights
         .iter()
         .filter(|(.., visible)| visible.get())
         .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
         .filter(|l| l.validate().is_ok())
         .collect();
     // Volumes end beyond the receivers' world bounds.
-    let bounds = occluders
+    sources.bounds = occluders
         .iter()
         .filter(|(_, receiver, _)| *receiver)
         .filter_map(|((_, t, _, aabb), ..)| aabb.map(|a| world_aabb(t, a)))
         .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
         .map(|(lo, hi)| (to_core(lo), to_core(hi)));
-    state.meshes.clear();
-    // What shadows the generators: receivers and the other meshes that cast shadows.
-    let mut shadowing = Vec::new();
-    for ((mesh3d, transform, visible, _), receiver, no_shadows) in &occluders {
-        if !blocks_caustic_light(visible, receiver, no_shadows) {
-            continue;
-        }
-        state.meshes.insert(mesh3d.id());
-        if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
-            shadowing.push(mesh);
-        }
-    }
     // Every generator shadows the others (`occluders_of`): the volumes' own, and the
-    // ones other techniques draw.
-    let mut inputs = Vec::new();
-    let mut other_generators = Vec::new();
+    // ones other techniques draw; each passes through its own mesh.
+    let mut volume_generators = Vec::new();
+    let mut occluder_meshes: Vec<(u32, TriMesh)> = Vec::new();
+    state.generator_meshes.clear();
+    let mut index = 0;
     for (entity, generator, choice, mesh3d, transform, visible) in &generators {
-        state.meshes.insert(mesh3d.id());
-        let uses_volumes = choice.technique() == Technique::WarpedVolumes;
+        state.generator_meshes.insert(mesh3d.id());
         let (Some(mesh), true) = (meshes.get(&mesh3d.0), visible.get()) else {
             continue;
         };
-        match core_mesh(mesh, transform) {
-            Ok(mesh) if !uses_volumes => other_generators.push((entity, mesh)),
-            Ok(mesh) => {
+        index += 1;
+        // A malformed mesh shadows nothing; the warning below says why it is skipped.
+        if several_generators && occluders_changed && let Ok(world) = core_mesh(mesh, transform) {
+            occluder_meshes.push((index, world));
+        }
+        if choice.technique() != Technique::WarpedVolumes {
+            continue;
+        }
+        let topology = match state.topologies.get(&entity) {
+            Some(known) if triangle_indices(mesh).is_ok_and(|(v, t)| v == known.vertices && t == known.triangles) => Ok(known.clone()),
+            _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
+        };
+        match topology {
+            Ok(topology) => {
                 state.warned.remove(&entity);
-                let sides = choice.facts.sides;
-                other_generators.push((entity, mesh.clone()));
-                inputs.push(GeneratorInput { entity, mesh, interaction: generator.specular_interaction(), sides });
+                state.topologies.insert(entity, topology.clone());
+                let interaction = generator.specular_interaction();
+                volume_generators.push((
+                    entity,
+                    VolumeGenerator {
+                        mesh: mesh3d.id(),
+                        world_from_local: transform.to_matrix(),
+                        two_sided: choice.facts.sides.lit_from_behind(&interaction),
+                        interaction,
+                        topology,
+                        occluder_index: if several_generators { index } else { NO_MESH },
+                    },
+                ));
             }
             Err(e) => {
                 if state.warned.insert(entity) {
@@ -192,57 +266,29 @@ fn build_volumes(
             }
         }
     }
-    let fans = std::mem::take(&mut state.fans);
-    let clock = cpu.main.clone();
-    let scene = BuildScene { inputs, other_generators, shadowing, lights, bounds };
-    state.running = Some(AsyncComputeTaskPool::get().spawn(async move { clock.time(|| build_all(scene, fans, &core_settings)) }));
-}
-
-/// What one build reads: the generators the volumes draw, the others (which only
-/// shadow them), the other shadowing meshes, the lights and the receivers' bounds.
-struct BuildScene {
-    inputs: Vec<GeneratorInput>,
-    other_generators: Vec<(Entity, TriMesh)>,
-    shadowing: Vec<TriMesh>,
-    lights: Vec<Light>,
-    bounds: Option<(caustics_core::glam::Vec3, caustics_core::glam::Vec3)>,
-}
-
-/// Builds every volume of `scene`, reusing the fans of the last build.
-fn build_all(scene: BuildScene, mut fans: HashMap<Entity, VertexFans>, core_settings: &VolumeSettings) -> BuildOutput {
-    let BuildScene { inputs, other_generators, shadowing, lights, bounds } = scene;
-    let mut built = Vec::new();
-    let mut stats = BuildStats::default();
-    let mut kept = HashMap::new();
-    let Some(bounds) = bounds else {
-        return (built, stats, kept);
-    };
-    for input in inputs {
-        let others = other_generators.iter().filter(|(e, _)| *e != input.entity).map(|(_, m)| m.clone());
-        let occluders = SceneBvh::build(&occluders_of(shadowing.iter().cloned(), others));
-        let mut fan = fans.remove(&input.entity).unwrap_or_default();
-        if !fan.fits(&input.mesh) {
-            fan = VertexFans::new(&input.mesh);
-        }
-        for light in &lights {
-            for (ior, color) in channels(&input.interaction, light.color) {
-                let s = build_generator_volumes(
-                    &input.mesh,
-                    &fan,
-                    &input.interaction,
-                    input.sides,
-                    ior,
-                    light,
-                    color,
-                    bounds,
-                    Some(&occluders),
-                    core_settings,
-                    &mut built,
-                );
-                stats = stats + s;
+    state.topologies.retain(|entity, _| volume_generators.iter().any(|(e, _)| e == entity));
+    if occluders_changed {
+        // What shadows the generators: receivers and the other meshes that cast shadows.
+        state.occluder_meshes.clear();
+        for ((mesh3d, transform, visible, _), receiver, no_shadows) in &occluders {
+            if !blocks_caustic_light(visible, receiver, no_shadows) {
+                continue;
+            }
+            state.occluder_meshes.insert(mesh3d.id());
+            if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
+                occluder_meshes.push((SHADOW_CASTER, mesh));
             }
         }
-        kept.insert(input.entity, fan);
+        sources.occluders = Arc::new(GeneratorBvh::of_meshes(occluder_meshes.iter().map(|(i, m)| (*i, m))));
     }
-    (built, stats, kept)
+    active.warped_volumes = !volume_generators.is_empty() && !sources.lights.is_empty() && sources.bounds.is_some();
+    sources.generators = volume_generators;
+    sources.generation += 1;
+}
+
+/// Takes the counts of the newest GPU build that came back.
+fn receive_stats(channel: Res<BuildStatsChannel>, mut volumes: ResMut<CausticVolumes>) {
+    if let Some(stats) = channel.0.lock().ok().and_then(|mut s| s.take()) {
+        *volumes = CausticVolumes { stats, generation: volumes.generation + 1 };
+    }
 }

@@ -1,15 +1,20 @@
 //! Warped caustic volumes (Ernst, Akenine-Möller & Jensen 2005) on the GPU.
 //!
-//! Every frame in which a generator, a light or a receiver changed, the main world
-//! rebuilds one caustic volume per lit generator triangle and light (and per colour
-//! channel for a dispersive refractor) with `caustics_core::volumes`, in parallel on
-//! the CPU (§3: "caustic volumes are computed by the CPU for every frame"); an
-//! unchanged scene costs nothing. The render world uploads them once per change and,
-//! for each caustics view:
+//! Every frame in which a generator, a light or a receiver changed, the GPU builds one
+//! caustic volume per lit generator triangle and light (and per colour channel for a
+//! dispersive refractor), from the generator's vertices as that frame draws them
+//! (`build.wgsl`, the twin of `caustics_core::volumes::build_generator_volumes`; the
+//! paper builds them on the CPU, §3): an animated ocean's caustics follow its waves in
+//! the same frame, and the CPU only gathers the sources (`build.rs`) and copies the
+//! vertices. An unchanged scene costs nothing. The volumes the build keeps are counted
+//! on the GPU and drawn indirectly; what it drops (unlit, shadowed, TIR, grazing,
+//! degenerate) comes back in [`CausticVolumes`]. Then, for each caustics view:
 //!
 //! 1. **surface pass** (between the prepass and the main pass): every volume's
-//!    bounding prism (§4.3) is drawn, back faces only and without depth test, so each
-//!    pixel whose view ray crosses it runs the fragment shader exactly once. The shader
+//!    bounding prism (§4.3) is drawn, back faces only, so each pixel whose view ray
+//!    crosses it runs the fragment shader at most once, and only where the back face
+//!    lies behind the pixel's receiver (a read-only test against a single-sampled copy
+//!    of the depth prepass: a prism in front of the receiver cannot hold it). The shader
 //!    rebuilds the pixel's receiver point from the depth prepass, runs the exact
 //!    point-in-volume test (§3.3) and adds the interpolated irradiance (§3.4), times
 //!    the receiver's cosine from the normal prepass, to the view's caustic irradiance
@@ -22,10 +27,12 @@
 //!    then adds to the image bilinearly ([`WarpedVolumesSettings::shaft_downsample`]).
 //!
 //! Both read Bevy's `DepthPrepass` and `NormalPrepass`, which
-//! [`crate::CausticsSettings`] requires on the camera. The WGSL in `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU test
-//! holds the two together.
+//! [`crate::CausticsSettings`] requires on the camera. The WGSL in `build.wgsl` and
+//! `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU tests hold the
+//! two together.
 
 mod build;
+mod compute;
 mod pass;
 mod render;
 
@@ -94,6 +101,8 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "volumes.wgsl");
     bevy::asset::embedded_asset!(app, "upsample.wgsl");
     bevy::asset::embedded_asset!(app, "receiver_depth.wgsl");
+    bevy::asset::embedded_asset!(app, "build.wgsl");
+    bevy::shader::load_shader_library!(app, "types.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
     build::build(app);
     render::build(app);

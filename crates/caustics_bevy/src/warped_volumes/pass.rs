@@ -37,23 +37,24 @@ impl VolumeDraw<'_> {
         pipeline_id: CachedRenderPipelineId,
         (irradiance, work, pipelines, prepass, view_offset): VolumeView,
     ) -> bool {
-        let (Some(pipeline), Some(depth), Some(normal), Some(view), Some(volumes), Some(settings)) = (
+        let (Some(pipeline), Some(depth), Some(normal), Some(view), Some(volumes), Some(counters), Some(settings)) = (
             self.cache.get_render_pipeline(pipeline_id),
             prepass.depth_view(),
             prepass.normal_view(),
             self.view_uniforms.uniforms.binding(),
-            self.buffers.volumes.binding(),
+            self.buffers.volumes.as_ref(),
+            self.buffers.counters.as_ref(),
             self.buffers.settings.binding(),
         ) else {
             return false;
         };
-        if self.buffers.count == 0 {
+        if self.buffers.empty {
             return false;
         }
         let bind_group = ctx.render_device().create_bind_group(
             "caustic_volumes_bind_group",
             &self.cache.get_bind_group_layout(&self.layouts.layouts[pipelines.multisampled as usize]),
-            &BindGroupEntries::sequential((view, volumes, settings, depth, normal)),
+            &BindGroupEntries::sequential((view, volumes.as_entire_binding(), settings, depth, normal)),
         );
         let diagnostics = ctx.diagnostic_recorder();
         let diagnostics = diagnostics.as_deref();
@@ -74,7 +75,8 @@ impl VolumeDraw<'_> {
         let intensity = f64::from(work.0.applied_intensity());
         render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
         render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
-        render_pass.draw(0..36, 0..self.buffers.count);
+        // As many instances as the GPU build kept (`compute.rs`).
+        render_pass.draw_indirect(counters, 0);
         span.end(&mut render_pass);
         self.recorder.record(pass);
         true

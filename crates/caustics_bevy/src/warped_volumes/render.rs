@@ -1,11 +1,12 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
-use super::{CausticVolumes, WarpedVolumesSettings, pass};
+use super::build::BuildStatsChannel;
+use super::{WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
 use bevy::camera::primitives::{Aabb, Frustum};
-use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
+use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
@@ -16,17 +17,17 @@ use bevy::render::{
         },
         *,
     },
-    renderer::{RenderDevice, RenderQueue},
+    renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     sync_world::RenderEntity,
     texture::{CachedTexture, TextureCache},
     camera::ExtractedCamera,
     view::{ExtractedView, Msaa, ViewUniform},
 };
 use bevy::shader::ShaderDefVal;
-use caustics_core::volumes::{CausticVolume, IntensityMode};
-use std::sync::Arc;
+use caustics_core::volumes::IntensityMode;
 
-/// One caustic volume as `volumes.wgsl` reads it (`CausticVolume` there).
+/// One caustic volume as `volumes.wgsl` reads it and `build.wgsl` writes it
+/// (`CausticVolume` in `types.wgsl`): its layout and size.
 #[derive(Clone, Copy, ShaderType)]
 pub(super) struct GpuCausticVolume {
     /// xyz: origin, w: depth.
@@ -51,58 +52,29 @@ pub(super) struct GpuCausticVolume {
     corners: [Vec4; 8],
 }
 
-impl From<&CausticVolume> for GpuCausticVolume {
-    fn from(v: &CausticVolume) -> Self {
-        let p = |v: caustics_core::glam::Vec3| Vec4::new(v.x, v.y, v.z, 0.0);
-        Self {
-            origin: p(v.origin).with_w(v.depth),
-            axis_x: p(v.axes[0]),
-            axis_y: p(v.axes[1]),
-            axis_z: p(v.axes[2]),
-            surface_normal: p(v.surface_normal).with_w(
-                v.owned_edges.iter().enumerate().map(|(i, &owned)| if owned { (1 << i) as f32 } else { 0.0 }).sum(),
-            ),
-            vertex_x: p(v.vertex_x),
-            vertex_z: p(v.vertex_z),
-            ray_x: p(v.ray_x),
-            ray_z: p(v.ray_z),
-            fan_a: p(v.fan_a),
-            fan_b: p(v.fan_b),
-            fan_c: p(v.fan_c),
-            triangle_abc: p(v.triangle_abc),
-            flux: p(v.flux),
-            color: p(v.color),
-            light_distance: p(v.light_distance).with_w(v.inverse_range_squared),
-            hit_planes: v.hit_planes.map(|h| Vec4::from_array(h.to_array())),
-            corners: v.bounds.corners.map(|c| p(c).with_w(1.0)),
-        }
-    }
-}
-
 /// `VolumeSettings` in `volumes.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuVolumeSettings {
     intensity_mode: u32,
     max_magnification: f32,
     medium_count: u32,
-    volume_count: u32,
     media: [GpuMedium; MAX_MEDIA],
 }
 
-/// Render world: the volumes of the main world, by generation.
+/// Render world: the main world's settings.
 #[derive(Resource, Default)]
-struct ExtractedVolumes {
-    generation: u64,
-    volumes: Arc<Vec<CausticVolume>>,
-    settings: WarpedVolumesSettings,
-}
+struct ExtractedVolumeSettings(WarpedVolumesSettings);
 
-/// Render world: the volumes and settings on the GPU.
+/// Render world: the volumes the GPU build wrote (`None` while no generator, light or
+/// receiver calls for any), the counters whose first words are the passes' indirect
+/// draw, and the passes' settings.
 #[derive(Resource, Default)]
 pub(super) struct VolumeBuffers {
-    generation: Option<u64>,
-    pub volumes: StorageBuffer<Vec<GpuCausticVolume>>,
-    pub count: u32,
+    pub volumes: Option<Buffer>,
+    pub counters: Option<Buffer>,
+    /// The build of the current sources came back with no volume: the passes skip
+    /// their draws (a generator in full shadow, say).
+    pub empty: bool,
     pub settings: UniformBuffer<GpuVolumeSettings>,
 }
 
@@ -159,20 +131,30 @@ pub(super) struct ReceiverDepthPipeline {
 
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticsCpuTime::of(app).render;
+    let channel = app.world().resource::<BuildStatsChannel>().clone();
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
-        .init_resource::<ExtractedVolumes>()
+        .insert_resource(channel)
+        .init_resource::<ExtractedVolumeSettings>()
+        .init_resource::<compute::ExtractedSources>()
+        .init_resource::<compute::VolumeBuild>()
         .init_resource::<VolumeBuffers>()
         .init_resource::<SpecializedRenderPipelines<VolumesPipeline>>()
         .init_resource::<SpecializedRenderPipelines<ShaftUpsamplePipeline>>()
-        .add_systems(RenderStartup, init_pipeline)
-        .add_systems(ExtractSchedule, (timed(&cpu, extract_volumes), timed(&cpu, mark_views_seeing_media)))
+        .add_systems(RenderStartup, (init_pipeline, compute::init_pipelines))
+        .add_systems(
+            ExtractSchedule,
+            (timed(&cpu, extract_settings), timed(&cpu, compute::extract_sources), timed(&cpu, mark_views_seeing_media)),
+        )
+        .add_systems(RenderGraph, timed(&cpu, compute::build_volumes).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Render,
             (
                 timed(&cpu, prepare_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, compute::prepare_build).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, compute::read_back_counts).in_set(RenderSystems::Cleanup),
                 timed(&cpu, prepare_shaft_textures).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, prepare_receiver_depth).in_set(RenderSystems::PrepareBindGroups),
                 timed(&cpu, prepare_pipelines).in_set(RenderSystems::Prepare),
@@ -190,16 +172,8 @@ pub(super) fn build(app: &mut App) {
         );
 }
 
-fn extract_volumes(
-    mut extracted: ResMut<ExtractedVolumes>,
-    volumes: Extract<Res<CausticVolumes>>,
-    settings: Extract<Res<WarpedVolumesSettings>>,
-) {
-    if extracted.generation != volumes.generation {
-        extracted.generation = volumes.generation;
-        extracted.volumes = volumes.volumes.clone();
-    }
-    extracted.settings = **settings;
+fn extract_settings(mut extracted: ResMut<ExtractedVolumeSettings>, settings: Extract<Res<WarpedVolumesSettings>>) {
+    extracted.0 = **settings;
 }
 
 /// 3D cameras, their frusta and caustics settings.
@@ -226,22 +200,14 @@ fn mark_views_seeing_media(
 }
 
 fn prepare_buffers(
-    extracted: Res<ExtractedVolumes>,
+    extracted: Res<ExtractedVolumeSettings>,
     media: Res<ExtractedMedia>,
     mut buffers: ResMut<VolumeBuffers>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
 ) {
-    if buffers.generation != Some(extracted.generation) {
-        buffers.generation = Some(extracted.generation);
-        buffers.count = extracted.volumes.len() as u32;
-        let gpu: Vec<GpuCausticVolume> = extracted.volumes.iter().map(GpuCausticVolume::from).collect();
-        buffers.volumes.set(gpu);
-        buffers.volumes.write_buffer(&device, &queue);
-    }
-    let settings = extracted.settings.core();
+    let settings = extracted.0.core();
     let (media, medium_count) = media.padded();
-    let count = buffers.count;
     buffers.settings.set(GpuVolumeSettings {
         intensity_mode: match settings.intensity {
             IntensityMode::Conserving => 0,
@@ -250,7 +216,6 @@ fn prepare_buffers(
         },
         max_magnification: settings.max_magnification,
         medium_count,
-        volume_count: count,
         media,
     });
     buffers.settings.write_buffer(&device, &queue);
@@ -420,10 +385,10 @@ fn prepare_pipelines(
     mut pipelines: ResMut<SpecializedRenderPipelines<VolumesPipeline>>,
     upsample: Res<ShaftUpsamplePipeline>,
     mut upsample_pipelines: ResMut<SpecializedRenderPipelines<ShaftUpsamplePipeline>>,
-    extracted: Res<ExtractedVolumes>,
+    extracted: Res<ExtractedVolumeSettings>,
     cache: Res<PipelineCache>,
 ) {
-    let scale = extracted.settings.shaft_scale();
+    let scale = extracted.0.shaft_scale();
     for (entity, view, msaa, prepass) in &views {
         if prepass.depth.is_none() || prepass.normal.is_none() {
             continue;
@@ -450,7 +415,7 @@ fn prepare_shaft_textures(
     mut commands: Commands,
     views: Query<(Entity, &ExtractedCamera), With<ViewSeesMedium>>,
     others: Query<Entity, (With<ViewShafts>, Without<ViewSeesMedium>)>,
-    extracted: Res<ExtractedVolumes>,
+    extracted: Res<ExtractedVolumeSettings>,
     upsample: Res<ShaftUpsamplePipeline>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
@@ -459,7 +424,7 @@ fn prepare_shaft_textures(
     for entity in &others {
         commands.entity(entity).remove::<ViewShafts>();
     }
-    let scale = extracted.settings.shaft_scale();
+    let scale = extracted.0.shaft_scale();
     for (entity, camera) in &views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0 && scale > 1) else {
             commands.entity(entity).remove::<ViewShafts>();
@@ -499,7 +464,7 @@ fn prepare_receiver_depth(
     cache: Res<PipelineCache>,
 ) {
     for (entity, irradiance, prepass, msaa) in &views {
-        let Some(depth) = prepass.depth_view().filter(|_| buffers.count > 0) else {
+        let Some(depth) = prepass.depth_view().filter(|_| buffers.volumes.is_some() && !buffers.empty) else {
             commands.entity(entity).remove::<ViewReceiverDepth>();
             continue;
         };

@@ -118,6 +118,19 @@ impl GeneratorBvh {
         Self { nodes, triangles }
     }
 
+    /// The BVH as `triangle_bvh.wgsl` reads it: the nodes, then the triangles, as
+    /// bytes (16 zero bytes for an empty BVH: a GPU binding may not be empty).
+    pub fn gpu_bytes(&self) -> Vec<u8> {
+        let bytes = [bytemuck::cast_slice(&self.nodes), bytemuck::cast_slice(&self.triangles)].concat();
+        if bytes.is_empty() { vec![0; 16] } else { bytes }
+    }
+
+    /// Where the triangles start in [`Self::gpu_bytes`], in `vec4`s: two a node; 0 for
+    /// a BVH without triangles, which the GPU reads as none.
+    pub fn gpu_triangle_offset(&self) -> u32 {
+        if self.triangles.is_empty() { 0 } else { 2 * self.nodes.len() as u32 }
+    }
+
     /// How far a traced ray starts off the surface it leaves: 2·10⁻⁵ of the
     /// generators' extent (the tracer's offset).
     pub fn ray_offset(&self) -> f32 {

@@ -48,6 +48,28 @@ impl VertexFans {
     fn around(&self, vertex: u32) -> &[u32] {
         &self.triangles[self.start[vertex as usize] as usize..self.start[vertex as usize + 1] as usize]
     }
+
+    /// Where each vertex's fan starts in [`Self::triangles`], and one past the last.
+    pub fn starts(&self) -> &[u32] {
+        &self.start
+    }
+
+    /// The triangles around every vertex, vertex after vertex.
+    pub fn triangles(&self) -> &[u32] {
+        &self.triangles
+    }
+
+    /// Which sides of triangle `t` it owns: side i (opposite vertex i) is shared with
+    /// at most one neighbour, and the triangle with the lower index owns the points
+    /// exactly on it; an open side is owned.
+    pub fn owned_edges(&self, mesh: &TriMesh, t: usize) -> [bool; 3] {
+        let tri = mesh.triangles()[t];
+        std::array::from_fn(|i| {
+            let (a, b) = (tri[(i + 1) % 3], tri[(i + 2) % 3]);
+            let neighbour = self.around(a).iter().find(|&&f| f as usize != t && mesh.triangles()[f as usize].contains(&b));
+            neighbour.is_none_or(|&f| t < f as usize)
+        })
+    }
 }
 
 /// Counts of what a build kept and dropped, and the flux on each side.
@@ -441,14 +463,7 @@ impl TriangleContext<'_> {
             let to_vertex = light.position().map_or(0.0, |l| (p[i] - l).length());
             to_vertex - frame.local(p[i]).y * r[i].length()
         }));
-        // Edge i (opposite vertex i) is shared with at most one neighbour; the
-        // triangle with the lower index owns the points exactly on it.
-        let owned_edges = std::array::from_fn(|i| {
-            let (a, b) = (tri[(i + 1) % 3], tri[(i + 2) % 3]);
-            let neighbour =
-                fans.around(a).iter().find(|&&f| f as usize != t && mesh.triangles()[f as usize].contains(&b));
-            neighbour.is_none_or(|&f| t < f as usize)
-        });
+        let owned_edges = fans.owned_edges(mesh, t);
         let volume = CausticVolume {
             origin: frame.origin,
             axes: frame.axes,

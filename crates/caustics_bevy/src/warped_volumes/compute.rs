@@ -1,0 +1,439 @@
+//! Render world: the caustic volumes built on the GPU (`build.wgsl`), once per change
+//! of their sources: the generators' vertices as this frame draws them, copied from
+//! their mesh assets, their topology (uploaded when it changes), the lights and the
+//! occluders' BVH. One job per generator, light and colour channel runs three
+//! dispatches (vertex rays, slicing axis, triangle volumes) that append the volumes
+//! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
+//! indirect draw; the counts of what was dropped go back to the main world.
+
+use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
+use super::render::{GpuCausticVolume, VolumeBuffers};
+use crate::report::PassRecorder;
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::{
+    Extract,
+    diagnostic::RecordDiagnostics,
+    render_resource::{
+        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer},
+        *,
+    },
+    renderer::{RenderContext, RenderDevice, RenderQueue},
+};
+use caustics_core::glam;
+use caustics_core::hierarchical::GeneratorBvh;
+use caustics_core::mesh::TriMesh;
+use caustics_core::scene::{Light, LightKind};
+use caustics_core::volumes::{BuildStats, channels};
+use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// `BuildJob` in `build.wgsl`: one generator under one light in one colour channel.
+#[derive(Clone, Copy, Default, ShaderType)]
+struct GpuBuildJob {
+    world_from_local: Mat4,
+    normal_from_local: Mat4,
+    light: Vec4,
+    spot: Vec4,
+    light_power: Vec4,
+    color: Vec4,
+    bounds_lo: Vec4,
+    bounds_hi: Vec4,
+    counts: UVec4,
+}
+
+/// `VertexRay` in `build.wgsl`: six `vec4`s.
+const VERTEX_RAY_BYTES: u64 = 6 * 16;
+
+/// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
+/// instances, two zeros), five counts, the kept and the dropped flux (f32 bits).
+const COUNTER_WORDS: usize = 15;
+
+/// The counters before a build: an indirect draw of no instance.
+const EMPTY_COUNTERS: [u32; COUNTER_WORDS] = [36, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+
+fn v4(v: glam::Vec3, w: f32) -> Vec4 {
+    Vec4::new(v.x, v.y, v.z, w)
+}
+
+impl GpuBuildJob {
+    /// The job of `generator` under `light` in one channel (its index of refraction,
+    /// `None` for a mirror, and its flux colour), against the occluders' BVH whose
+    /// triangles start at `occluders`.
+    fn new(generator: &VolumeGenerator, light: &Light, (ior, color): (Option<f32>, glam::Vec3), sources: &VolumeSources, occluders: u32) -> Self {
+        let (light_vec, spot, power, spot_scale) = match light.kind {
+            LightKind::Directional { direction, irradiance } => (v4(direction.normalize(), 0.0), Vec4::ZERO, irradiance, 0.0),
+            LightKind::Point { position, intensity } => (v4(position, 1.0), Vec4::ZERO, intensity, 0.0),
+            LightKind::Spot { position, direction, intensity, inner_angle, outer_angle } => {
+                // `Light::cone_attenuation`'s constants.
+                let (cos_outer, cos_inner) = (outer_angle.cos(), inner_angle.min(outer_angle).cos());
+                let axis = direction.normalize_or(glam::Vec3::NEG_Y);
+                (v4(position, 1.0), v4(axis, cos_outer), intensity, 1.0 / (cos_inner - cos_outer).max(1e-4))
+            }
+        };
+        let (lo, hi) = sources.bounds.unwrap_or_default();
+        Self {
+            world_from_local: generator.world_from_local,
+            normal_from_local: Mat4::from_mat3(Mat3::from_mat4(generator.world_from_local).inverse().transpose()),
+            light: light_vec,
+            spot,
+            light_power: Vec4::new(power, spot_scale, light.inverse_range_squared(), 0.0),
+            color: v4(color, ior.unwrap_or(0.0)),
+            bounds_lo: v4(lo, sources.settings.min_ray_cosine),
+            bounds_hi: v4(hi, if generator.two_sided { 1.0 } else { 0.0 }),
+            counts: UVec4::new(
+                generator.topology.vertices as u32,
+                generator.topology.owned_sides.len() as u32,
+                occluders,
+                generator.occluder_index,
+            ),
+        }
+    }
+}
+
+/// A generator's vertex positions and normals, in its own frame.
+type VertexData = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+
+/// Render world: the sources of the last gathering, and each generator's vertices as
+/// this frame draws them (positions and unit normals; `None` while its mesh is not
+/// there), when they are new.
+#[derive(Resource, Default)]
+pub(super) struct ExtractedSources {
+    generation: u64,
+    sources: VolumeSources,
+    vertices: Vec<Option<VertexData>>,
+    new: bool,
+}
+
+/// The vertices of a generator's mesh: its positions and normals (smooth ones, made
+/// here, for a mesh without), when they still fit its topology.
+fn vertex_data(mesh: &Mesh, topology: &Topology) -> Option<VertexData> {
+    use bevy::mesh::VertexAttributeValues::Float32x3;
+    let Ok(Float32x3(positions)) = mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) else {
+        return None;
+    };
+    if positions.len() != topology.vertices {
+        return None;
+    }
+    let normals = match mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL) {
+        Ok(Float32x3(normals)) if normals.len() == positions.len() => normals.clone(),
+        _ => {
+            let corners = topology.triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+            let smooth = TriMesh::with_smooth_normals(positions.iter().map(|&p| glam::Vec3::from_array(p)).collect(), corners).ok()?;
+            smooth.normals().iter().map(|n| n.to_array()).collect()
+        }
+    };
+    Some((positions.clone(), normals))
+}
+
+pub(super) fn extract_sources(
+    mut extracted: ResMut<ExtractedSources>,
+    sources: Extract<Res<VolumeSources>>,
+    meshes: Extract<Res<Assets<Mesh>>>,
+) {
+    extracted.new = extracted.generation != sources.generation;
+    if !extracted.new {
+        return;
+    }
+    extracted.generation = sources.generation;
+    extracted.vertices = sources.generators.iter().map(|(_, g)| meshes.get(g.mesh).and_then(|m| vertex_data(m, &g.topology))).collect();
+    extracted.sources = (**sources).clone();
+}
+
+/// One generator's buffers: its topology, vertices and per-vertex rays.
+struct GeneratorBuffers {
+    topology: Arc<Topology>,
+    /// Triangles, fan starts, fan triangles, owned sides.
+    indices: [Buffer; 4],
+    positions: Buffer,
+    normals: Buffer,
+    rays: Buffer,
+}
+
+/// A job's dispatch: its generator's bind group, its uniform offset, its vertices and
+/// triangles.
+struct Dispatch {
+    bind_group: BindGroup,
+    offset: u32,
+    vertices: u32,
+    triangles: u32,
+}
+
+/// Render world: what the build runs with, and whether it runs this frame.
+#[derive(Resource, Default)]
+pub(super) struct VolumeBuild {
+    generators: HashMap<Entity, GeneratorBuffers>,
+    occluders: Option<(Arc<GeneratorBvh>, Buffer)>,
+    jobs: DynamicUniformBuffer<GpuBuildJob>,
+    dispatches: Vec<Dispatch>,
+    /// The counters' copy that the main world's [`super::CausticVolumes`] reads, and
+    /// whether one is on its way.
+    staging: Option<Buffer>,
+    reading: Arc<AtomicBool>,
+    /// The sources' generation of the build whose counters were copied this frame.
+    copied: Option<u64>,
+    /// The volumes a build of a generation kept, as read back.
+    counted: Arc<Mutex<Option<(u64, u32)>>>,
+}
+
+/// The build's pipelines (vertex rays, slicing axis, triangle volumes) and layout.
+#[derive(Resource)]
+pub(super) struct VolumeBuildPipelines {
+    layout: BindGroupLayoutDescriptor,
+    pipelines: [CachedComputePipelineId; 3],
+}
+
+pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache: Res<PipelineCache>) {
+    let read = || storage_buffer_read_only_sized(false, None);
+    let layout = BindGroupLayoutDescriptor::new(
+        "caustic_volume_build_layout",
+        &BindGroupLayoutEntries::with_indices(
+            ShaderStages::COMPUTE,
+            (
+                (0, uniform_buffer::<GpuBuildJob>(true)),
+                (1, read()),
+                (2, read()),
+                (3, read()),
+                (4, read()),
+                (5, read()),
+                (6, read()),
+                (7, storage_buffer_sized(false, None)),
+                (8, storage_buffer_sized(false, None)),
+                (9, storage_buffer_sized(false, None)),
+                (14, read()),
+            ),
+        ),
+    );
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
+    let pipelines = ["vertex_rays", "slicing_axis", "triangle_volumes"].map(|entry| {
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("caustic_volume_{entry}").into()),
+            layout: vec![layout.clone()],
+            shader: shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    });
+    commands.insert_resource(VolumeBuildPipelines { layout, pipelines });
+}
+
+fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
+    // A binding may not be empty.
+    let contents = if contents.is_empty() { &[0; 4][..] } else { contents };
+    device.create_buffer_with_data(&BufferInitDescriptor { label: Some(label), contents, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST })
+}
+
+impl GeneratorBuffers {
+    fn new(device: &RenderDevice, topology: &Arc<Topology>, (positions, normals): (&[[f32; 3]], &[[f32; 3]])) -> Self {
+        let bytes = |words: &[u32]| bytemuck::cast_slice::<u32, u8>(words).to_vec();
+        Self {
+            topology: topology.clone(),
+            indices: [
+                storage(device, "caustic_volume_triangles", &bytes(&topology.triangles)),
+                storage(device, "caustic_volume_fan_starts", &bytes(topology.fans.starts())),
+                storage(device, "caustic_volume_fan_triangles", &bytes(topology.fans.triangles())),
+                storage(device, "caustic_volume_owned_sides", &bytes(&topology.owned_sides)),
+            ],
+            positions: storage(device, "caustic_volume_positions", bytemuck::cast_slice(positions)),
+            normals: storage(device, "caustic_volume_normals", bytemuck::cast_slice(normals)),
+            rays: device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_volume_vertex_rays"),
+                size: (topology.vertices as u64 + 1) * VERTEX_RAY_BYTES,
+                usage: BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+}
+
+/// Uploads a new extraction's vertices, topology and occluders, writes the jobs, sizes
+/// the volumes for every triangle of every job and starts the counters again.
+pub(super) fn prepare_build(
+    extracted: Res<ExtractedSources>,
+    mut build: ResMut<VolumeBuild>,
+    mut buffers: ResMut<VolumeBuffers>,
+    pipelines: Res<VolumeBuildPipelines>,
+    cache: Res<PipelineCache>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    // A build read back with no volume for the current sources: nothing to draw.
+    if let Some((generation, volumes)) = build.counted.lock().ok().and_then(|mut c| c.take()) {
+        buffers.empty = generation == extracted.generation && volumes == 0;
+    }
+    if !extracted.new {
+        return;
+    }
+    buffers.empty = false;
+    let build = &mut *build;
+    let sources = &extracted.sources;
+    let occluders = match &build.occluders {
+        Some((bvh, buffer)) if Arc::ptr_eq(bvh, &sources.occluders) => buffer.clone(),
+        _ => {
+            let buffer = storage(&device, "caustic_volume_occluders", &sources.occluders.gpu_bytes());
+            build.occluders = Some((sources.occluders.clone(), buffer.clone()));
+            buffer
+        }
+    };
+    build.generators.retain(|entity, _| sources.generators.iter().any(|(e, _)| e == entity));
+    build.jobs.clear();
+    let mut planned = Vec::new();
+    let mut capacity = 0u64;
+    for ((entity, generator), vertices) in sources.generators.iter().zip(&extracted.vertices) {
+        let Some((positions, normals)) = vertices else { continue };
+        let data = (positions.as_slice(), normals.as_slice());
+        match build.generators.get_mut(entity) {
+            Some(known) if Arc::ptr_eq(&known.topology, &generator.topology) => {
+                queue.write_buffer(&known.positions, 0, bytemuck::cast_slice(positions));
+                queue.write_buffer(&known.normals, 0, bytemuck::cast_slice(normals));
+            }
+            _ => {
+                build.generators.insert(*entity, GeneratorBuffers::new(&device, &generator.topology, data));
+            }
+        }
+        for light in &sources.lights {
+            for channel in channels(&generator.interaction, light.color) {
+                let job = GpuBuildJob::new(generator, light, channel, sources, sources.occluders.gpu_triangle_offset());
+                planned.push((*entity, build.jobs.push(&job), job.counts));
+                capacity += u64::from(job.counts.y);
+            }
+        }
+    }
+    build.jobs.write_buffer(&device, &queue);
+    build.dispatches.clear();
+    if capacity == 0 || sources.bounds.is_none() {
+        buffers.volumes = None;
+        return;
+    }
+    let volume_bytes = GpuCausticVolume::min_size().get();
+    if buffers.volumes.as_ref().is_none_or(|b| b.size() < capacity * volume_bytes) {
+        buffers.volumes = Some(device.create_buffer(&BufferDescriptor {
+            label: Some("caustic_volumes"),
+            size: capacity * volume_bytes,
+            usage: BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        }));
+    }
+    let counters = buffers
+        .counters
+        .get_or_insert_with(|| {
+            device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_volume_counters"),
+                size: (COUNTER_WORDS * 4) as u64,
+                usage: BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        })
+        .clone();
+    queue.write_buffer(&counters, 0, bytemuck::cast_slice(&EMPTY_COUNTERS));
+    let (Some(jobs), Some(volumes)) = (build.jobs.binding(), buffers.volumes.as_ref()) else {
+        return;
+    };
+    let layout = cache.get_bind_group_layout(&pipelines.layout);
+    for (entity, offset, counts) in planned {
+        let Some(g) = build.generators.get(&entity) else { continue };
+        let bind_group = device.create_bind_group(
+            "caustic_volume_build_bind_group",
+            &layout,
+            &BindGroupEntries::with_indices((
+                (0, jobs.clone()),
+                (1, g.positions.as_entire_binding()),
+                (2, g.normals.as_entire_binding()),
+                (3, g.indices[0].as_entire_binding()),
+                (4, g.indices[1].as_entire_binding()),
+                (5, g.indices[2].as_entire_binding()),
+                (6, g.indices[3].as_entire_binding()),
+                (7, g.rays.as_entire_binding()),
+                (8, volumes.as_entire_binding()),
+                (9, counters.as_entire_binding()),
+                (14, occluders.as_entire_binding()),
+            )),
+        );
+        build.dispatches.push(Dispatch { bind_group, offset, vertices: counts.x, triangles: counts.y });
+    }
+}
+
+/// Once per change of the sources: every job's three dispatches, then a copy of the
+/// counters for the main world when none is on its way.
+pub(super) fn build_volumes(
+    mut ctx: RenderContext,
+    mut build: ResMut<VolumeBuild>,
+    buffers: Res<VolumeBuffers>,
+    extracted: Res<ExtractedSources>,
+    pipelines: Res<VolumeBuildPipelines>,
+    cache: Res<PipelineCache>,
+    recorder: Res<PassRecorder>,
+) {
+    let Some(kernels) = pipelines.pipelines.iter().map(|id| cache.get_compute_pipeline(*id)).collect::<Option<Vec<_>>>() else {
+        return;
+    };
+    let (Some(counters), false) = (buffers.counters.as_ref(), build.dispatches.is_empty()) else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let encoder = ctx.command_encoder();
+    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
+    let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
+    for dispatch in &build.dispatches {
+        pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
+        pass.set_pipeline(kernels[0]);
+        pass.dispatch_workgroups(dispatch.vertices.div_ceil(64), 1, 1);
+        pass.set_pipeline(kernels[1]);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(kernels[2]);
+        pass.dispatch_workgroups(dispatch.triangles.div_ceil(64), 1, 1);
+    }
+    span.end(&mut pass);
+    drop(pass);
+    build.dispatches.clear();
+    recorder.record("volume build");
+    if !build.reading.swap(true, Ordering::AcqRel) {
+        let device = ctx.render_device().clone();
+        let staging = build.staging.get_or_insert_with(|| {
+            device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_volume_counters_readback"),
+                size: (COUNTER_WORDS * 4) as u64,
+                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        ctx.command_encoder().copy_buffer_to_buffer(counters, 0, staging, 0, (COUNTER_WORDS * 4) as u64);
+        build.copied = Some(extracted.generation);
+    }
+}
+
+/// The counts of a build, from its counters.
+fn stats_of(words: &[u32]) -> BuildStats {
+    let flux = |i: usize| glam::DVec3::new(f64::from(f32::from_bits(words[i])), f64::from(f32::from_bits(words[i + 1])), f64::from(f32::from_bits(words[i + 2])));
+    BuildStats {
+        volumes: words[1] as usize,
+        unlit: words[4] as usize,
+        shadowed: words[5] as usize,
+        total_internal_reflection: words[6] as usize,
+        grazing: words[7] as usize,
+        degenerate: words[8] as usize,
+        flux: flux(9),
+        dropped_flux: flux(12),
+    }
+}
+
+/// After this frame's commands went in: reads the counters copied this frame back, on
+/// to the main world.
+pub(super) fn read_back_counts(mut build: ResMut<VolumeBuild>, channel: Res<BuildStatsChannel>) {
+    let (Some(generation), Some(staging)) = (build.copied.take(), build.staging.clone()) else {
+        return;
+    };
+    let (reading, channel, counted, buffer) = (build.reading.clone(), channel.0.clone(), build.counted.clone(), staging.clone());
+    staging.slice(..).map_async(MapMode::Read, move |result| {
+        if result.is_ok() {
+            let words: Vec<u32> = bytemuck::cast_slice(&buffer.slice(..).get_mapped_range()).to_vec();
+            buffer.unmap();
+            if let (Ok(mut stats), Ok(mut count)) = (channel.lock(), counted.lock()) {
+                *stats = Some(stats_of(&words));
+                *count = Some((generation, words[1]));
+            }
+        }
+        reading.store(false, Ordering::Release);
+    });
+}
