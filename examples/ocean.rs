@@ -7,7 +7,7 @@
 //! display; `--headless --out PATH` to force it). `--resolution N` sets the ocean grid
 //! (a power of two, default 32), `--wind M/S` the wind speed (default 7) and
 //! `--shaft-downsample N` the pixels across each light-shaft sample (1, 2 or 4, default
-//! 2; `WarpedVolumesSettings::shaft_downsample`).
+//! 4; `WarpedVolumesSettings::shaft_downsample`).
 
 #[path = "support/mod.rs"]
 mod support;

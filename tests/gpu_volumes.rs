@@ -146,7 +146,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let medium_transform = Transform::from_xyz(0.0, 0.4, 0.0).with_scale(Vec3::new(4.0, 0.8, 4.0));
     renderer.world_mut().spawn((medium, medium_transform));
     // Every pixel integrated, to hold the pass to the twin pixel by pixel (the
-    // default integrates one in four, below).
+    // default integrates one in sixteen, below).
     renderer.world_mut().insert_resource(WarpedVolumesSettings { shaft_downsample: 1, ..default() });
     let foggy = render(&mut renderer, 3);
     save(&foggy, "gpu_volumes_medium.png");
@@ -184,15 +184,15 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("GPU vs half the CPU twin, in-scattering at intensity ½: relative L2 {error:.2e}");
     assert!(error < 0.01, "shafts at intensity ½: relative L2 {error}");
     renderer.world_mut().entity_mut(camera).insert(CausticsSettings::default());
-    // The default: shafts integrated at one pixel in four and spread bilinearly over
+    // The default: shafts integrated at one pixel in sixteen and spread bilinearly over
     // the image. Against every pixel's own (the GPU's, above, and the twin's).
     let full: Vec<f32> = foggy.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
     renderer.world_mut().insert_resource(WarpedVolumesSettings::default());
     let sampled = render(&mut renderer, 3);
     let gpu: Vec<f32> = sampled.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
     let (against_full, against_twin) = (relative_l2(&gpu, &full), relative_l2(&gpu, &cpu));
-    eprintln!("shafts at one pixel in four: relative L2 {against_full:.2e} from every pixel's, {against_twin:.2e} from the twin's");
-    assert!(against_full > 0.0 && against_full < 0.03 && against_twin < 0.03, "shafts at one pixel in four: {against_full}, {against_twin}");
+    eprintln!("shafts at one pixel in sixteen: relative L2 {against_full:.2e} from every pixel's, {against_twin:.2e} from the twin's");
+    assert!(against_full > 0.0 && against_full < 0.03 && against_twin < 0.03, "shafts at one pixel in sixteen: {against_full}, {against_twin}");
     renderer.world_mut().entity_mut(camera).insert(CausticsSettings { shafts: false, ..default() });
     let unlit = render(&mut renderer, 3);
     assert_eq!(renderer.pass_report().views("volumetric"), 0, "{:?}", renderer.pass_report());
