@@ -6,6 +6,7 @@
 // (`lift_negative_irradiance`: no texel below zero, the flux kept).
 
 #import bevy_caustics::convolution::Pool
+#import bevy_caustics::optics::fresnel_transmittance
 
 @group(0) @binding(0) var<uniform> pool: Pool;
 @group(0) @binding(1) var<storage, read> images: array<vec4<f32>>;  // x, z, strength, drop time
@@ -55,22 +56,6 @@ fn ripple_heights(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     heights[texel_index(id.x, id.y)] = h;
-}
-
-// `optics::fresnel_reflectance` for light entering water from air.
-fn fresnel_transmittance(cos_i: f32, eta: f32) -> f32 {
-    if eta == 1.0 {
-        return 1.0;
-    }
-    let c = min(abs(cos_i), 1.0);
-    let sin2_t = eta * eta * (1.0 - c * c);
-    if sin2_t >= 1.0 {
-        return 0.0;
-    }
-    let cos_t = sqrt(1.0 - sin2_t);
-    let rs = (eta * c - cos_t) / (eta * c + cos_t);
-    let rp = (c - eta * cos_t) / (c + eta * cos_t);
-    return 1.0 - clamp(0.5 * (rs * rs + rp * rp), 0.0, 1.0);
 }
 
 // `transmitted_light` and `ConvolutionKernels::terms`: what each texel convolves.

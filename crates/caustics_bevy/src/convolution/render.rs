@@ -351,15 +351,8 @@ fn init_pipelines(
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
-    let compute = ["ripple_heights", "convolution_terms", "convolve", "deficit_ratios", "lift"].map(|entry| {
-        cache.queue_compute_pipeline(ComputePipelineDescriptor {
-            label: Some(format!("pool_{entry}").into()),
-            layout: vec![compute_layout.clone()],
-            shader: shader.clone(),
-            entry_point: Some(entry.into()),
-            ..default()
-        })
-    });
+    let kernels = ["ripple_heights", "convolution_terms", "convolve", "deficit_ratios", "lift"];
+    let compute = crate::irradiance::compute_pipelines(&cache, "pool", &compute_layout, &shader, kernels);
     let project_layout = |multisampled: bool| {
         BindGroupLayoutDescriptor::new(
             if multisampled { "pool_project_layout_msaa" } else { "pool_project_layout" },

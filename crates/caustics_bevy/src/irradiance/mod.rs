@@ -170,6 +170,26 @@ impl ViewCausticIrradiance {
     }
 }
 
+/// A technique's compute kernels: one pipeline per entry point of `shader`, each with
+/// `layout`, labelled `{prefix}_{entry}`.
+pub fn compute_pipelines<const N: usize>(
+    cache: &PipelineCache,
+    prefix: &str,
+    layout: &BindGroupLayoutDescriptor,
+    shader: &Handle<Shader>,
+    entries: [&'static str; N],
+) -> [CachedComputePipelineId; N] {
+    entries.map(|entry| {
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("{prefix}_{entry}").into()),
+            layout: vec![layout.clone()],
+            shader: shader.clone(),
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    })
+}
+
 /// A technique's fullscreen pass that adds the irradiance it computes at each pixel's
 /// receiver point to the view's buffer: `layouts[multisampled]` for the view's
 /// prepass, the fragment entry point `project` of `shader` (with `MULTISAMPLED`

@@ -205,15 +205,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
-    let pipelines = ["vertex_rays", "slicing_axis", "triangle_volumes"].map(|entry| {
-        cache.queue_compute_pipeline(ComputePipelineDescriptor {
-            label: Some(format!("caustic_volume_{entry}").into()),
-            layout: vec![layout.clone()],
-            shader: shader.clone(),
-            entry_point: Some(entry.into()),
-            ..default()
-        })
-    });
+    let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "triangle_volumes"]);
     commands.insert_resource(VolumeBuildPipelines { layout, pipelines });
 }
 
