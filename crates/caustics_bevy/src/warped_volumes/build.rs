@@ -127,8 +127,8 @@ struct GatherState {
     warned: HashSet<Entity>,
 }
 
-/// The triangle indices of a mesh, `None` without triangles or with an index past its
-/// vertices.
+/// The triangle indices of a mesh; an error without triangles or with an index past
+/// its vertices.
 fn triangle_indices(mesh: &Mesh) -> Result<(usize, Vec<u32>), String> {
     let vertices = mesh.count_vertices();
     let indices: Vec<u32> = match mesh.indices() {
@@ -147,6 +147,20 @@ fn triangle_indices(mesh: &Mesh) -> Result<(usize, Vec<u32>), String> {
 }
 
 impl Topology {
+    /// Whether `mesh` still has these triangles (an animated mesh's every frame: read
+    /// in place, nothing copied).
+    fn fits(&self, mesh: &Mesh) -> bool {
+        let vertices = mesh.count_vertices();
+        let same = |count: usize, mut indices: Box<dyn Iterator<Item = usize> + '_>| {
+            count / 3 * 3 == self.triangles.len() && self.triangles.iter().all(|&t| indices.next() == Some(t as usize))
+        };
+        vertices == self.vertices
+            && match mesh.indices() {
+                Some(indices) => same(indices.len(), Box::new(indices.iter())),
+                None => same(vertices, Box::new(0..vertices)),
+            }
+    }
+
     /// The topology of a mesh's triangles, checked.
     fn of(vertices: usize, triangles: Vec<u32>) -> Result<Self, String> {
         let corners: Vec<[u32; 3]> = triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
@@ -239,7 +253,7 @@ fn gather_sources(
             continue;
         }
         let topology = match state.topologies.get(&entity) {
-            Some(known) if triangle_indices(mesh).is_ok_and(|(v, t)| v == known.vertices && t == known.triangles) => Ok(known.clone()),
+            Some(known) if known.fits(mesh) => Ok(known.clone()),
             _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
         };
         match topology {
