@@ -21,6 +21,8 @@ pub mod hierarchical_maps;
 pub mod illumination_textures;
 pub mod irradiance;
 pub mod lights;
+#[cfg(any(feature = "ocean", feature = "warped-volumes"))]
+mod mesh_vertices;
 #[cfg(feature = "ocean")]
 pub mod ocean;
 pub mod reference;

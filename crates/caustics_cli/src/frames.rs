@@ -10,7 +10,9 @@
 //! technique's first pass has run and its GPU times arrived, [`MEASURED_FRAMES`] frames
 //! record the GPU time of the caustics passes (timestamp queries, by span), Bevy's own
 //! main passes of the same view as the yardstick, and the plugin's CPU time in the
-//! main and render worlds (`CausticsCpuTime`). Writes `frames.csv`, `frames.md` (each
+//! main and render worlds (`CausticsCpuTime`), and how often the caustic volumes'
+//! sources were gathered on the CPU in those frames (`CausticVolumes::gathered`: none
+//! for the ocean, whose waves move on the GPU). Writes `frames.csv`, `frames.md` (each
 //! line's growth exponent, the slope of log cost against log size) and the log–log
 //! plots `frames-gpu.png` and `frames-cpu.png`, one line per technique and scene.
 
@@ -19,6 +21,7 @@ use bevy::camera::{Exposure, RenderTarget};
 use bevy::prelude::*;
 use caustics_bevy::headless::{CAUSTIC_SPANS, HeadlessRenderer};
 use caustics_bevy::prelude::*;
+use caustics_bevy::warped_volumes::CausticVolumes;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -92,6 +95,8 @@ struct FrameCost {
     cpu_render_ms: f64,
     /// The frame's wall time in the headless renderer (s).
     frame_s: f64,
+    /// The caustic volumes' CPU gatherings in the measured frames.
+    volume_gathers: u64,
 }
 
 /// Runs every family of the techniques `runs` accepts (the first `sizes` sizes of
@@ -118,7 +123,7 @@ pub fn run(out: &Path, runs: impl Fn(&str) -> bool, sizes: Option<usize>, budget
             let start = Instant::now();
             let row = measure(family, parameter)?;
             eprintln!(
-                "{:>11} {:>10} {:>9} {}: caustics {:9.2} ms, main pass {:8.2} ms (GPU); plugin CPU {:.3} + {:.3} ms; {:.0} s",
+                "{:>11} {:>10} {:>9} {}: caustics {:9.2} ms, main pass {:8.2} ms (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {:.0} s",
                 family.technique,
                 family.scene,
                 row.size,
@@ -127,6 +132,7 @@ pub fn run(out: &Path, runs: impl Fn(&str) -> bool, sizes: Option<usize>, budget
                 row.main_pass_ms,
                 row.cpu_main_ms,
                 row.cpu_render_ms,
+                row.volume_gathers,
                 start.elapsed().as_secs_f64()
             );
             rows.push(row);
@@ -159,6 +165,8 @@ fn measure(family: &Family, parameter: u32) -> Result<FrameCost, String> {
     if left != Some(0) {
         return Err(failed(&format!("its pass did not run in {MAX_WARM_UP} frames")));
     }
+    let gathered = |renderer: &mut HeadlessRenderer| renderer.world_mut().resource::<CausticVolumes>().gathered;
+    let gathered_before = gathered(&mut renderer);
     let mut frames: Vec<Frame> = Vec::new();
     for _ in 0..MEASURED_FRAMES {
         let start = Instant::now();
@@ -196,6 +204,7 @@ fn measure(family: &Family, parameter: u32) -> Result<FrameCost, String> {
         cpu_main_ms: mean(&|f| f.cpu_main),
         cpu_render_ms: mean(&|f| f.cpu_render),
         frame_s: mean(&|f| f.seconds),
+        volume_gathers: gathered(&mut renderer) - gathered_before,
     })
 }
 
@@ -215,13 +224,13 @@ fn growth_exponent(points: &[(f64, f64)]) -> Option<f64> {
 fn write_outputs(out: &Path, adapter: &str, rows: &[FrameCost], skipped: &[String]) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let mut csv = String::from(
-        "adapter,technique,scene,unit,size,caustics_gpu_ms,main_pass_gpu_ms,caustics_over_main_pass,plugin_cpu_main_ms,plugin_cpu_render_ms,frame_wall_s,spans\n",
+        "adapter,technique,scene,unit,size,caustics_gpu_ms,main_pass_gpu_ms,caustics_over_main_pass,plugin_cpu_main_ms,plugin_cpu_render_ms,cpu_volume_gathers,frame_wall_s,spans\n",
     );
     for r in rows {
         let spans: Vec<String> = r.spans.iter().map(|(s, ms)| format!("{s}={ms:.3}")).collect();
         let _ = writeln!(
             csv,
-            "\"{adapter}\",{},{},{},{},{:.3},{:.3},{:.3},{:.4},{:.4},{:.2},{}",
+            "\"{adapter}\",{},{},{},{},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.2},{}",
             r.technique,
             r.scene,
             r.unit,
@@ -231,6 +240,7 @@ fn write_outputs(out: &Path, adapter: &str, rows: &[FrameCost], skipped: &[Strin
             r.caustics_ms / r.main_pass_ms,
             r.cpu_main_ms,
             r.cpu_render_ms,
+            r.volume_gathers,
             r.frame_s,
             spans.join(";")
         );

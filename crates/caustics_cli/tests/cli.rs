@@ -127,7 +127,7 @@ fn the_frame_bench_times_every_pass_of_a_moving_generator_and_the_plugins_cpu() 
         assert!(number(7) + number(8) > 0.0, "the plugin's CPU time: {csv}");
         // The turning generator's maps are remade every frame, and every stage is timed.
         for stage in ["caustic_maps/photon_buffer", "caustic_maps/gather", "caustic_maps/splat", "caustic_maps/projection"] {
-            assert!(row[10].contains(stage), "{stage} missing: {csv}");
+            assert!(row[11].contains(stage), "{stage} missing: {csv}");
         }
     }
     let md = std::fs::read_to_string(dir.join("frames.md")).unwrap();

@@ -2,12 +2,13 @@
 //! whenever something it depends on changed: the generators the volumes draw (their
 //! meshes' topology, kept across frames, and placement), the lights, the receivers'
 //! bounds and the occluders' BVH (rebuilt only when an occluder changed). The render
-//! world uploads the generators' vertices and builds the volumes (`compute.rs`); the
-//! counts of the last build come back into [`CausticVolumes`].
+//! world builds the volumes from the generators' vertices in Bevy's vertex buffers
+//! (`compute.rs`); the counts of the last build come back into [`CausticVolumes`].
 
 use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
+use crate::mesh_vertices::MovesOnGpu;
 use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
 use bevy::camera::primitives::Aabb;
@@ -25,11 +26,15 @@ use std::sync::{Arc, Mutex};
 
 /// What the last GPU build of the caustic volumes kept and dropped (unlit, shadowed,
 /// TIR, grazing, degenerate) and the flux on each side, read back from the GPU a frame
-/// or two later. A new `generation` means a newer build.
+/// or two later. A new `generation` means a newer build. `gathered` counts the times
+/// the main world gathered the builds' sources, reading generator meshes on the CPU
+/// (when a generator, light, receiver or mesh asset changed): an ocean animated on the
+/// GPU adds none while its waves move.
 #[derive(Resource, Clone, Default)]
 pub struct CausticVolumes {
     pub stats: BuildStats,
     pub generation: u64,
+    pub gathered: u64,
 }
 
 /// The counts of a GPU build on their way from the render world.
@@ -63,6 +68,8 @@ pub(super) struct VolumeGenerator {
     pub topology: Arc<Topology>,
     /// Its own mesh index in the occluders' BVH, which its rays pass through.
     pub occluder_index: u32,
+    /// Its mesh moves on the GPU ([`MovesOnGpu`]): the volumes are built every frame.
+    pub moves_on_gpu: bool,
 }
 
 /// Everything the GPU build reads but the generators' vertices. A new `generation`
@@ -99,8 +106,14 @@ type LightChanged = Or<(
     Changed<InheritedVisibility>,
 )>;
 type OccluderChanged = Or<(Changed<GlobalTransform>, Changed<Aabb>, Changed<Mesh3d>, Changed<InheritedVisibility>)>;
-type GeneratorChanged =
-    Or<(Changed<GlobalTransform>, Changed<Mesh3d>, Changed<CausticGenerator>, Changed<CausticTechniqueChoice>, Changed<InheritedVisibility>)>;
+type GeneratorChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<Mesh3d>,
+    Changed<CausticGenerator>,
+    Changed<CausticTechniqueChoice>,
+    Changed<InheritedVisibility>,
+    Added<MovesOnGpu>,
+)>;
 type Generators<'w, 's> = Query<
     'w,
     's,
@@ -111,6 +124,7 @@ type Generators<'w, 's> = Query<
         &'static Mesh3d,
         &'static GlobalTransform,
         &'static InheritedVisibility,
+        Has<MovesOnGpu>,
     ),
     Without<InvalidCausticParams>,
 >;
@@ -189,11 +203,12 @@ fn gather_sources(
     changed_occluders: Query<(), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
     mut removed: RemovedComponents<CausticTechniqueChoice>,
     mut removed_invalid: RemovedComponents<InvalidCausticParams>,
-    (mut removed_meshes, mut removed_receivers): (RemovedComponents<Mesh3d>, RemovedComponents<CausticReceiver>),
+    (mut removed_meshes, mut removed_receivers, mut removed_moving): (RemovedComponents<Mesh3d>, RemovedComponents<CausticReceiver>, RemovedComponents<MovesOnGpu>),
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
     mut sources: ResMut<VolumeSources>,
+    mut volumes: ResMut<CausticVolumes>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<GatherState>,
 ) {
@@ -204,11 +219,12 @@ fn gather_sources(
             generator_mesh_changed |= state.generator_meshes.contains(id);
         }
     }
-    let several_generators = generators.iter().filter(|(.., visible)| visible.get()).count() > 1;
+    let several_generators = generators.iter().filter(|(.., visible, _)| visible.get()).count() > 1;
     let generators_changed = generator_mesh_changed
         || !changed_generators.is_empty()
         || removed.read().count() > 0
         || removed_invalid.read().count() > 0
+        || removed_moving.read().count() > 0
         // A mesh that had not loaded at the last gathering.
         || generators.iter().any(|(_, _, _, m, ..)| !state.generator_meshes.contains(&m.id()));
     let occluders_changed = occluder_mesh_changed
@@ -239,7 +255,7 @@ fn gather_sources(
     let mut occluder_meshes: Vec<(u32, TriMesh)> = Vec::new();
     state.generator_meshes.clear();
     let mut index = 0;
-    for (entity, generator, choice, mesh3d, transform, visible) in &generators {
+    for (entity, generator, choice, mesh3d, transform, visible, moves_on_gpu) in &generators {
         state.generator_meshes.insert(mesh3d.id());
         let (Some(mesh), true) = (meshes.get(&mesh3d.0), visible.get()) else {
             continue;
@@ -270,6 +286,7 @@ fn gather_sources(
                         interaction,
                         topology,
                         occluder_index: if several_generators { index } else { NO_MESH },
+                        moves_on_gpu,
                     },
                 ));
             }
@@ -298,11 +315,13 @@ fn gather_sources(
     active.warped_volumes = !volume_generators.is_empty() && !sources.lights.is_empty() && sources.bounds.is_some();
     sources.generators = volume_generators;
     sources.generation += 1;
+    volumes.gathered += 1;
 }
 
 /// Takes the counts of the newest GPU build that came back.
 fn receive_stats(channel: Res<BuildStatsChannel>, mut volumes: ResMut<CausticVolumes>) {
     if let Some(stats) = channel.0.lock().ok().and_then(|mut s| s.take()) {
-        *volumes = CausticVolumes { stats, generation: volumes.generation + 1 };
+        volumes.stats = stats;
+        volumes.generation += 1;
     }
 }

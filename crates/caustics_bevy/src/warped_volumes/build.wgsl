@@ -30,6 +30,7 @@ struct BuildJob {
     bounds_lo: vec4<f32>,   // the receivers' bounds; w the smallest ray cosine
     bounds_hi: vec4<f32>,   // w 1: lit from behind too
     counts: vec4<u32>,      // vertices, triangles, the occluders' BVH triangle offset (0: none), the generator's own mesh there
+    vertex: vec4<u32>,      // in `vertices`: the first vertex's word, the vertex stride, the position's and the normal's word in a vertex
 }
 
 // One vertex's ray (`VertexRay` with its shadow and first hit).
@@ -43,8 +44,9 @@ struct VertexRay {
 }
 
 @group(0) @binding(0) var<uniform> job: BuildJob;
-@group(0) @binding(1) var<storage, read> positions: array<f32>;
-@group(0) @binding(2) var<storage, read> normals: array<f32>;
+// The generator's vertices where Bevy draws them from (or a copy, for a mesh without
+// normals), read through `job.vertex`.
+@group(0) @binding(1) var<storage, read> vertices: array<f32>;
 @group(0) @binding(3) var<storage, read> triangles: array<u32>;
 @group(0) @binding(4) var<storage, read> fan_starts: array<u32>;
 @group(0) @binding(5) var<storage, read> fan_triangles: array<u32>;
@@ -99,12 +101,17 @@ fn add_flux(word: u32, flux: vec3<f32>) {
     add_float(word + 2u, flux.z);
 }
 
+fn vertex_vec3(i: u32, word: u32) -> vec3<f32> {
+    let at = job.vertex.x + i * job.vertex.y + word;
+    return vec3(vertices[at], vertices[at + 1u], vertices[at + 2u]);
+}
+
 fn position_at(i: u32) -> vec3<f32> {
-    return vec3(positions[3u * i], positions[3u * i + 1u], positions[3u * i + 2u]);
+    return vertex_vec3(i, job.vertex.z);
 }
 
 fn normal_at(i: u32) -> vec3<f32> {
-    return vec3(normals[3u * i], normals[3u * i + 1u], normals[3u * i + 2u]);
+    return vertex_vec3(i, job.vertex.w);
 }
 
 // `Light::incident`: the light's travel direction at `p` and the irradiance there on a
@@ -547,6 +554,15 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var c = 0u; c < 8u; c++) {
         out.corners[c] = vec4(corners[c], 1.0);
     }
-    add_flux(FLUX, colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * abc.x));
-    volumes[atomicAdd(&counters[INSTANCES], 1u)] = out;
+    let flux = colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * abc.x);
+    // Past the volumes the adapter can bind (`prepare_build` warns), the slot is given
+    // back and the volume's flux counted as dropped: the instance count never passes it.
+    let slot = atomicAdd(&counters[INSTANCES], 1u);
+    if slot >= arrayLength(&volumes) {
+        atomicSub(&counters[INSTANCES], 1u);
+        add_flux(DROPPED_FLUX, flux);
+        return;
+    }
+    add_flux(FLUX, flux);
+    volumes[slot] = out;
 }

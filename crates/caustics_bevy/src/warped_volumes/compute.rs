@@ -1,6 +1,8 @@
 //! Render world: the caustic volumes built on the GPU (`build.wgsl`), once per change
-//! of their sources: the generators' vertices as this frame draws them, copied from
-//! their mesh assets, their topology (uploaded when it changes), the lights and the
+//! of their sources and every frame while a generator's mesh moves on the GPU (an
+//! ocean): the generators' vertices as this frame draws them, read from Bevy's own
+//! vertex buffers (copied only for a mesh without normals, whose smooth normals are
+//! made here), their topology (uploaded when it changes), the lights and the
 //! occluders' BVH. One job per generator, light and colour channel runs three
 //! dispatches (vertex rays, slicing axis, triangle volumes) that append the volumes
 //! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
@@ -8,12 +10,15 @@
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
 use super::render::{GpuCausticVolume, VolumeBuffers};
+use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::{
     Extract,
     diagnostic::RecordDiagnostics,
+    mesh::{RenderMesh, allocator::MeshAllocator},
+    render_asset::RenderAssets,
     render_resource::{
         binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer},
         *,
@@ -40,6 +45,7 @@ struct GpuBuildJob {
     bounds_lo: Vec4,
     bounds_hi: Vec4,
     counts: UVec4,
+    vertex: UVec4,
 }
 
 /// `VertexRay` in `build.wgsl`: six `vec4`s.
@@ -59,8 +65,9 @@ fn v4(v: glam::Vec3, w: f32) -> Vec4 {
 impl GpuBuildJob {
     /// The job of `generator` under `light` in one channel (its index of refraction,
     /// `None` for a mirror, and its flux colour), against the occluders' BVH whose
-    /// triangles start at `occluders`.
-    fn new(generator: &VolumeGenerator, light: &Light, (ior, color): (Option<f32>, glam::Vec3), sources: &VolumeSources, occluders: u32) -> Self {
+    /// triangles start at `occluders`, its vertices read through `vertex`
+    /// ([`MeshVertices::layout`]).
+    fn new(generator: &VolumeGenerator, light: &Light, (ior, color): (Option<f32>, glam::Vec3), sources: &VolumeSources, (occluders, vertex): (u32, UVec4)) -> Self {
         let (light_vec, spot, power, spot_scale) = match light.kind {
             LightKind::Directional { direction, irradiance } => (v4(direction.normalize(), 0.0), Vec4::ZERO, irradiance, 0.0),
             LightKind::Point { position, intensity } => (v4(position, 1.0), Vec4::ZERO, intensity, 0.0),
@@ -87,43 +94,51 @@ impl GpuBuildJob {
                 occluders,
                 generator.occluder_index,
             ),
+            vertex,
         }
     }
 }
 
-/// A generator's vertex positions and normals, in its own frame.
-type VertexData = (Vec<[f32; 3]>, Vec<[f32; 3]>);
+/// Where the build reads a generator's vertices.
+enum VertexSource {
+    /// From the buffer Bevy draws its mesh from.
+    Drawn,
+    /// From a copy: positions and smooth normals made here (a mesh without normals),
+    /// interleaved.
+    Copied(Vec<[f32; 3]>),
+    /// Nowhere: its mesh is not there, or no longer fits its topology.
+    Missing,
+}
 
-/// Render world: the sources of the last gathering, and each generator's vertices as
-/// this frame draws them (positions and unit normals; `None` while its mesh is not
-/// there), when they are new.
+/// Render world: the sources of the last gathering, and where each generator's
+/// vertices are read, when they are new.
 #[derive(Resource, Default)]
 pub(super) struct ExtractedSources {
     generation: u64,
     sources: VolumeSources,
-    vertices: Vec<Option<VertexData>>,
+    vertices: Vec<VertexSource>,
     new: bool,
 }
 
-/// The vertices of a generator's mesh: its positions and normals (smooth ones, made
-/// here, for a mesh without), when they still fit its topology.
-fn vertex_data(mesh: &Mesh, topology: &Topology) -> Option<VertexData> {
+/// Where the build reads the vertices of a generator's mesh: Bevy's vertex buffer when
+/// it has `Float32x3` positions and normals fitting its topology; a copy with smooth
+/// normals made here for a mesh without normals.
+fn vertex_source(mesh: &Mesh, topology: &Topology) -> VertexSource {
     use bevy::mesh::VertexAttributeValues::Float32x3;
     let Ok(Float32x3(positions)) = mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) else {
-        return None;
+        return VertexSource::Missing;
     };
     if positions.len() != topology.vertices {
-        return None;
+        return VertexSource::Missing;
     }
-    let normals = match mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL) {
-        Ok(Float32x3(normals)) if normals.len() == positions.len() => normals.clone(),
-        _ => {
-            let corners = topology.triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
-            let smooth = TriMesh::with_smooth_normals(positions.iter().map(|&p| glam::Vec3::from_array(p)).collect(), corners).ok()?;
-            smooth.normals().iter().map(|n| n.to_array()).collect()
-        }
-    };
-    Some((positions.clone(), normals))
+    if matches!(mesh.try_attribute(Mesh::ATTRIBUTE_NORMAL), Ok(Float32x3(normals)) if normals.len() == positions.len()) {
+        return VertexSource::Drawn;
+    }
+    let corners = topology.triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    match TriMesh::with_smooth_normals(positions.iter().map(|&p| glam::Vec3::from_array(p)).collect(), corners) {
+        Ok(smooth) => VertexSource::Copied(positions.iter().zip(smooth.normals()).flat_map(|(p, n)| [*p, n.to_array()]).collect()),
+        Err(_) => VertexSource::Missing,
+    }
 }
 
 pub(super) fn extract_sources(
@@ -136,17 +151,21 @@ pub(super) fn extract_sources(
         return;
     }
     extracted.generation = sources.generation;
-    extracted.vertices = sources.generators.iter().map(|(_, g)| meshes.get(g.mesh).and_then(|m| vertex_data(m, &g.topology))).collect();
+    extracted.vertices = sources
+        .generators
+        .iter()
+        .map(|(_, g)| meshes.get(g.mesh).map_or(VertexSource::Missing, |m| vertex_source(m, &g.topology)))
+        .collect();
     extracted.sources = (**sources).clone();
 }
 
-/// One generator's buffers: its topology, vertices and per-vertex rays.
+/// One generator's buffers: its topology, the copy of its vertices (a mesh without
+/// normals) and its per-vertex rays.
 struct GeneratorBuffers {
     topology: Arc<Topology>,
     /// Triangles, fan starts, fan triangles, owned sides.
     indices: [Buffer; 4],
-    positions: Buffer,
-    normals: Buffer,
+    copy: Option<Buffer>,
     rays: Buffer,
 }
 
@@ -166,6 +185,10 @@ pub(super) struct VolumeBuild {
     occluders: Option<(Arc<GeneratorBvh>, Buffer)>,
     jobs: DynamicUniformBuffer<GpuBuildJob>,
     dispatches: Vec<Dispatch>,
+    /// A generator's vertices were not uploaded yet at the last build: build again.
+    retry: bool,
+    /// The volumes asked for when the adapter's limit last lowered them (warned once).
+    clamped: Option<u64>,
     /// The counters' copy that the main world's [`super::CausticVolumes`] reads, and
     /// whether one is on its way.
     staging: Option<Buffer>,
@@ -192,7 +215,6 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             (
                 (0, uniform_buffer::<GpuBuildJob>(true)),
                 (1, read()),
-                (2, read()),
                 (3, read()),
                 (4, read()),
                 (5, read()),
@@ -216,7 +238,7 @@ fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffe
 }
 
 impl GeneratorBuffers {
-    fn new(device: &RenderDevice, topology: &Arc<Topology>, (positions, normals): (&[[f32; 3]], &[[f32; 3]])) -> Self {
+    fn new(device: &RenderDevice, topology: &Arc<Topology>) -> Self {
         let bytes = |words: &[u32]| bytemuck::cast_slice::<u32, u8>(words).to_vec();
         Self {
             topology: topology.clone(),
@@ -226,8 +248,7 @@ impl GeneratorBuffers {
                 storage(device, "caustic_volume_fan_triangles", &bytes(topology.fans.triangles())),
                 storage(device, "caustic_volume_owned_sides", &bytes(&topology.owned_sides)),
             ],
-            positions: storage(device, "caustic_volume_positions", bytemuck::cast_slice(positions)),
-            normals: storage(device, "caustic_volume_normals", bytemuck::cast_slice(normals)),
+            copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
                 size: (topology.vertices as u64 + 1) * VERTEX_RAY_BYTES,
@@ -236,16 +257,43 @@ impl GeneratorBuffers {
             }),
         }
     }
+
+    /// The generator's vertices for this build: Bevy's vertex buffer, or the copy
+    /// (uploaded here), laid out as [`MeshVertices::layout`] says.
+    fn vertices(&mut self, source: &VertexSource, mesh: AssetId<Mesh>, (meshes, allocator, device, queue): DrawnMeshes) -> Option<MeshVertices> {
+        match source {
+            VertexSource::Drawn => MeshVertices::of(mesh, meshes, allocator, device).filter(|v| v.count as usize == self.topology.vertices),
+            VertexSource::Copied(interleaved) => {
+                let bytes: &[u8] = bytemuck::cast_slice(interleaved);
+                let copy = match &self.copy {
+                    Some(copy) if copy.size() == bytes.len() as u64 => {
+                        queue.write_buffer(copy, 0, bytes);
+                        copy.clone()
+                    }
+                    _ => self.copy.insert(storage(device, "caustic_volume_vertices", bytes)).clone(),
+                };
+                Some(MeshVertices { size: std::num::NonZeroU64::new(copy.size())?, buffer: copy, offset: 0, layout: UVec4::new(0, 6, 0, 3), count: self.topology.vertices as u32 })
+            }
+            VertexSource::Missing => None,
+        }
+    }
 }
 
-/// Uploads a new extraction's vertices, topology and occluders, writes the jobs, sizes
-/// the volumes for every triangle of every job and starts the counters again.
+/// What reading a mesh's vertices in Bevy's buffers takes.
+type DrawnMeshes<'a> = (&'a RenderAssets<RenderMesh>, &'a MeshAllocator, &'a RenderDevice, &'a RenderQueue);
+
+/// When the sources are new, a generator's mesh moves on the GPU or the last build
+/// missed a mesh's vertices: uploads the topology and occluders that changed, writes
+/// the jobs, sizes the volumes for every triangle of every job and starts the counters
+/// again.
+#[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_build(
     extracted: Res<ExtractedSources>,
     mut build: ResMut<VolumeBuild>,
     mut buffers: ResMut<VolumeBuffers>,
     pipelines: Res<VolumeBuildPipelines>,
     cache: Res<PipelineCache>,
+    (meshes, allocator): (Res<RenderAssets<RenderMesh>>, Res<MeshAllocator>),
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
 ) {
@@ -253,10 +301,12 @@ pub(super) fn prepare_build(
     if let Some((generation, volumes)) = build.counted.lock().ok().and_then(|mut c| c.take()) {
         buffers.empty = generation == extracted.generation && volumes == 0;
     }
-    if !extracted.new {
+    let moving = extracted.sources.generators.iter().any(|(_, g)| g.moves_on_gpu);
+    if !(extracted.new || moving || build.retry) {
         return;
     }
     buffers.empty = false;
+    build.retry = false;
     let build = &mut *build;
     let sources = &extracted.sources;
     let occluders = match &build.occluders {
@@ -271,21 +321,22 @@ pub(super) fn prepare_build(
     build.jobs.clear();
     let mut planned = Vec::new();
     let mut capacity = 0u64;
-    for ((entity, generator), vertices) in sources.generators.iter().zip(&extracted.vertices) {
-        let Some((positions, normals)) = vertices else { continue };
-        let data = (positions.as_slice(), normals.as_slice());
-        match build.generators.get_mut(entity) {
-            Some(known) if Arc::ptr_eq(&known.topology, &generator.topology) => {
-                queue.write_buffer(&known.positions, 0, bytemuck::cast_slice(positions));
-                queue.write_buffer(&known.normals, 0, bytemuck::cast_slice(normals));
-            }
-            _ => {
-                build.generators.insert(*entity, GeneratorBuffers::new(&device, &generator.topology, data));
-            }
+    let mut vertex_bindings = HashMap::new();
+    for ((entity, generator), source) in sources.generators.iter().zip(&extracted.vertices) {
+        if build.generators.get(entity).is_none_or(|known| !Arc::ptr_eq(&known.topology, &generator.topology)) {
+            build.generators.insert(*entity, GeneratorBuffers::new(&device, &generator.topology));
         }
+        let Some(g) = build.generators.get_mut(entity) else { continue };
+        let Some(vertices) = g.vertices(source, generator.mesh, (&meshes, &allocator, &device, &queue)) else {
+            // Not uploaded yet (a mesh added this frame): the next frame builds again.
+            build.retry |= matches!(source, VertexSource::Drawn);
+            continue;
+        };
+        let layout = vertices.layout;
+        vertex_bindings.insert(*entity, vertices);
         for light in &sources.lights {
             for channel in channels(&generator.interaction, light.color) {
-                let job = GpuBuildJob::new(generator, light, channel, sources, sources.occluders.gpu_triangle_offset());
+                let job = GpuBuildJob::new(generator, light, channel, sources, (sources.occluders.gpu_triangle_offset(), layout));
                 planned.push((*entity, build.jobs.push(&job), job.counts));
                 capacity += u64::from(job.counts.y);
             }
@@ -298,6 +349,21 @@ pub(super) fn prepare_build(
         return;
     }
     let volume_bytes = GpuCausticVolume::min_size().get();
+    let limits = device.limits();
+    let bindable = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / volume_bytes;
+    if capacity > bindable {
+        if build.clamped != Some(capacity) {
+            warn!(
+                "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {} MiB, more than this adapter binds \
+                 ({} MiB): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
+                 dropped flux); use coarser generator meshes",
+                (capacity * volume_bytes) >> 20,
+                (bindable * volume_bytes) >> 20
+            );
+        }
+        build.clamped = Some(capacity);
+        capacity = bindable;
+    }
     if buffers.volumes.as_ref().is_none_or(|b| b.size() < capacity * volume_bytes) {
         buffers.volumes = Some(device.create_buffer(&BufferDescriptor {
             label: Some("caustic_volumes"),
@@ -323,14 +389,13 @@ pub(super) fn prepare_build(
     };
     let layout = cache.get_bind_group_layout(&pipelines.layout);
     for (entity, offset, counts) in planned {
-        let Some(g) = build.generators.get(&entity) else { continue };
+        let (Some(g), Some(vertices)) = (build.generators.get(&entity), vertex_bindings.get(&entity)) else { continue };
         let bind_group = device.create_bind_group(
             "caustic_volume_build_bind_group",
             &layout,
             &BindGroupEntries::with_indices((
                 (0, jobs.clone()),
-                (1, g.positions.as_entire_binding()),
-                (2, g.normals.as_entire_binding()),
+                (1, BindingResource::Buffer(vertices.binding())),
                 (3, g.indices[0].as_entire_binding()),
                 (4, g.indices[1].as_entire_binding()),
                 (5, g.indices[2].as_entire_binding()),

@@ -4,9 +4,11 @@
 //! caustic volume per lit generator triangle and light (and per colour channel for a
 //! dispersive refractor), from the generator's vertices as that frame draws them
 //! (`build.wgsl`, the twin of `caustics_core::volumes::build_generator_volumes`; the
-//! paper builds them on the CPU, §3): an animated ocean's caustics follow its waves in
-//! the same frame, and the CPU only gathers the sources (`build.rs`) and copies the
-//! vertices. An unchanged scene costs nothing. The volumes the build keeps are counted
+//! paper builds them on the CPU, §3), reading the vertices from the buffers Bevy draws
+//! the meshes from: an animated mesh's caustics follow it in the same frame, and the
+//! CPU only gathers the sources when they change (`build.rs`). An ocean evaluated on
+//! the GPU is built again every frame with no CPU work at all. An unchanged scene costs
+//! nothing. The volumes the build keeps are counted
 //! on the GPU and drawn indirectly; what it drops (unlit, shadowed, TIR, grazing,
 //! degenerate) comes back in [`CausticVolumes`]. Then, for each caustics view:
 //!
@@ -105,6 +107,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "build.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
+    crate::mesh_vertices::build(app);
     build::build(app);
     render::build(app);
 }
