@@ -1,7 +1,8 @@
 //! Sunlight through an animated ocean: caustics on a sandy sea floor and light shafts
 //! in the water beneath, with slight dispersion (Ernst, Akenine-Möller & Jensen 2005,
-//! Fig. 9). The `Ocean` component (Tessendorf's FFT waves) rewrites the water mesh
-//! every frame; the caustic volumes follow it.
+//! Fig. 9). The `Ocean` component (Tessendorf's FFT waves) moves the water mesh every
+//! frame on the GPU, and the caustic volumes are built on the GPU from the waves of the
+//! same frame: the CPU does no per-frame work for either.
 //!
 //! `cargo run --example ocean` opens a window (or writes `target/ocean.png` without a
 //! display; `--headless --out PATH` to force it). `--resolution N` sets the ocean grid

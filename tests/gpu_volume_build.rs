@@ -1,6 +1,8 @@
 //! Caustic volumes built on the GPU (`build.wgsl`) against their CPU build in
-//! `caustics_core::volumes`, on water that moves every frame: an `Ocean`, and a pool
-//! rippled by pebbles with stones lying on its floor (receivers that shadow and end
+//! `caustics_core::volumes`, on water that moves every frame: an `Ocean` whose waves
+//! are evaluated on the GPU (`waves.wgsl`) into the vertex buffer the build reads, held
+//! to the core crate's evaluation of the same sea at the same time, and a pool rippled
+//! by pebbles on the CPU, with stones lying on its floor (receivers that shadow and end
 //! the rays). In each frame the GPU's irradiance matches the CPU build of the mesh that
 //! frame drew (and not the frame before's); paused, the GPU keeps and drops the same
 //! volumes as the CPU, with the same flux, lost light (total internal reflection,
@@ -17,10 +19,11 @@ use bevy_caustics::headless::HeadlessRenderer;
 use bevy::mesh::VertexAttributeValues;
 use bevy_caustics::reference::{bevy_mesh, core_mesh, to_core};
 use bevy_caustics::warped_volumes::CausticVolumes;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, DropPebble, Ocean, PoolRipples};
+use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, DropPebble, Ocean, PoolRipples};
 use caustics_core::bvh::SceneBvh;
 use caustics_core::glam::Vec3 as V;
 use caustics_core::metrics::relative_l2;
+use caustics_core::ocean::OceanSpectrum;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
 use caustics_core::volumes::{BuildStats, VolumeSet, build_scene_volumes};
@@ -53,11 +56,17 @@ fn white(world: &mut World) -> Handle<StandardMaterial> {
 }
 
 /// The scene as the app holds it now, for the CPU build: the water's mesh as this
-/// frame drew it, every receiver, the sun.
+/// frame drew it (an ocean's evaluated by the core crate at the app's time: the twin
+/// of the GPU's waves), every receiver, the sun.
 fn cpu_scene(renderer: &mut HeadlessRenderer, water: Entity) -> Scene {
     let world = renderer.world_mut();
     let mesh = |world: &mut World, entity: Entity| {
         let (handle, transform) = (world.get::<Mesh3d>(entity).unwrap().0.clone(), *world.get::<GlobalTransform>(entity).unwrap());
+        if let Some(ocean) = world.get::<Ocean>(entity).filter(|o| o.on_gpu) {
+            let time = world.resource::<Time>().elapsed_secs() * ocean.time_scale;
+            let sea = OceanSpectrum::new(&ocean.settings()).unwrap().evaluate(time).mesh();
+            return core_mesh(&bevy_mesh(&sea), &transform).unwrap();
+        }
         core_mesh(world.resource::<Assets<Mesh>>().get(&handle).unwrap(), &transform).unwrap()
     };
     let receivers: Vec<Entity> = world.query_filtered::<Entity, With<CausticReceiver>>().iter(world).collect();
@@ -146,11 +155,23 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
         ))
         .id();
     render(&mut renderer, 3);
+    let passes = renderer.world_mut().resource::<CausticPassReport>().passes.clone();
+    assert!(passes.iter().any(|(pass, _)| *pass == "ocean waves"), "the ocean's waves are not evaluated on the GPU: {passes:?}");
     // Half-float storage and depth-rebuilt points: ~10⁻³; the mesh a frame late is
     // far off (time runs four times fast: waves move a centimetre a frame).
+    let built = |renderer: &mut HeadlessRenderer| renderer.world_mut().resource::<CausticVolumes>().clone();
+    let before = built(&mut renderer);
     let (worst, late) = follow(&mut renderer, camera, ocean, 4, "ocean");
+    let after = built(&mut renderer);
+    assert_eq!(after.gathered, before.gathered, "the waves moved on the GPU, yet the volumes' sources were gathered on the CPU");
+    assert!(after.generation >= before.generation + 2, "the volumes were not built again as the waves moved");
     assert!(worst < 0.01, "ocean: the GPU build's irradiance is {worst} from the CPU build's");
     assert!(late > 5.0 * worst, "ocean: a frame's caustics are as near the frame before's mesh ({late}) as to its own ({worst})");
+    // Choppy waves: four transforms (the displacement and its derivatives) on the GPU.
+    renderer.world_mut().get_mut::<Ocean>(ocean).unwrap().choppiness = 0.8;
+    render(&mut renderer, 2);
+    let (worst, _) = follow(&mut renderer, camera, ocean, 2, "choppy ocean");
+    assert!(worst < 0.01, "choppy ocean: the GPU build's irradiance is {worst} from the CPU build's");
     renderer.world_mut().get_mut::<Ocean>(ocean).unwrap().time_scale = 0.0;
     assert_same_volumes(&mut renderer, ocean, "ocean");
     renderer.world_mut().despawn(ocean);

@@ -182,6 +182,8 @@ pub struct OceanSpectrum {
     /// h̃₀(k) per grid frequency, and h̃₀*(−k) beside it.
     h0: Vec<(Complex32, Complex32)>,
     omega: Vec<f32>,
+    /// An upper bound of |h|, |∇h|, λ|D| and λ|∂D| over the patch and all time (m).
+    bound: f32,
     fft: Arc<dyn Fft<f32>>,
     work: Workspace,
 }
@@ -243,11 +245,23 @@ impl OceanSpectrum {
             });
         }
         let fft = FftPlanner::new().plan_fft_inverse(n);
-        Ok(Self { settings: *settings, h0, omega, fft, work: Workspace::default() })
+        Ok(Self { settings: *settings, h0, omega, bound: bound as f32, fft, work: Workspace::default() })
     }
 
     pub fn settings(&self) -> &OceanSettings {
         &self.settings
+    }
+
+    /// An upper bound of the waves' height and choppy displacement (m), for all time:
+    /// the surface stays within this distance of its rest plane in every direction.
+    pub fn height_bound(&self) -> f32 {
+        self.bound
+    }
+
+    /// Per grid frequency, row-major: h̃₀(k) and h̃₀*(−k) as (re, im, re, im), and ω
+    /// (0 for a silent mode) — what a GPU evaluation of eq. 43 reads.
+    pub fn modes(&self) -> impl ExactSizeIterator<Item = ([f32; 4], f32)> + '_ {
+        self.h0.iter().zip(&self.omega).map(|((a, b), &omega)| ([a.re, a.im, b.re, b.im], omega))
     }
 
     /// The height spectrum at time `t` (s): h̃(k, t) = h̃₀(k) e^{iωt} + h̃₀*(−k) e^{−iωt}

@@ -1,23 +1,47 @@
-//! An animated ocean surface: the [`Ocean`] component rewrites its entity's mesh every
-//! frame from Tessendorf's FFT spectrum (`caustics_core::ocean`). With a
-//! [`crate::CausticGenerator`] beside it, the caustic techniques see the mesh asset
-//! change and rebuild — the same path any user-animated generator takes: write the
-//! `Mesh` asset behind a `Mesh3d` in place (`Assets<Mesh>::get_mut`), and Bevy
+//! An animated ocean surface: the [`Ocean`] component moves its entity's mesh every
+//! frame by Tessendorf's FFT spectrum (`caustics_core::ocean`).
+//!
+//! On the GPU (the default, [`Ocean::on_gpu`]) the render world evaluates the waves
+//! each frame straight into the vertex buffer Bevy draws the mesh from (`render.rs`,
+//! `waves.wgsl`): the CPU does nothing per frame, and caustic volumes built from the
+//! ocean read the waves of the frame they are drawn in. The mesh asset keeps the
+//! surface of the moment it was made, and the entity's `Aabb` covers every wave the
+//! spectrum can raise ([`OceanSpectrum::height_bound`], with `NoAutoAabb`).
+//!
+//! On the CPU (when asked, when the ocean is a [`crate::CausticGenerator`] drawn by a
+//! technique that reads its triangles on the CPU, or without a render app) the mesh
+//! asset is rewritten in place every frame — the same path any user-animated generator
+//! takes: write the `Mesh` behind a `Mesh3d` through `Assets<Mesh>::get_mut`, and Bevy
 //! re-uploads it and recomputes the entity's `Aabb`.
 
+mod render;
+
 use crate::cpu_time::timed;
-use crate::grid_mesh::{grid_mesh, rewrite_grid};
+use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
+use crate::mesh_vertices::MovesOnGpu;
+use crate::technique::CausticTechniqueChoice;
+use bevy::camera::primitives::Aabb;
+use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
+use caustics_core::technique::Technique;
+use std::sync::Arc;
+
+/// The largest resolution evaluated on the GPU: four complex fields of 2048² texels fill
+/// the 128 MiB that every adapter binds as one storage buffer. Finer oceans stay on the
+/// CPU.
+pub const MAX_GPU_RESOLUTION: u32 = 2048;
 
 /// A square patch of wind-driven ocean, centred on its entity, in its xz plane. The
 /// entity's `Mesh3d` is created when it has none (or one that is not this ocean's
 /// grid, or whose data lives only in the render world) and then updated in place
 /// every frame: (N + 1)² vertices, the last row and column repeating the first so
 /// that copies tile. The fields are `caustics_core::ocean::OceanSettings`' (see there),
-/// in Bevy types for the inspector, and `time_scale`, simulated seconds per second of
-/// `Time::elapsed_secs`. Invalid settings are reported once and the ocean stands still.
+/// in Bevy types for the inspector; `time_scale`, simulated seconds per second of
+/// `Time::elapsed_secs`; and `on_gpu`: evaluate the waves on the GPU where the ocean's
+/// use allows (see the module's text), else on the CPU. Invalid settings are reported
+/// once and the ocean stands still.
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 #[require(Transform, Visibility)]
@@ -33,6 +57,7 @@ pub struct Ocean {
     pub depth: Option<f32>,
     pub seed: u64,
     pub time_scale: f32,
+    pub on_gpu: bool,
 }
 
 impl Default for Ocean {
@@ -49,6 +74,7 @@ impl Default for Ocean {
             depth: core.depth,
             seed: core.seed,
             time_scale: 1.0,
+            on_gpu: true,
         }
     }
 }
@@ -78,13 +104,25 @@ impl Ocean {
     }
 }
 
-/// The wave field drawn for an [`Ocean`]'s current settings, and the surface it last
-/// evaluated (its buffers reused every frame).
+/// A spectrum's modes as the GPU reads them (`OceanSpectrum::modes`).
+struct OceanModes {
+    amplitudes: Vec<[f32; 4]>,
+    omega: Vec<f32>,
+}
+
+/// The wave field drawn for an [`Ocean`]'s current settings, the surface it last
+/// evaluated on the CPU (its buffers reused every frame) and the field's modes for the
+/// GPU.
 #[derive(Component)]
 struct OceanWaves {
     spectrum: OceanSpectrum,
     surface: OceanSurface,
+    modes: Arc<OceanModes>,
 }
+
+/// Present when a render app evaluates oceans on the GPU.
+#[derive(Resource)]
+struct GpuWaves;
 
 /// Animates every [`Ocean`]. `CausticsPlugin` adds it; it also works on its own.
 pub struct OceanPlugin;
@@ -93,6 +131,11 @@ impl Plugin for OceanPlugin {
     fn build(&self, app: &mut App) {
         let cpu = crate::CausticsCpuTime::of(app).main;
         app.register_type::<Ocean>().add_systems(Update, (timed(&cpu, draw_waves), timed(&cpu, animate_oceans)).chain());
+        if app.get_sub_app(bevy::render::RenderApp).is_some() {
+            app.insert_resource(GpuWaves);
+            crate::mesh_vertices::build(app);
+            render::build(app);
+        }
     }
 }
 
@@ -119,7 +162,9 @@ fn draw_waves(
         match ocean.spectrum() {
             Ok(spectrum) => {
                 warned.remove(&entity);
-                commands.entity(entity).insert(OceanWaves { spectrum, surface: OceanSurface::default() });
+                let (amplitudes, omega) = spectrum.modes().unzip();
+                let modes = Arc::new(OceanModes { amplitudes, omega });
+                commands.entity(entity).insert(OceanWaves { spectrum, surface: OceanSurface::default(), modes });
             }
             Err(reason) => {
                 if warned.insert(entity) {
@@ -131,21 +176,48 @@ fn draw_waves(
     }
 }
 
-fn animate_oceans(
-    mut commands: Commands,
-    time: Res<Time>,
-    mut oceans: Query<(Entity, &Ocean, &mut OceanWaves, Option<&Mesh3d>)>,
-    mut meshes: ResMut<Assets<Mesh>>,
-) {
-    for (entity, ocean, mut waves, mesh3d) in &mut oceans {
-        let OceanWaves { spectrum, surface } = &mut *waves;
-        spectrum.evaluate_into(time.elapsed_secs() * ocean.time_scale, surface);
-        if let Some(mut mesh) = mesh3d.and_then(|m| meshes.get_mut(&m.0))
-            && write_in_place(&mut mesh, surface)
-        {
-            continue;
+/// The components [`animate_oceans`] reads.
+type Oceans<'w, 's> = Query<
+    'w,
+    's,
+    (Entity, &'static Ocean, &'static mut OceanWaves, Option<&'static Mesh3d>, Option<&'static CausticTechniqueChoice>, Has<crate::CausticGenerator>, Has<MovesOnGpu>),
+>;
+
+/// Whether an ocean's waves are evaluated on the GPU: asked for, possible, and no
+/// technique reads the ocean's triangles on the CPU (only the caustic volumes' build
+/// reads them on the GPU; a generator whose technique is not chosen yet waits a frame).
+fn evaluates_on_gpu(ocean: &Ocean, gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: bool) -> bool {
+    gpu && ocean.on_gpu
+        && ocean.resolution <= MAX_GPU_RESOLUTION
+        && (!generator || choice.is_some_and(|c| c.technique() == Technique::WarpedVolumes))
+}
+
+/// Moves every ocean: on the GPU, makes its mesh once (the surface of this moment) and
+/// leaves the frames to the render world; on the CPU, evaluates it and rewrites the mesh.
+fn animate_oceans(mut commands: Commands, time: Res<Time>, gpu: Option<Res<GpuWaves>>, mut oceans: Oceans, mut meshes: ResMut<Assets<Mesh>>) {
+    for (entity, ocean, mut waves, mesh3d, choice, generator, was_on_gpu) in &mut oceans {
+        let t = time.elapsed_secs() * ocean.time_scale;
+        let OceanWaves { spectrum, surface, .. } = &mut *waves;
+        let n = spectrum.settings().resolution;
+        let grid = |meshes: &Assets<Mesh>| mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| is_grid(mesh, 6 * n * n, (n + 1) * (n + 1)));
+        if evaluates_on_gpu(ocean, gpu.is_some(), choice, generator) {
+            if was_on_gpu && grid(&meshes) {
+                continue;
+            }
+            spectrum.evaluate_into(t, surface);
+            let (size, bound) = (spectrum.settings().size, spectrum.height_bound());
+            let aabb = Aabb::from_min_max(Vec3::new(-0.5 * size - bound, -bound, -0.5 * size - bound), Vec3::new(0.5 * size + bound, bound, 0.5 * size + bound));
+            commands.entity(entity).insert((MovesOnGpu, NoAutoAabb, aabb));
+        } else {
+            if was_on_gpu {
+                commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
+            }
+            spectrum.evaluate_into(t, surface);
         }
-        commands.entity(entity).insert(Mesh3d(meshes.add(new_grid_mesh(surface))));
+        let written = mesh3d.and_then(|m| meshes.get_mut(&m.0)).is_some_and(|mut mesh| write_in_place(&mut mesh, surface));
+        if !written {
+            commands.entity(entity).insert(Mesh3d(meshes.add(new_grid_mesh(surface))));
+        }
     }
 }
 
