@@ -19,6 +19,9 @@ pub enum MeshError {
     /// A position is NaN or infinite.
     #[error("vertex {0} has a position that is not finite")]
     NonFinitePosition(usize),
+    /// A coordinate lies farther than [`MAX_COORDINATE`] from the origin.
+    #[error("vertex {index} has a coordinate of {value:e} m, past the ±1e12 m within which areas, volumes and BVH costs stay finite")]
+    PositionTooLarge { index: usize, value: f32 },
     /// A normal is NaN, infinite or zero.
     #[error("vertex {0} has a normal that is NaN, infinite or zero")]
     BadNormal(usize),
@@ -26,6 +29,12 @@ pub enum MeshError {
     #[error("OBJ line {line}: {reason}")]
     Obj { line: usize, reason: String },
 }
+
+/// The largest coordinate a mesh may have (m): a product of three coordinates (a
+/// volume, a determinant) stays below `f32::MAX`, and every area and squared distance
+/// the techniques form from them far below. Beyond the solar system; a game's world
+/// is some 10⁶ times smaller.
+pub const MAX_COORDINATE: f32 = 1e12;
 
 /// Vertices closer than this fraction of a mesh's bounding-box diagonal are one corner
 /// for [`TriMesh::is_closed`]. Above what storage rounds to (f32 round trips exactly,
@@ -73,7 +82,8 @@ pub struct TriMesh {
 
 impl TriMesh {
     /// Builds a mesh, checking every index, position and normal. Normals are
-    /// normalised; zero, NaN or infinite normals are an error.
+    /// normalised; zero, NaN or infinite normals are an error, and so are positions
+    /// past [`MAX_COORDINATE`].
     pub fn new(
         positions: Vec<Vec3>,
         normals: Vec<Vec3>,
@@ -87,6 +97,9 @@ impl TriMesh {
         }
         if let Some(i) = positions.iter().position(|p| !p.is_finite()) {
             return Err(MeshError::NonFinitePosition(i));
+        }
+        if let Some(index) = positions.iter().position(|p| p.abs().max_element() > MAX_COORDINATE) {
+            return Err(MeshError::PositionTooLarge { index, value: positions[index].abs().max_element() });
         }
         let normals = normals
             .iter()

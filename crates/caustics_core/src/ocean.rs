@@ -31,10 +31,11 @@ pub const GRAVITY: f32 = 9.81;
 /// The largest resolution [`OceanSettings::validate`] accepts.
 pub const MAX_RESOLUTION: usize = 4096;
 
-/// No displacement, slope or height may exceed this bound (m): far beyond any sea,
-/// far below where `f32` squares overflow. [`OceanSpectrum::new`] refuses settings
-/// whose waves could.
-const MAX_MAGNITUDE: f64 = 1e15;
+/// No displacement, slope or height may exceed this bound (m): far beyond any sea, and
+/// with the patch (at most [`crate::mesh::MAX_COORDINATE`] across) still within the
+/// coordinates a mesh may have. [`OceanSpectrum::new`] refuses settings whose waves
+/// could.
+const MAX_MAGNITUDE: f64 = 1e11;
 
 /// What an ocean patch looks like.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -96,6 +97,9 @@ impl OceanSettings {
             return Err(ParamError::OutOfRange { name: "ocean resolution", value: self.resolution as f32, expected });
         }
         check_positive("ocean size", self.size, "a finite length > 0 (m)")?;
+        if self.size > crate::mesh::MAX_COORDINATE {
+            return Err(ParamError::OutOfRange { name: "ocean size", value: self.size, expected: "at most 1e12 m" });
+        }
         check_non_negative("wind speed", self.wind_speed, "a finite speed ≥ 0 (m/s)")?;
         check_finite("wind direction x", self.wind_direction.x)?;
         check_finite("wind direction z", self.wind_direction.y)?;
@@ -241,7 +245,7 @@ impl OceanSpectrum {
             return Err(ParamError::OutOfRange {
                 name: "ocean wave height bound",
                 value: bound as f32,
-                expected: "below 1e15 m: lower the amplitude, the choppiness or the wind, or shrink the patch",
+                expected: "below 1e11 m: lower the amplitude, the choppiness or the wind, or shrink the patch",
             });
         }
         let fft = FftPlanner::new().plan_fft_inverse(n);

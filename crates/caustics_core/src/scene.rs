@@ -22,6 +22,12 @@ pub enum LightKind {
     Spot { position: Vec3, direction: Vec3, intensity: f32, inner_angle: f32, outer_angle: f32 },
 }
 
+/// The largest irradiance or intensity a light may have in any colour channel (lux or
+/// candela): 10¹⁵ times the sun's illuminance, so that the irradiance 1 µm from a point
+/// light (`I/r²`, r² clamped at 10⁻¹²) times any area or magnification the techniques
+/// apply stays far below `f32::MAX`.
+pub const MAX_LIGHT_POWER: f32 = 1e20;
+
 /// A light with a linear RGB colour that scales its flux per channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Light {
@@ -48,14 +54,17 @@ impl Light {
             .collect()
     }
 
-    /// Checks that directions are non-zero and every number finite and non-negative.
+    /// Checks that directions are non-zero, every number finite and non-negative, and
+    /// the light no stronger than [`MAX_LIGHT_POWER`].
     pub fn validate(&self) -> Result<(), ParamError> {
         let finite = |name, v: Vec3| {
             check_finite(name, v.x)?;
             check_finite(name, v.y)?;
             check_finite(name, v.z)
         };
-        finite("light colour", self.color)?;
+        for channel in self.color.to_array() {
+            crate::params::check_coefficient("light colour", channel)?;
+        }
         if self.range.is_nan() || self.range <= 0.0 {
             return Err(ParamError::OutOfRange { name: "light range", value: self.range, expected: "positive (infinite: no range)" });
         }
@@ -77,6 +86,12 @@ impl Light {
                 crate::params::check_coefficient("spot inner angle", inner_angle)?;
                 crate::params::check_coefficient("spot outer angle", outer_angle)?;
             }
+        }
+        let (LightKind::Directional { irradiance: power, .. } | LightKind::Point { intensity: power, .. } | LightKind::Spot { intensity: power, .. }) = self.kind;
+        let strongest = power * self.color.max_element();
+        if strongest > MAX_LIGHT_POWER {
+            let expected = "at most 1e20 (lux or candela, times the colour's largest channel)";
+            return Err(ParamError::OutOfRange { name: "light intensity × colour", value: strongest, expected });
         }
         Ok(())
     }

@@ -266,7 +266,7 @@ fn extremes_stay_finite() {
         OceanSettings { resolution: 2, choppiness: 1.0, ..d },
         OceanSettings { size: 1.0e4, resolution: 16, ..d },
         OceanSettings { size: 1e-3, resolution: 16, small_wave_cutoff: 0.0, ..d },
-        OceanSettings { size: 1e30, resolution: 8, amplitude: 1e-30, ..d },
+        OceanSettings { size: caustics_core::mesh::MAX_COORDINATE, resolution: 8, amplitude: 1e-30, ..d },
         OceanSettings { depth: Some(1e-6), choppiness: 1.0, ..d },
         OceanSettings { depth: Some(f32::MAX), ..d },
     ] {
@@ -278,4 +278,6 @@ fn extremes_stay_finite() {
             s.mesh();
         }
     }
+    // A patch wider than a mesh's coordinates may reach is refused.
+    assert!(OceanSpectrum::new(&OceanSettings { size: 1e30, resolution: 8, amplitude: 1e-30, ..d }).is_err());
 }

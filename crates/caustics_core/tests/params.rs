@@ -39,7 +39,30 @@ fn malformed_meshes_are_refused() {
         TriMesh::new(vec![Vec3::ZERO, Vec3::NAN, Vec3::Z], n.clone(), vec![[0, 1, 2]]),
         Err(MeshError::NonFinitePosition(1))
     );
-    assert!(matches!(TriMesh::new(p, vec![Vec3::Y], vec![[0, 1, 2]]), Err(MeshError::NormalCount { .. })));
+    assert!(matches!(TriMesh::new(p.clone(), vec![Vec3::Y], vec![[0, 1, 2]]), Err(MeshError::NormalCount { .. })));
+    // Found by the fuzzer: finite coordinates whose products overflow made the BVH
+    // builder panic and the tracer emit infinite flux. Refused past MAX_COORDINATE;
+    // at it, the mesh is kept.
+    let scaled = |s: f32| p.iter().map(|&v| v * s).collect::<Vec<_>>();
+    assert!(TriMesh::new(scaled(caustics_core::mesh::MAX_COORDINATE), n.clone(), vec![[0, 1, 2]]).is_ok());
+    for huge in [1e20, 3e38] {
+        let refused = TriMesh::new(scaled(huge), n.clone(), vec![[0, 1, 2]]);
+        assert!(matches!(refused, Err(MeshError::PositionTooLarge { index: 1, .. })), "{refused:?}");
+        assert!(refused.unwrap_err().to_string().contains("1e12"));
+    }
+}
+
+#[test]
+fn lights_too_strong_for_f32_are_refused() {
+    use caustics_core::scene::{Light, LightKind, MAX_LIGHT_POWER};
+    let point = |intensity: f32, color: Vec3| Light { color, ..Light::white(LightKind::Point { position: Vec3::Y, intensity }) };
+    assert!(point(MAX_LIGHT_POWER, Vec3::ONE).validate().is_ok());
+    // Found by the fuzzer: 3.4e38 cd a kilometre away gave the volumes NaN irradiance.
+    assert!(point(f32::MAX, Vec3::ONE).validate().is_err());
+    assert!(point(1e19, Vec3::splat(100.0)).validate().is_err(), "the colour counts");
+    assert!(point(1.0, Vec3::new(1.0, -1.0, 1.0)).validate().is_err(), "a negative colour");
+    let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1e21 });
+    assert!(sun.validate().unwrap_err().to_string().contains("1e20"));
 }
 
 #[test]
