@@ -1,8 +1,9 @@
-//! `caustics`: render a scene's caustics, write irradiance planes, and run the
-//! error-against-run-time bench. Errors are one line on stderr and a non-zero exit.
+//! `caustics`: render a scene's caustics, write irradiance planes, run the
+//! error-against-run-time bench, and fuzz every CPU twin with adversarial scenes. Errors are one line on stderr and a non-zero exit.
 
 mod bench;
 mod frames;
+mod fuzz;
 mod gltf;
 mod hierarchical;
 mod illumination;
@@ -30,7 +31,16 @@ enum Command {
     /// a CSV, a Markdown table and a PNG plot of error against run time; with
     /// `--frames`, each technique's cost per frame as its work grows instead.
     Bench(bench::BenchArgs),
+    /// Run adversarial scenes (degenerate and non-finite meshes, extreme scales, IORs
+    /// and lights, empty scenes, photon floods, adversarial pools) through every CPU
+    /// twin and print, per category, the cases tried, refused and failed, the largest
+    /// energy ratio and the peak memory.
+    Fuzz(fuzz::FuzzArgs),
 }
+
+/// Counts the memory each fuzzed case takes.
+#[global_allocator]
+static ALLOCATOR: caustics_core::fuzz::CountingAllocator = caustics_core::fuzz::CountingAllocator;
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -43,6 +53,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render::run(args),
         Command::Bench(args) => bench::run(args),
+        Command::Fuzz(args) => fuzz::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,6 +7,7 @@
 pub mod bvh;
 pub mod convolution;
 pub mod estimate;
+pub mod fuzz;
 pub mod hierarchical;
 pub mod illumination_textures;
 pub mod mesh;
