@@ -54,6 +54,12 @@ pub fn blocks_caustic_light(visible: &InheritedVisibility, receiver: bool, no_sh
 /// Any of Bevy's lights.
 pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 
+/// The direction an entity faces (its −Z) under `transform`, zero when the transform
+/// has none (a zero scale): `GlobalTransform::forward` would panic there.
+pub fn facing(transform: &GlobalTransform) -> Vec3 {
+    Vec3::from(transform.affine().matrix3 * bevy::math::Vec3A::NEG_Z).normalize_or_zero()
+}
+
 /// A Bevy light placed by `transform` as the core crate's light, with a point or spot
 /// light's `range`. Bevy's point and spot intensities are luminous power (lm); the core
 /// wants intensity per steradian, Φ/4π (Bevy's own convention, spots included).
@@ -68,7 +74,8 @@ pub fn core_light(
         caustics_core::glam::Vec3::new(c.red, c.green, c.blue)
     };
     let position = to_core(transform.translation());
-    let forward = to_core(transform.forward().as_vec3());
+    // A light without a direction (a zero scale) fails `Light::validate`, which says so.
+    let forward = to_core(facing(transform));
     Some(match (directional, point, spot) {
         (Some(d), ..) => Light {
             kind: LightKind::Directional { direction: forward, irradiance: d.illuminance },
@@ -96,10 +103,19 @@ pub fn core_light(
 }
 
 /// A Bevy mesh placed by `transform` as a world-space core mesh. Meshes without
-/// normals get smooth ones; malformed meshes (no positions, bad indices, NaN) are an
-/// error that says why.
+/// normals get smooth ones; malformed meshes (not a triangle list, no positions, bad
+/// indices, NaN) and placements that flatten or overflow them (a zero scale, a
+/// translation past `f32`) are an error that says why.
 pub fn core_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, String> {
     use bevy::mesh::VertexAttributeValues::Float32x3;
+    if mesh.primitive_topology() != bevy::mesh::PrimitiveTopology::TriangleList {
+        return Err(format!("is a {:?}, not a triangle list", mesh.primitive_topology()));
+    }
+    let affine = glam::Affine3A::from_cols_array(&transform.affine().to_cols_array());
+    let determinant = affine.matrix3.determinant();
+    if !(determinant.is_finite() && determinant != 0.0 && affine.translation.is_finite()) {
+        return Err("is placed by a transform with a zero or non-finite scale or translation".into());
+    }
     let positions = match mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) {
         Ok(Float32x3(p)) => p.iter().map(|&p| glam::Vec3::from_array(p)).collect::<Vec<_>>(),
         _ => return Err("has no Float32x3 positions".into()),
@@ -115,7 +131,9 @@ pub fn core_mesh(mesh: &Mesh, transform: &GlobalTransform) -> Result<TriMesh, St
         _ => TriMesh::with_smooth_normals(positions, triangles),
     }
     .map_err(|e| e.to_string())?;
-    Ok(local.transformed(&glam::Affine3A::from_cols_array(&transform.affine().to_cols_array())))
+    // Placed, it is checked again: a large scale may carry it past `MAX_COORDINATE`.
+    let world = local.transformed(&affine);
+    TriMesh::new(world.positions().to_vec(), world.normals().to_vec(), world.triangles().to_vec()).map_err(|e| format!("placed in the world: {e}"))
 }
 
 /// World-space bounds `(min, max)` of an entity's local `Aabb` placed by `transform`.

@@ -30,6 +30,7 @@ const MAX_UPDATES: usize = 2000;
 pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
     let name = path.display().to_string();
     let abs = std::fs::canonicalize(path).map_err(|e| format!("{name}: {e}"))?;
+    precheck(&std::fs::read(&abs).map_err(|e| format!("{name}: {e}"))?).map_err(|e| format!("{name}: {e}"))?;
     let (dir, file) = (abs.parent().unwrap_or(Path::new("/")), abs.file_name().unwrap_or_default());
 
     let mut app = App::new();
@@ -71,6 +72,35 @@ pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
     Err(format!("{name}: the scene did not finish loading"))
+}
+
+/// Faults that Bevy's glTF loader (through the `gltf` crate) meets with a panic in its
+/// loading task rather than an error: an index accessor that is not of an unsigned
+/// integer type (glTF 2.0 §3.7.2.1). A document that does not parse is left to the
+/// loader, which says why.
+fn precheck(bytes: &[u8]) -> Result<(), String> {
+    // A GLB's JSON chunk follows its 12-byte header and 8-byte chunk header.
+    let json = match bytes.get(..4) {
+        Some(b"glTF") => {
+            let length = bytes.get(12..16).map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]) as usize).unwrap_or(0);
+            bytes.get(20..20 + length).unwrap_or_default()
+        }
+        _ => bytes,
+    };
+    let Ok(document) = serde_json::from_slice::<serde_json::Value>(json) else { return Ok(()) };
+    let accessors = document["accessors"].as_array();
+    for (m, mesh) in document["meshes"].as_array().into_iter().flatten().enumerate() {
+        for (p, primitive) in mesh["primitives"].as_array().into_iter().flatten().enumerate() {
+            let Some(indices) = primitive["indices"].as_u64() else { continue };
+            let component = accessors.and_then(|a| a.get(indices as usize)).map(|a| &a["componentType"]);
+            if let Some(component) = component.and_then(|c| c.as_u64()).filter(|c| ![5121, 5123, 5125].contains(c)) {
+                return Err(format!(
+                    "meshes[{m}].primitives[{p}]: its indices (accessor {indices}) have componentType {component}, not an unsigned byte, short or int"
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// World transform of an entity of the scene world, following `ChildOf` to the root.
@@ -131,8 +161,8 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
     });
     let camera = camera.map(|(t, p)| PinholeCamera {
             position: to_core(t.translation()),
-            look_at: to_core(t.translation() + t.forward().as_vec3()),
-            up: to_core(t.up().as_vec3()),
+            look_at: to_core(t.translation() + caustics_bevy::reference::facing(&t)),
+            up: to_core(Vec3::from(t.affine().matrix3 * bevy::math::Vec3A::Y).normalize_or(Vec3::Y)),
             fov_y: p.fov,
             width: 0,
             height: 0,

@@ -28,6 +28,13 @@ pub struct Wave {
 /// Water surface `y = height + Σ aᵢ sin(kxᵢ x + kzᵢ z + φᵢ)` on an `n × n` grid with the
 /// analytic normals `(−∂y/∂x, 1, −∂y/∂z)`.
 pub fn wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) -> TriMesh {
+    // Analytic normals are never zero (their y is 1): only non-finite input can fail.
+    try_wave_heightfield(n, size, height, waves).expect("finite waves make a finite heightfield")
+}
+
+/// [`wave_heightfield`], or why its waves make no mesh (a height or slope that is not
+/// finite, a position past [`crate::mesh::MAX_COORDINATE`]).
+pub fn try_wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) -> Result<TriMesh, crate::mesh::MeshError> {
     let h = |x: f32, z: f32| height + waves.iter().map(|w| w.amplitude * (w.kx * x + w.kz * z + w.phase).sin()).sum::<f32>();
     let nrm = |x: f32, z: f32| {
         let (mut dx, mut dz) = (0.0, 0.0);
@@ -38,8 +45,7 @@ pub fn wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) -> Tri
         }
         Vec3::new(-dx, 1.0, -dz)
     };
-    // Analytic normals are never zero (their y is 1), so this cannot fail.
-    TriMesh::heightfield(n, size, h, nrm).expect("heightfield normals have y = 1")
+    TriMesh::heightfield(n, size, h, nrm)
 }
 
 /// The waves of the reference pool (`shared/reference/wave_pool_scene.json`).
@@ -147,6 +153,9 @@ pub fn floor(size: f32) -> Receiver {
     Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * (0.5 * size), Vec3::X * (0.5 * size)), albedo: Vec3::splat(0.8) }
 }
 
+/// The finest heightfield a scene description may ask for: 4096² cells, 34 M triangles.
+pub const MAX_DESCRIPTION_GRID: usize = 4096;
+
 /// The scene description format of `shared/reference/*_scene.json`.
 #[derive(Clone, Debug, Deserialize)]
 pub struct SceneDescription {
@@ -214,9 +223,13 @@ impl SceneDescription {
                     "mirror" => SpecularInteraction::Reflect,
                     m => return Err(format!("generator material {m:?} is not supported (\"glass\" or \"mirror\")")),
                 };
+                if !(1..=MAX_DESCRIPTION_GRID).contains(&g.n) {
+                    return Err(format!("heightfield n = {} is out of range (1 to {MAX_DESCRIPTION_GRID} cells a side)", g.n));
+                }
                 let waves: Vec<Wave> =
                     g.waves.iter().map(|&[kx, kz, amplitude, phase]| Wave { kx, kz, amplitude, phase }).collect();
-                Ok(Generator { mesh: wave_heightfield(g.n, g.size, g.height, &waves), interaction, double_sided: g.double_sided })
+                let mesh = try_wave_heightfield(g.n, g.size, g.height, &waves).map_err(|e| format!("the heightfield's waves make no mesh: {e}"))?;
+                Ok(Generator { mesh, interaction, double_sided: g.double_sided })
             })
             .collect::<Result<Vec<_>, _>>()?;
         let half = 0.5 * self.receiver.size;

@@ -196,7 +196,7 @@ fn plan_caustic_maps(
             let color = Vec3::from_array(light.color.to_array()) * light_intensity(&light);
             let cone = s.map(|s| {
                 let (cos_outer, cos_inner) = (s.outer_angle.cos(), s.inner_angle.min(s.outer_angle).cos());
-                (t.forward().as_vec3(), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
+                (crate::reference::facing(t), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
             });
             for view in LightView::for_light(&light, core_bounds(generators), core_bounds(receivers)) {
                 next.views.push(PlannedLightView { view, color, cone, inverse_range_squared: light.inverse_range_squared() });
