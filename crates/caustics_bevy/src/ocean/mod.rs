@@ -196,23 +196,22 @@ fn evaluates_on_gpu(ocean: &Ocean, gpu: bool, choice: Option<&CausticTechniqueCh
 /// leaves the frames to the render world; on the CPU, evaluates it and rewrites the mesh.
 fn animate_oceans(mut commands: Commands, time: Res<Time>, gpu: Option<Res<GpuWaves>>, mut oceans: Oceans, mut meshes: ResMut<Assets<Mesh>>) {
     for (entity, ocean, mut waves, mesh3d, choice, generator, was_on_gpu) in &mut oceans {
-        let t = time.elapsed_secs() * ocean.time_scale;
+        // A wave field drawn anew (new settings): a new bound, and the mesh of this moment.
+        let redrawn = waves.is_changed();
+        let n = waves.spectrum.settings().resolution;
+        let grid = mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| is_grid(mesh, 6 * n * n, (n + 1) * (n + 1)));
+        let on_gpu = evaluates_on_gpu(ocean, gpu.is_some(), choice, generator);
+        if on_gpu && was_on_gpu && !redrawn && grid {
+            continue;
+        }
         let OceanWaves { spectrum, surface, .. } = &mut *waves;
-        let n = spectrum.settings().resolution;
-        let grid = |meshes: &Assets<Mesh>| mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| is_grid(mesh, 6 * n * n, (n + 1) * (n + 1)));
-        if evaluates_on_gpu(ocean, gpu.is_some(), choice, generator) {
-            if was_on_gpu && grid(&meshes) {
-                continue;
-            }
-            spectrum.evaluate_into(t, surface);
+        spectrum.evaluate_into(time.elapsed_secs() * ocean.time_scale, surface);
+        if on_gpu {
             let (size, bound) = (spectrum.settings().size, spectrum.height_bound());
             let aabb = Aabb::from_min_max(Vec3::new(-0.5 * size - bound, -bound, -0.5 * size - bound), Vec3::new(0.5 * size + bound, bound, 0.5 * size + bound));
             commands.entity(entity).insert((MovesOnGpu, NoAutoAabb, aabb));
-        } else {
-            if was_on_gpu {
-                commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
-            }
-            spectrum.evaluate_into(t, surface);
+        } else if was_on_gpu {
+            commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
         }
         let written = mesh3d.and_then(|m| meshes.get_mut(&m.0)).is_some_and(|mut mesh| write_in_place(&mut mesh, surface));
         if !written {
