@@ -142,11 +142,22 @@ pub struct CaseResult {
     pub peak_bytes: usize,
 }
 
-/// Draws case `index` of `seed`: its category (cases cycle through [`CATEGORIES`]) and
-/// what it is made of, then runs it through every twin.
+/// Case `index` of `seed`: its category (cases cycle through [`CATEGORIES`]) and its
+/// draws.
+fn case(seed: u64, index: u64) -> (Category, Draw) {
+    (CATEGORIES[(index % CATEGORIES.len() as u64) as usize], Draw(Pcg32::for_photon(seed, 0x0f22, index)))
+}
+
+/// The scene of case `index` of `seed` when it is one that passes validation (not a
+/// pool, not refused): what the GPU passes are fuzzed with.
+pub fn valid_scene(seed: u64, index: u64) -> Option<(Category, Scene)> {
+    let (category, mut draw) = case(seed, index);
+    (category != Category::Pool).then(|| scene_case(category, &mut draw).ok()).flatten().map(|(scene, _)| (category, scene))
+}
+
+/// Draws case `index` of `seed` and runs it through every twin.
 pub fn run_case(seed: u64, index: u64) -> CaseResult {
-    let category = CATEGORIES[(index % CATEGORIES.len() as u64) as usize];
-    let mut draw = Draw(Pcg32::for_photon(seed, 0x0f22, index));
+    let (category, mut draw) = case(seed, index);
     let start = CountingAllocator::start_peak();
     let verdict = match catch_unwind(AssertUnwindSafe(|| check_case(category, &mut draw))) {
         Ok(verdict) => verdict,
