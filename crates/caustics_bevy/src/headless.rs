@@ -312,6 +312,22 @@ impl HeadlessRenderer {
         Ok(bytes.chunks_exact(row as usize).flat_map(|r| &r[..packed as usize]).copied().collect())
     }
 
+    /// The GPU memory the render device holds now (bytes, by the label its buffer or
+    /// texture was made with), from the backend's allocator
+    /// (`wgpu::Device::generate_allocator_report`): every live allocation, the plugin's,
+    /// Bevy's and the app's. Resources dropped in the render world are freed once the
+    /// GPU is done with them, a frame or two later. `None` where the backend keeps no
+    /// such report (Metal, GL).
+    pub fn gpu_memory(&self) -> Option<std::collections::BTreeMap<String, u64>> {
+        let device = self.app.world().get_resource::<bevy::render::renderer::RenderDevice>()?;
+        let report = device.wgpu_device().generate_allocator_report()?;
+        let mut by_label = std::collections::BTreeMap::new();
+        for allocation in report.allocations {
+            *by_label.entry(allocation.name).or_default() += allocation.size;
+        }
+        Some(by_label)
+    }
+
     /// The first pipeline whose shader did not compile or whose pipeline was refused,
     /// with its label and why: a frame drawn without it is not the frame asked for.
     fn failed_pipeline(&self) -> Option<String> {

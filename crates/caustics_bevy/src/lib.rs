@@ -4,6 +4,11 @@
 //! the per-view caustic irradiance buffer and its composite onto receivers, a pass
 //! report, glTF tagging and a headless renderer for tests and tools. The math lives in
 //! `caustics_core`; this crate is a thin layer of components, systems and passes.
+//!
+//! Every buffer and texture the plugin makes is labelled `caustic_…`, so that a GPU
+//! capture or wgpu's allocator report ([`headless::HeadlessRenderer::gpu_memory`]) tells
+//! its memory from Bevy's; what it asks of the GPU is bounded by the adapter's limits
+//! and [`CausticsGpuBudget`].
 
 pub mod components;
 pub mod cpu_time;
@@ -12,6 +17,7 @@ pub mod convolution;
 #[cfg(feature = "egui")]
 pub mod debug_panel;
 pub mod gltf_tagging;
+pub mod gpu_budget;
 #[cfg(any(feature = "ocean", feature = "convolution"))]
 mod grid_mesh;
 pub mod headless;
@@ -36,6 +42,7 @@ pub use components::{
     ParticipatingMedium,
 };
 pub use gltf_tagging::TagCausticsFromMaterials;
+pub use gpu_budget::CausticsGpuBudget;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, InjectedIrradiance};
 #[cfg(feature = "convolution")]
 pub use convolution::{DropPebble, PoolRipples};
@@ -70,6 +77,9 @@ impl Plugin for CausticsPlugin {
             .register_type::<CausticsSettings>()
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
+            .register_type::<CausticsGpuBudget>()
+            .init_resource::<CausticsGpuBudget>()
+            .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<CausticsGpuBudget>::default())
             .add_systems(Update, timed(&cpu, gltf_tagging::tag_from_materials))
             .add_systems(PostUpdate, (timed(&cpu, components::validate_caustic_params), timed(&cpu, lights::warn_unsupported_lights)))
             .configure_sets(
@@ -111,7 +121,7 @@ pub mod prelude {
     pub use crate::{
         AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticReceiverMaterialPlugin,
         CausticTechnique,
-        CausticTechniqueChoice, CausticsPlugin, CausticsSettings,
+        CausticTechniqueChoice, CausticsGpuBudget, CausticsPlugin, CausticsSettings,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };
 }

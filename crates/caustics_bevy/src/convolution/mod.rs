@@ -102,7 +102,35 @@ impl PoolRipples {
     pub fn size(&self) -> Vec2 {
         Vec2::new(self.columns as f32, self.rows as f32) * self.cell_size
     }
+
+    /// These settings with a grid that fits one storage binding of `largest_binding`
+    /// bytes and a budget of `budget` bytes: the texels' buffers (four terms in one
+    /// binding; with the height, the irradiance and the water's mesh, [`BYTES_PER_TEXEL`])
+    /// and the kernels' taps (64 bytes each, one binding). While they do not fit, texels
+    /// twice as wide (half as many along each side, a side with an odd count gaining
+    /// half a texel at its far edge) keep the lobe in metres with half the kernel
+    /// radius; a kernel too wide alone gets a smaller radius.
+    pub fn fitted(&self, largest_binding: u64, budget: u64) -> Self {
+        let mut fitted = self.clone();
+        let texels = |p: &Self| u64::from(p.columns) * u64::from(p.rows);
+        let taps = |p: &Self| (2 * u64::from(p.kernel_radius) + 1).pow(2) * 64;
+        while texels(&fitted) > 1 && (texels(&fitted) * 16 > largest_binding || texels(&fitted) * BYTES_PER_TEXEL + taps(&fitted) > budget) {
+            fitted.columns = fitted.columns.div_ceil(2);
+            fitted.rows = fitted.rows.div_ceil(2);
+            fitted.cell_size *= 2.0;
+            fitted.kernel_radius = fitted.kernel_radius.div_ceil(2);
+        }
+        while fitted.kernel_radius > 0 && taps(&fitted) > largest_binding.min(budget) {
+            fitted.kernel_radius /= 2;
+        }
+        fitted
+    }
 }
+
+/// The bytes a pool takes per texel: on the GPU its height, four convolution terms and
+/// floor irradiance (24), and its water's grid mesh (position, normal, UV and six
+/// indices: 56).
+pub const BYTES_PER_TEXEL: u64 = 24 + 56;
 
 /// Drops a pebble: a new ripple impulse (§4.3) in the pool whose water lies under
 /// `position` (world space; its height does not matter), `strength` metres high at
@@ -127,4 +155,34 @@ impl Plugin for PoolRipplesPlugin {
 pub(crate) fn build(app: &mut App) {
     app.add_plugins(PoolRipplesPlugin);
     render::build(app);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pool_too_large_for_the_gpu_or_the_budget_runs_on_wider_texels() {
+        const MIB: u64 = 1 << 20;
+        let pool = PoolRipples::default();
+        assert_eq!(pool.fitted(128 * MIB, 1 << 30), pool, "the default pool fits as asked");
+
+        // 8192² texels: 1 GiB of terms in one binding, 5 GiB in all.
+        let huge = PoolRipples { columns: 8192, rows: 6000, cell_size: 4.0 / 8192.0, kernel_radius: 8, ..default() };
+        let fitted = huge.fitted(128 * MIB, 1 << 30);
+        let texels = u64::from(fitted.columns) * u64::from(fitted.rows);
+        assert_eq!((fitted.columns, fitted.rows, fitted.kernel_radius), (2048, 1500, 2));
+        assert!(texels * 16 <= 128 * MIB && texels * BYTES_PER_TEXEL <= 1 << 30);
+        // The same pool, the same lobe in metres.
+        assert!((fitted.size() - huge.size()).abs().max_element() < 1e-6);
+        assert_eq!(fitted.cell_size * fitted.kernel_radius as f32, huge.cell_size * huge.kernel_radius as f32);
+
+        // A kernel of radius 2048 alone takes 1 GiB of taps.
+        let wide = PoolRipples { kernel_radius: 2048, ..default() }.fitted(128 * MIB, 1 << 30);
+        assert!((2 * u64::from(wide.kernel_radius) + 1).pow(2) * 64 <= 128 * MIB, "radius {}", wide.kernel_radius);
+
+        // An odd side gains half a texel at its far edge.
+        let odd = PoolRipples { columns: 129, rows: 128, ..default() }.fitted(u64::MAX, 128 * 128 * BYTES_PER_TEXEL);
+        assert_eq!((odd.columns, odd.rows), (65, 64));
+    }
 }

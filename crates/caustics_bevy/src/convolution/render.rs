@@ -87,9 +87,9 @@ impl PoolBuffers {
             images: StorageBuffer::default(),
             taps: StorageBuffer::default(),
             taps_written: None,
-            heights: texel_buffer(device, "pool_heights", texels, 1),
-            terms: texel_buffer(device, "pool_terms", texels, 4),
-            irradiance: texel_buffer(device, "pool_floor_irradiance", texels, 1),
+            heights: texel_buffer(device, "caustic_pool_heights", texels, 1),
+            terms: texel_buffer(device, "caustic_pool_terms", texels, 4),
+            irradiance: texel_buffer(device, "caustic_pool_floor_irradiance", texels, 1),
             compute: None,
         }
     }
@@ -159,7 +159,7 @@ type PoolGenerator = (&'static CausticGenerator, &'static CausticTechniqueChoice
 type ConvolutionPools = Query<
     'static,
     'static,
-    (Entity, &'static PoolRipples, &'static PoolSurface, PoolGenerator, &'static GlobalTransform),
+    (Entity, &'static PoolSurface, PoolGenerator, &'static GlobalTransform),
     Without<InvalidCausticParams>,
 >;
 
@@ -167,7 +167,7 @@ type ConvolutionPools = Query<
 type AimedPools<'w, 's> = Query<
     'w,
     's,
-    (Entity, &'static PoolRipples, &'static mut PoolSurface, PoolGenerator, &'static GlobalTransform),
+    (Entity, &'static mut PoolSurface, PoolGenerator, &'static GlobalTransform),
     Without<InvalidCausticParams>,
 >;
 
@@ -208,10 +208,10 @@ fn aim_kernels(
     mut pools: AimedPools,
     suns: Query<SunComponents>,
 ) {
-    for (entity, pool, mut surface, generator, transform) in &mut pools {
+    for (entity, mut surface, generator, transform) in &mut pools {
         let Some(ior) = uses_convolution(generator) else { continue };
-        let Some((_, direction)) = pool_sun(&pool_from_world(pool, transform), suns.iter()) else { continue };
-        if let Err(e) = surface.bypass_change_detection().aim_kernels(pool, ior, direction) {
+        let Some((_, direction)) = pool_sun(&pool_from_world(surface.settings(), transform), suns.iter()) else { continue };
+        if let Err(e) = surface.bypass_change_detection().aim_kernels(ior, direction) {
             warn!("bevy_caustics: the pool {entity} keeps its kernels: {e}");
         }
     }
@@ -229,8 +229,9 @@ fn mark_active(
 
 fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<ConvolutionPools>, suns: Extract<Suns>, time: Extract<Res<Time>>) {
     extracted.0.clear();
-    for (entity, pool, surface, generator, transform) in &pools {
+    for (entity, surface, generator, transform) in &pools {
         let Some(ior) = uses_convolution(generator) else { continue };
+        let pool = surface.settings();
         let pool_from_world = pool_from_world(pool, transform);
         let Some((sun, direction)) = pool_sun(&pool_from_world, suns.iter()) else { continue };
         // Kernels aimed at other light (the frame before the light moved) wait a frame.
@@ -302,11 +303,14 @@ fn prepare_buffers(
             *buffers = PoolBuffers::new(&device, texels);
         }
         buffers.uniform.set(pool.uniform);
+        buffers.uniform.set_label(Some("caustic_pool_settings"));
         buffers.uniform.write_buffer(&device, &queue);
         buffers.images.set(std::mem::take(&mut pool.images));
+        buffers.images.set_label(Some("caustic_pool_images"));
         buffers.images.write_buffer(&device, &queue);
         if !buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps)) {
             buffers.taps.set(pool.taps.as_ref().clone());
+            buffers.taps.set_label(Some("caustic_pool_kernel_taps"));
             buffers.taps.write_buffer(&device, &queue);
             buffers.taps_written = Some(pool.taps.clone());
         }

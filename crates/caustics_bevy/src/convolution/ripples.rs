@@ -1,6 +1,8 @@
 //! Main world: the pool's water, simulated from its impulses and written into its mesh.
 
 use crate::cpu_time::timed;
+use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use bevy::render::renderer::RenderDevice;
 use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
 use bevy::platform::collections::HashSet;
@@ -10,9 +12,11 @@ use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
 use std::sync::Arc;
 
 /// The simulated water of a [`PoolRipples`]: its live impulses and the surface they
-/// made this frame (pool coordinates: x and z from 0 to the pool's size).
+/// made this frame (pool coordinates: x and z from 0 to the pool's size), on the grid
+/// its settings fit in ([`PoolRipples::fitted`]).
 #[derive(Component, Clone, Debug)]
 pub struct PoolSurface {
+    settings: PoolRipples,
     ripples: Ripples,
     heightfield: Heightfield,
     kernels: PoolKernels,
@@ -56,6 +60,12 @@ impl PoolKernels {
 }
 
 impl PoolSurface {
+    /// The pool's settings as the water runs them: the component's, with the grid
+    /// lowered to what the GPU and the budget hold ([`PoolRipples::fitted`]).
+    pub fn settings(&self) -> &PoolRipples {
+        &self.settings
+    }
+
     /// The impulses and wave settings.
     pub fn ripples(&self) -> &Ripples {
         &self.ripples
@@ -73,19 +83,19 @@ impl PoolSurface {
 
     /// Aims the kernels at new light (`PoolKernels::new`) if it is not the light they
     /// were made for.
-    pub fn aim_kernels(&mut self, pool: &PoolRipples, ior: f32, sun: Vec3) -> Result<(), String> {
+    pub fn aim_kernels(&mut self, ior: f32, sun: Vec3) -> Result<(), String> {
         if self.kernels.aimed != (ior, sun) {
-            self.kernels = PoolKernels::new(pool, ior, sun)?;
+            self.kernels = PoolKernels::new(&self.settings, ior, sun)?;
         }
         Ok(())
     }
 
-    /// A still pool for `pool`'s settings, or why there is none.
+    /// A still pool for `pool`'s (fitted) settings, or why there is none.
     fn new(pool: &PoolRipples) -> Result<Self, String> {
         let (columns, rows) = (pool.columns as usize, pool.rows as usize);
         let ripples = Ripples::new(columns, rows, pool.cell_size, pool.waves()).map_err(|e| e.to_string())?;
         let heightfield = Heightfield::flat(columns, rows, pool.cell_size).map_err(|e| e.to_string())?;
-        Ok(Self { ripples, heightfield, kernels: PoolKernels::new(pool, 1.333, Vec3::NEG_Y)? })
+        Ok(Self { settings: pool.clone(), ripples, heightfield, kernels: PoolKernels::new(pool, 1.333, Vec3::NEG_Y)? })
     }
 }
 
@@ -96,29 +106,50 @@ pub(super) fn build(app: &mut App) {
 
 /// Starts the water of pools that are new or whose grid or waves changed (a still
 /// pool), and redraws the kernels of those whose light changed (the water keeps
-/// moving); invalid settings are reported once per entity and the pool has no water
-/// until fixed.
+/// moving); a grid too large for the GPU or the budget is lowered
+/// ([`PoolRipples::fitted`]), and invalid settings are reported once per entity and the
+/// pool has no water until fixed.
 fn configure_pools(
     mut commands: Commands,
     mut pools: Query<(Entity, &PoolRipples, Option<&mut PoolSurface>), Changed<PoolRipples>>,
     orphans: Query<Entity, (With<PoolSurface>, Without<PoolRipples>)>,
     mut removed: RemovedComponents<PoolRipples>,
     mut warned: Local<HashSet<Entity>>,
+    (device, budget): (Option<Res<RenderDevice>>, Res<CausticsGpuBudget>),
 ) {
+    let largest = device.as_deref().map_or(u64::MAX, largest_binding);
     for entity in removed.read() {
         warned.remove(&entity);
     }
     for entity in &orphans {
         commands.entity(entity).remove::<PoolSurface>();
     }
-    for (entity, pool, surface) in &mut pools {
+    for (entity, asked, surface) in &mut pools {
+        let pool = &asked.fitted(largest, budget.bytes);
+        if pool != asked {
+            warn!(
+                "bevy_caustics: PoolRipples on {entity}: {}×{} texels with a kernel radius of {} do not fit this GPU or CausticsGpuBudget ({}); \
+                 its water runs at {}×{} texels of {} m with a radius of {}",
+                asked.columns,
+                asked.rows,
+                asked.kernel_radius,
+                mib(budget.bytes),
+                pool.columns,
+                pool.rows,
+                pool.cell_size,
+                pool.kernel_radius
+            );
+        }
         let same_water = surface.as_ref().is_some_and(|s| {
             let hf = &s.heightfield;
             *s.ripples.settings() == pool.waves()
                 && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
         });
         let made = match surface {
-            Some(mut surface) if same_water => surface.kernels.reaimed(pool).map(|kernels| surface.kernels = kernels),
+            Some(mut surface) if same_water => surface.kernels.reaimed(pool).map(|kernels| {
+                surface.kernels = kernels;
+                surface.settings = pool.clone();
+            }),
             _ => PoolSurface::new(pool).map(|surface| {
                 commands.entity(entity).insert(surface);
             }),
@@ -140,14 +171,15 @@ fn configure_pools(
 /// Starts an impulse for each [`DropPebble`] in the first pool whose water lies under it.
 fn drop_pebbles(
     mut pebbles: MessageReader<DropPebble>,
-    mut pools: Query<(Entity, &PoolRipples, &GlobalTransform, &mut PoolSurface)>,
+    mut pools: Query<(Entity, &GlobalTransform, &mut PoolSurface)>,
     time: Res<Time>,
 ) {
     for pebble in pebbles.read() {
-        let landed = pools.iter_mut().find_map(|(entity, pool, transform, surface)| {
+        let landed = pools.iter_mut().find_map(|(entity, transform, surface)| {
             let local = transform.affine().inverse().transform_point3(pebble.position);
-            let at = Vec2::new(local.x, local.z) + 0.5 * pool.size();
-            let inside = at.cmpge(Vec2::ZERO).all() && at.cmple(pool.size()).all();
+            let size = surface.settings.size();
+            let at = Vec2::new(local.x, local.z) + 0.5 * size;
+            let inside = at.cmpge(Vec2::ZERO).all() && at.cmple(size).all();
             inside.then_some((entity, at, surface))
         });
         let Some((entity, at, mut surface)) = landed else {
@@ -166,11 +198,11 @@ fn drop_pebbles(
 fn animate_pools(
     mut commands: Commands,
     time: Res<Time>,
-    mut pools: Query<(Entity, &PoolRipples, &mut PoolSurface, Option<&Mesh3d>)>,
+    mut pools: Query<(Entity, &mut PoolSurface, Option<&Mesh3d>)>,
     mut meshes: ResMut<Assets<Mesh>>,
 ) {
     let now = time.elapsed_secs();
-    for (entity, pool, mut surface, mesh3d) in &mut pools {
+    for (entity, mut surface, mesh3d) in &mut pools {
         let surface = &mut *surface;
         surface.ripples.remove_expired(now);
         let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
@@ -185,7 +217,7 @@ fn animate_pools(
             Ok(heightfield) => heightfield,
             Err(e) => {
                 warn!("bevy_caustics: the water of the pool {entity} is stilled: {e}");
-                if let Ok(still) = PoolSurface::new(pool) {
+                if let Ok(still) = PoolSurface::new(&surface.settings.clone()) {
                     *surface = still;
                 }
                 continue;

@@ -2,6 +2,7 @@
 //! the passes (`pass.rs`) draw with.
 
 use crate::cpu_time::timed;
+use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
@@ -438,7 +439,8 @@ pub struct CausticMapsGpu {
     steps: DynamicUniformBuffer<GpuStep>,
     pub(super) generator_draws: Vec<MeshDraw>,
     pub(super) occluder_draws: Vec<MeshDraw>,
-    warned: bool,
+    /// The photon and map resolutions last asked for that did not fit (warned once).
+    lowered: Option<(u32, u32)>,
 }
 
 impl CausticMapsGpu {
@@ -671,22 +673,37 @@ impl Scratch {
     }
 }
 
-/// `settings` with the photon and map resolutions the device's limits allow, at most the
-/// asked ones: the photon buffer's halves (8 bytes a photon) and the map levels (8 bytes
-/// a texel) are the largest bindings.
-fn fitting(device: &RenderDevice, settings: &CausticMapSettings) -> CausticMapSettings {
-    let limits = device.limits();
-    let largest = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
-    let mut fitted = *settings;
+/// `settings` with the photon and map resolutions that the device's limits and the
+/// budget allow, at most the asked ones: the photon buffer's halves (8 bytes a photon)
+/// and the map levels (8 bytes a texel) are the largest bindings, and the scratch and
+/// `views` light views' maps ([`Scratch::new`], [`ViewMaps`]) must fit `budget` bytes.
+/// Halves the finer of the two until they fit (or reach 16).
+fn fitting(device: &RenderDevice, settings: &CausticMapSettings, budget: u64, views: usize) -> CausticMapSettings {
+    let (largest, widest) = (largest_binding(device), device.limits().max_texture_dimension_2d);
     let side = |r: u32| (r as u64).pow(2);
-    while fitted.photon_resolution > 16 && (side(fitted.photon_resolution) * 8 > largest || fitted.photon_resolution > limits.max_texture_dimension_2d) {
-        fitted.photon_resolution /= 2;
-    }
     let levels = |s: &CausticMapSettings| (0..=top_level(s)).map(|l| side((s.map_resolution >> l).max(1)) * 8).sum::<u64>();
-    while fitted.map_resolution > 16 && (levels(&fitted) > largest || fitted.map_resolution > limits.max_texture_dimension_2d) {
-        fitted.map_resolution /= 2;
+    let pyramid = |p: u32| (0..=p.ilog2()).map(|l| side(p >> l)).sum::<u64>() * 16;
+    let bytes = |s: &CausticMapSettings| {
+        let (p, m) = (s.photon_resolution, s.map_resolution);
+        side(p) * (2 * 8 + 3 * 4 + 16 + 16 + 4) + pyramid(p) + levels(s) + side(m) * (4 + 8 * views as u64)
+    };
+    let mut fitted = *settings;
+    loop {
+        let photons_too_many = side(fitted.photon_resolution) * 8 > largest || fitted.photon_resolution > widest;
+        let map_too_fine = levels(&fitted) > largest || fitted.map_resolution > widest;
+        let finer_photons = fitted.photon_resolution >= fitted.map_resolution;
+        let halve_photons = photons_too_many || (!map_too_fine && bytes(&fitted) > budget && finer_photons);
+        let halve_map = map_too_fine || (bytes(&fitted) > budget && !finer_photons);
+        if halve_photons && fitted.photon_resolution > 16 {
+            fitted.photon_resolution /= 2;
+        } else if (halve_map || halve_photons) && fitted.map_resolution > 16 {
+            fitted.map_resolution /= 2;
+        } else if halve_map && fitted.photon_resolution > 16 {
+            fitted.photon_resolution /= 2;
+        } else {
+            return fitted;
+        }
     }
-    fitted
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -700,6 +717,7 @@ fn prepare_maps(
     mut specialized: ResMut<SpecializedMeshPipelines<LightMapPipeline>>,
     cache: Res<PipelineCache>,
     meshes: Res<RenderAssets<RenderMesh>>,
+    budget: Res<CausticsGpuBudget>,
 ) {
     let plan = &extracted.0;
     let Some(mut settings) = plan.settings.filter(|_| !plan.views.is_empty()) else {
@@ -714,14 +732,15 @@ fn prepare_maps(
     let gpu = gpu.as_mut();
     gpu.generation = Some(plan.generation);
     gpu.dirty = true;
-    let fitted = fitting(&device, &settings);
+    let fitted = fitting(&device, &settings, budget.bytes, plan.views.len());
     if fitted != settings {
-        if !gpu.warned {
+        let asked = (settings.photon_resolution, settings.map_resolution);
+        if gpu.lowered != Some(asked) {
             warn!(
-                "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers; the caustic maps use {}² into {}²",
-                settings.photon_resolution, settings.map_resolution, fitted.photon_resolution, fitted.map_resolution
+                "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers or CausticsGpuBudget ({}); the caustic maps use {}² into {}²",
+                settings.photon_resolution, settings.map_resolution, mib(budget.bytes), fitted.photon_resolution, fitted.map_resolution
             );
-            gpu.warned = true;
+            gpu.lowered = Some(asked);
         }
         settings = fitted;
     }
@@ -771,8 +790,10 @@ fn prepare_maps(
         }
     }
     gpu.generators.set(generators);
+    gpu.generators.set_label(Some("caustic_map_generators"));
     gpu.generators.write_buffer(&device, &queue);
     gpu.occluders.set(occluders);
+    gpu.occluders.set_label(Some("caustic_map_occluders"));
     gpu.occluders.write_buffer(&device, &queue);
 
     // Per light view: its uniform and dispatches; scratch sized for all.
@@ -788,6 +809,7 @@ fn prepare_maps(
         let offsets: Vec<u32> = steps.into_iter().map(|s| gpu.steps.push(&s)).collect();
         plans.push((dispatches, offsets));
     }
+    gpu.steps.set_label(Some("caustic_map_steps"));
     gpu.steps.write_buffer(&device, &queue);
     let slots = plans.iter().map(|(d, _)| d.iter().filter(|d| matches!(d.groups, Groups::Indirect(_))).count()).max().unwrap_or(0);
     let size = ScratchSize {
@@ -835,6 +857,7 @@ fn prepare_maps(
             ),
         };
         uniform.set(uniform_value);
+        uniform.set_label(Some("caustic_map_light_view"));
         uniform.write_buffer(&device, &queue);
         let Some(view_binding) = uniform.binding() else { continue };
         let map_group = |instances: BindingResource| {

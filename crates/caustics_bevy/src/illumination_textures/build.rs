@@ -3,6 +3,8 @@
 
 use super::IlluminationTexturesSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
+use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh};
 use crate::technique::CausticTechniqueChoice;
@@ -112,6 +114,8 @@ struct BuildState {
     running: Option<Task<BuildOutput>>,
     warned: HashSet<Entity>,
     warned_settings: bool,
+    /// The settings last asked for that did not fit (warned once).
+    lowered: Option<IlluminationSettings>,
 }
 
 /// Sets up the virtual planes again when a generator, light, receiver, shadow caster,
@@ -129,7 +133,7 @@ fn set_up_planes(
     mut frames: ResMut<IlluminationFrames>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<BuildState>,
-    cpu: Res<crate::CausticsCpuTime>,
+    (cpu, device, budget): (Res<crate::CausticsCpuTime>, Option<Res<RenderDevice>>, Res<CausticsGpuBudget>),
 ) {
     let core_settings = match settings.core() {
         Ok(s) => {
@@ -259,11 +263,43 @@ fn set_up_planes(
         .map(|mesh| Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE })
         .collect();
     let lights = next.lights;
+    let fitted = fitting(core_settings, lights.len(), device.as_deref(), budget.bytes);
+    let builds = !inputs.is_empty() && !lights.is_empty();
+    if builds && fitted != core_settings && state.lowered != Some(core_settings) {
+        warn!(
+            "bevy_caustics: {} lights' illumination textures of {} planes at {}² do not fit this GPU or CausticsGpuBudget ({}); they use {} planes at {}²",
+            lights.len(),
+            core_settings.planes,
+            core_settings.texture_size,
+            mib(budget.bytes),
+            fitted.planes,
+            fitted.texture_size
+        );
+    }
+    state.lowered = (builds && fitted != core_settings).then_some(core_settings);
+    let core_settings = fitted;
     let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
     let clock = cpu.main.clone();
     state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
         clock.time(|| make_frames(inputs, &lights, &receivers, &core_settings, (directions, max_bytes, cache_dir)))
     }));
+}
+
+/// `settings` with the planes and texture size that the device's limits and the budget
+/// allow for `frames` lights' textures (at most 16 bytes a texel and plane: 32-bit
+/// floats) and depth maps (16 bytes a texel, one storage binding): the size halves until
+/// they fit, or reaches 16. Without a render device only the budget bounds them.
+fn fitting(settings: IlluminationSettings, frames: usize, device: Option<&RenderDevice>, budget: u64) -> IlluminationSettings {
+    let (largest, widest, layers) = device.map_or((u64::MAX, u32::MAX, u32::MAX), |d| {
+        (largest_binding(d), d.limits().max_texture_dimension_2d, d.limits().max_texture_array_layers)
+    });
+    let mut fitted = IlluminationSettings { planes: settings.planes.min(layers), ..settings };
+    let texels = |s: &IlluminationSettings| u64::from(s.texture_size).pow(2);
+    let bytes = |s: &IlluminationSettings| texels(s) * (16 * u64::from(s.planes) + 16) * frames as u64;
+    while fitted.texture_size > 16 && (bytes(&fitted) > budget || texels(&fitted) * 16 > largest || fitted.texture_size > widest) {
+        fitted.texture_size /= 2;
+    }
+    fitted
 }
 
 /// The build: each generator's table (made once per key), then each light's frame.

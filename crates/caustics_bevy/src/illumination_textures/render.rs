@@ -306,6 +306,7 @@ fn prepare_frames(
     let old = std::mem::take(&mut gpu.frames);
     for (k, t) in extracted.frames.iter().enumerate() {
         let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine));
+        uniform.set_label(Some("caustic_illumination_frame"));
         uniform.write_buffer(&device, &queue);
         let mut volumes: Vec<GpuVolume> = t.volumes.iter().map(GpuVolume::from).collect();
         let volume_count = volumes.len() as u32;
@@ -314,15 +315,16 @@ fn prepare_frames(
             volumes.push(GpuVolume::default());
         }
         let mut volume_buffer = StorageBuffer::from(volumes);
+        volume_buffer.set_label(Some("caustic_illumination_volumes"));
         volume_buffer.write_buffer(&device, &queue);
         let mut surface = StorageBuffer::from(t.surface.iter().flat_map(surface_texel).collect::<Vec<Vec4>>());
-        surface.set_label(Some("illumination_depth_map"));
+        surface.set_label(Some("caustic_illumination_depth_map"));
         surface.write_buffer(&device, &queue);
         let layers = t.planes.len() as u32;
         let reuse = old.get(k).filter(|f| f.textures.width() == t.size && f.layers.len() as u32 == layers).map(|f| f.textures.clone());
         let textures = reuse.unwrap_or_else(|| {
             device.create_texture(&TextureDescriptor {
-                label: Some("illumination_textures"),
+                label: Some("caustic_illumination_textures"),
                 size: Extent3d { width: t.size, height: t.size, depth_or_array_layers: layers },
                 mip_level_count: 1,
                 sample_count: 1,

@@ -186,6 +186,7 @@ pub(super) fn prepare_receiver_bind_groups(
             uv_transform: albedo.uv_transform,
             fog_enabled: albedo.fog_enabled as u32,
         });
+        uniform.set_label(Some("caustic_receiver_albedo"));
         uniform.write_buffer(&device, &queue);
         let Some(binding) = uniform.binding() else { continue };
         let bind_group = device.create_bind_group(

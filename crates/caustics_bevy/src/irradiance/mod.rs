@@ -551,6 +551,7 @@ fn prepare_irradiance_buffers(
             medium_count,
             media: padded_media,
         });
+        uniform.set_label(Some("caustic_view_settings"));
         uniform.write_buffer(&device, &queue);
         let Some(binding) = uniform.binding() else { continue };
         let bind_group = device.create_bind_group(

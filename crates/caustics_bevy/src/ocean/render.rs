@@ -150,11 +150,11 @@ fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffe
 impl OceanBuffers {
     fn new(device: &RenderDevice, modes: &Arc<OceanModes>, fields: u32) -> Self {
         let bytes = modes.omega.len() as u64 * u64::from(fields) * 8;
-        let field = || device.create_buffer(&BufferDescriptor { label: Some("ocean_fields"), size: bytes, usage: BufferUsages::STORAGE, mapped_at_creation: false });
+        let field = || device.create_buffer(&BufferDescriptor { label: Some("caustic_ocean_fields"), size: bytes, usage: BufferUsages::STORAGE, mapped_at_creation: false });
         Self {
             modes: modes.clone(),
-            amplitudes: storage(device, "ocean_amplitudes", bytemuck::cast_slice(&modes.amplitudes)),
-            omega: storage(device, "ocean_omega", bytemuck::cast_slice(&modes.omega)),
+            amplitudes: storage(device, "caustic_ocean_amplitudes", bytemuck::cast_slice(&modes.amplitudes)),
+            omega: storage(device, "caustic_ocean_omega", bytemuck::cast_slice(&modes.omega)),
             fields: [field(), field()],
         }
     }
@@ -202,6 +202,12 @@ fn prepare_oceans(
         offsets.push(oceans.steps.push(&base));
         planned.push((ocean.entity, vertices, offsets, n, fields));
     }
+    if planned.is_empty() {
+        // No waves to make: the steps' buffer goes back.
+        oceans.steps = DynamicUniformBuffer::default();
+        return;
+    }
+    oceans.steps.set_label(Some("caustic_ocean_fft_steps"));
     oceans.steps.write_buffer(&device, &queue);
     let Some(steps) = oceans.steps.binding() else {
         return;

@@ -10,6 +10,7 @@
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
 use super::render::{GpuCausticVolume, VolumeBuffers};
+use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -286,7 +287,6 @@ type DrawnMeshes<'a> = (&'a RenderAssets<RenderMesh>, &'a MeshAllocator, &'a Ren
 /// missed a mesh's vertices: uploads the topology and occluders that changed, writes
 /// the jobs, sizes the volumes for every triangle of every job and starts the counters
 /// again.
-#[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_build(
     extracted: Res<ExtractedSources>,
     mut build: ResMut<VolumeBuild>,
@@ -294,8 +294,7 @@ pub(super) fn prepare_build(
     pipelines: Res<VolumeBuildPipelines>,
     cache: Res<PipelineCache>,
     (meshes, allocator): (Res<RenderAssets<RenderMesh>>, Res<MeshAllocator>),
-    device: Res<RenderDevice>,
-    queue: Res<RenderQueue>,
+    (device, queue, budget): (Res<RenderDevice>, Res<RenderQueue>, Res<CausticsGpuBudget>),
 ) {
     // A build read back with no volume for the current sources: nothing to draw.
     if let Some((generation, volumes)) = build.counted.lock().ok().and_then(|mut c| c.take()) {
@@ -309,14 +308,6 @@ pub(super) fn prepare_build(
     build.retry = false;
     let build = &mut *build;
     let sources = &extracted.sources;
-    let occluders = match &build.occluders {
-        Some((bvh, buffer)) if Arc::ptr_eq(bvh, &sources.occluders) => buffer.clone(),
-        _ => {
-            let buffer = storage(&device, "caustic_volume_occluders", &sources.occluders.gpu_bytes());
-            build.occluders = Some((sources.occluders.clone(), buffer.clone()));
-            buffer
-        }
-    };
     build.generators.retain(|entity, _| sources.generators.iter().any(|(e, _)| e == entity));
     build.jobs.clear();
     let mut planned = Vec::new();
@@ -342,23 +333,37 @@ pub(super) fn prepare_build(
             }
         }
     }
+    build.jobs.set_label(Some("caustic_volume_jobs"));
     build.jobs.write_buffer(&device, &queue);
     build.dispatches.clear();
     if capacity == 0 || sources.bounds.is_none() {
-        buffers.volumes = None;
+        // Nothing to build: the GPU memory goes back (the counters' readback buffer
+        // once no copy is on its way).
+        (buffers.volumes, buffers.counters, build.occluders) = (None, None, None);
+        build.jobs = DynamicUniformBuffer::default();
+        if !build.reading.load(Ordering::Acquire) {
+            build.staging = None;
+        }
         return;
     }
+    let occluders = match &build.occluders {
+        Some((bvh, buffer)) if Arc::ptr_eq(bvh, &sources.occluders) => buffer.clone(),
+        _ => {
+            let buffer = storage(&device, "caustic_volume_occluders", &sources.occluders.gpu_bytes());
+            build.occluders = Some((sources.occluders.clone(), buffer.clone()));
+            buffer
+        }
+    };
     let volume_bytes = GpuCausticVolume::min_size().get();
-    let limits = device.limits();
-    let bindable = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / volume_bytes;
+    let bindable = largest_binding(&device).min(budget.bytes) / volume_bytes;
     if capacity > bindable {
         if build.clamped != Some(capacity) {
             warn!(
-                "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {} MiB, more than this adapter binds \
-                 ({} MiB): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
+                "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {}, more than this adapter binds \
+                 or CausticsGpuBudget allows ({}): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
                  dropped flux); use coarser generator meshes",
-                (capacity * volume_bytes) >> 20,
-                (bindable * volume_bytes) >> 20
+                mib(capacity * volume_bytes),
+                mib(bindable * volume_bytes)
             );
         }
         build.clamped = Some(capacity);

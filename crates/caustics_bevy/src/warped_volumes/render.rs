@@ -218,6 +218,7 @@ fn prepare_buffers(
         medium_count,
         media,
     });
+    buffers.settings.set_label(Some("caustic_volume_settings"));
     buffers.settings.write_buffer(&device, &queue);
 }
 
@@ -453,16 +454,21 @@ fn prepare_shaft_textures(
 }
 
 /// Gives every caustics view that reads a depth prepass its [`ViewReceiverDepth`],
-/// the size of its irradiance buffer.
+/// the size of its irradiance buffer, and takes it from views without caustics work.
+#[expect(clippy::too_many_arguments)]
 fn prepare_receiver_depth(
     mut commands: Commands,
     views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa)>,
+    others: Query<Entity, (With<ViewReceiverDepth>, Without<ViewCausticIrradiance>)>,
     pipeline: Res<ReceiverDepthPipeline>,
     buffers: Res<VolumeBuffers>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
     cache: Res<PipelineCache>,
 ) {
+    for entity in &others {
+        commands.entity(entity).remove::<ViewReceiverDepth>();
+    }
     for (entity, irradiance, prepass, msaa) in &views {
         let Some(depth) = prepass.depth_view().filter(|_| buffers.volumes.is_some() && !buffers.empty) else {
             commands.entity(entity).remove::<ViewReceiverDepth>();
