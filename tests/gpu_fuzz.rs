@@ -7,6 +7,8 @@
 //! non-negative, and each technique's pass ran on some of them (a technique that does
 //! not apply to a scene — illumination textures on an open surface — falls back).
 //!
+//! The same for convolution caustics with thirty of the fuzzer's adversarial pools.
+//!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
 mod support;
@@ -15,7 +17,8 @@ use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::reference::spawn_scene_content;
 use bevy_caustics::{CausticPassReport, CausticTechnique};
-use caustics_core::fuzz::valid_scene;
+use bevy_caustics::{CausticGenerator, CausticReceiver, DropPebble, PoolRipples};
+use caustics_core::fuzz::{valid_pool, valid_scene};
 use support::render;
 
 const SCENES_PER_TECHNIQUE: usize = 30;
@@ -52,4 +55,57 @@ fn extreme_scenes_give_finite_caustics_with_every_technique() {
         eprintln!("{technique:?}: its pass ran on {ran} of {SCENES_PER_TECHNIQUE} extreme scenes");
         assert!(ran > 0, "{technique:?}: its pass never ran");
     }
+    extreme_pools_give_finite_floors(&mut renderer, camera);
+}
+
+/// Convolution caustics: thirty of the fuzzer's adversarial pools (`valid_pool`: one
+/// texel to 64², cells from a micrometre to a kilometre, waves and damping at their
+/// extremes, grazing to overhead suns from dark to 10³⁰ lux, indices from 1 to 50, from
+/// none to two hundred pebbles on walls and corners), each under its sun with its floor
+/// as a receiver, a few frames while the pebbles ripple.
+fn extreme_pools_give_finite_floors(renderer: &mut HeadlessRenderer, camera: Entity) {
+    let pools = (0..).filter_map(|index| valid_pool(11, index).map(|pool| (index, pool)));
+    let mut ran = 0;
+    for (index, case) in pools.take(SCENES_PER_TECHNIQUE) {
+        let light = case.light;
+        let pool = PoolRipples {
+            columns: case.columns as u32,
+            rows: case.rows as u32,
+            cell_size: case.cell_size,
+            wave_number: case.waves.wave_number,
+            angular_frequency: case.waves.angular_frequency,
+            time_damping: case.waves.time_damping,
+            front_damping: case.waves.front_damping,
+            expiry_height: case.waves.expiry_height,
+            depth: light.depth,
+            exponent: light.exponent,
+            extinction: light.extinction,
+            kernel_radius: light.kernel_radius as u32,
+        };
+        let size = pool.size();
+        let world = renderer.world_mut();
+        let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(size.x, size.y));
+        let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+        let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { alpha_mode: AlphaMode::Blend, ..default() });
+        let sun = Vec3::from_array(light.sun_direction.to_array());
+        world.spawn((Mesh3d(floor), MeshMaterial3d(white), CausticReceiver, Transform::from_xyz(0.0, -light.depth, 0.0)));
+        world.spawn((DirectionalLight { illuminance: light.sun_irradiance, ..default() }, Transform::default().looking_to(sun, if sun.y.abs() > 0.9 { Vec3::X } else { Vec3::Y })));
+        world.spawn((pool, MeshMaterial3d(water), CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(light.ior) }));
+        render(renderer, 1);
+        for &(at, strength) in &case.pebbles {
+            renderer.world_mut().write_message(DropPebble { position: Vec3::new(at.x - 0.5 * size.x, 0.0, at.y - 0.5 * size.y), strength });
+        }
+        render(renderer, 3);
+        let irradiance = renderer.caustic_irradiance(camera).unwrap_or_else(|e| panic!("{e}"));
+        let bad = irradiance.iter().find(|e| !e.is_finite() || e.min_element() < 0.0);
+        assert!(bad.is_none(), "pool {index} ({case:?}): a pixel holds {bad:?}");
+        ran += usize::from(renderer.pass_report().views("pool floor") > 0);
+        let world = renderer.world_mut();
+        let spawned: Vec<Entity> = world.query_filtered::<Entity, Or<(With<Mesh3d>, With<DirectionalLight>, With<PoolRipples>)>>().iter(world).collect();
+        for entity in spawned {
+            world.despawn(entity);
+        }
+    }
+    eprintln!("Convolution: its pass ran on {ran} of {SCENES_PER_TECHNIQUE} extreme pools");
+    assert!(ran > 0, "the convolution pass never ran");
 }

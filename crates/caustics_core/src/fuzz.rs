@@ -23,6 +23,7 @@
 //! [`CountingAllocator`] measures the memory a case takes when a binary installs it as
 //! its global allocator (the CLI and the fuzz test do).
 
+use crate::convolution::ripples::{PoolRipples as Ripples, RippleSettings};
 use crate::convolution::{Boundary, ConvolutionCaustics, ConvolutionSettings, Heightfield, LobeAxis};
 use crate::hierarchical::{CausticMapSettings, PhotonPaths, scene_caustics};
 use crate::illumination_textures::{Cosine, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild};
@@ -153,6 +154,54 @@ fn case(seed: u64, index: u64) -> (Category, Draw) {
 pub fn valid_scene(seed: u64, index: u64) -> Option<(Category, Scene)> {
     let (category, mut draw) = case(seed, index);
     (category != Category::Pool).then(|| scene_case(category, &mut draw).ok()).flatten().map(|(scene, _)| (category, scene))
+}
+
+/// A rippling pool that passes validation, drawn from adversarial parts: what the GPU
+/// convolution pass is fuzzed with. Coordinates are the pool's (x and z from 0 to its
+/// size); the light's `sun_direction` is in the same frame.
+#[derive(Clone, Debug)]
+pub struct PoolCase {
+    pub columns: usize,
+    pub rows: usize,
+    pub cell_size: f32,
+    pub waves: RippleSettings,
+    pub light: ConvolutionSettings,
+    /// Where pebbles fall (in the pool, on its walls and corners) and how high each
+    /// impulse starts (m).
+    pub pebbles: Vec<(glam::Vec2, f32)>,
+}
+
+/// Pool `index` of `seed` when it passes validation (`None` when its grid, waves or
+/// light are refused): one- and two-texel pools, cells from a micrometre to a kilometre,
+/// waves and damping from 10⁻³ to 10⁴, every light of [`Category::Pool`]'s cases, and
+/// from no pebble to two hundred, of zero to ten metres, on the walls and corners.
+pub fn valid_pool(seed: u64, index: u64) -> Option<PoolCase> {
+    let mut draw = Draw(Pcg32::for_photon(seed, 0x9001, index));
+    let (columns, rows) = (draw.pick(&[1, 2, 3, 8, 17, 32, 64]), draw.pick(&[1, 2, 5, 16, 32, 64]));
+    let cell_size = draw.pick(&[1e-6, 1e-3, 0.05, 1.0, 1e3]);
+    let waves = RippleSettings {
+        wave_number: draw.pick(&[1e-3, 1.0, 60.0, 1e4]),
+        angular_frequency: draw.pick(&[1e-3, 1.0, 20.0, 1e4]),
+        time_damping: draw.pick(&[0.0, 0.5, 1e3]),
+        front_damping: draw.pick(&[0.0, 0.5, 1e3]),
+        expiry_height: draw.pick(&[1e-9, 1e-4, 1.0]),
+    };
+    let light = pool_light(&mut draw);
+    Ripples::new(columns, rows, cell_size, waves).ok()?;
+    ConvolutionCaustics::new(&light, columns, rows, cell_size).ok()?;
+    let size = glam::Vec2::new(columns as f32, rows as f32) * cell_size;
+    let count = draw.pick(&[0, 1, 5, 200]);
+    let pebbles = (0..count)
+        .map(|_| {
+            let at = match draw.below(3) {
+                0 => glam::Vec2::new(draw.unit(), draw.unit()),
+                1 => glam::Vec2::new(draw.pick(&[0.0, 1.0]), draw.pick(&[0.0, 1.0])),
+                _ => glam::Vec2::new(draw.pick(&[0.0, 1.0]), draw.unit()),
+            };
+            (at * size, draw.pick(&[0.0, 1e-6, 0.05, -0.05, 10.0]))
+        })
+        .collect();
+    Some(PoolCase { columns, rows, cell_size, waves, light, pebbles })
 }
 
 /// Draws case `index` of `seed` and runs it through every twin.
@@ -560,9 +609,21 @@ fn pool_case(draw: &mut Draw) -> Result<Result<f64, String>, String> {
         heights[at] = draw.pick(&[f32::NAN, f32::INFINITY, 1e30]);
     }
     let heightfield = Heightfield::new(columns, rows, cell, heights).map_err(|e| e.to_string())?;
+    let settings = pool_light(draw);
+    let mut caustics = ConvolutionCaustics::new(&settings, columns, rows, cell).map_err(|e| e.to_string())?;
+    let floor = caustics.irradiance(&heightfield).map_err(|e| e.to_string())?;
+    Ok(finite_all("convolution", "the floor's irradiance", floor.iter().copied()).and_then(|()| {
+        let mean = floor.iter().map(|&e| e as f64).sum::<f64>() / floor.len() as f64;
+        energy_ratio("convolution", mean, settings.sun_irradiance as f64)
+    }))
+}
+
+/// The light of an adversarial pool: the sun from grazing to overhead, from dark to
+/// 10³⁰, indices of refraction and every kernel setting at and past their limits.
+fn pool_light(draw: &mut Draw) -> ConvolutionSettings {
     let elevation: f32 = draw.pick(&[1e-6, 0.01, 0.3, 1.0, std::f32::consts::FRAC_PI_2]);
     let azimuth = draw.range(0.0, std::f32::consts::TAU);
-    let settings = ConvolutionSettings {
+    ConvolutionSettings {
         ior: draw.pick(&[1.0, 1.333, 2.4, 50.0, 0.5]),
         sun_direction: Vec3::new(elevation.cos() * azimuth.cos(), -elevation.sin(), elevation.cos() * azimuth.sin()),
         sun_irradiance: draw.pick(&[0.0, 1.0, 1e5, 1e30]),
@@ -573,13 +634,7 @@ fn pool_case(draw: &mut Draw) -> Result<Result<f64, String>, String> {
         kernel_radius: draw.pick(&[0, 1, 3, 40]),
         boundary: draw.pick(&[Boundary::Mirror, Boundary::Periodic]),
         lobe_axis: draw.pick(&[LobeAxis::Vertical, LobeAxis::RefractedSun]),
-    };
-    let mut caustics = ConvolutionCaustics::new(&settings, columns, rows, cell).map_err(|e| e.to_string())?;
-    let floor = caustics.irradiance(&heightfield).map_err(|e| e.to_string())?;
-    Ok(finite_all("convolution", "the floor's irradiance", floor.iter().copied()).and_then(|()| {
-        let mean = floor.iter().map(|&e| e as f64).sum::<f64>() / floor.len() as f64;
-        energy_ratio("convolution", mean, settings.sun_irradiance as f64)
-    }))
+    }
 }
 
 /// A global allocator that counts the bytes in use and their peak: install it with
