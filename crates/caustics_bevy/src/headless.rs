@@ -122,13 +122,19 @@ pub struct HeadlessRenderer {
 impl HeadlessRenderer {
     /// Builds the app, after checking that an adapter exists.
     pub fn new(width: u32, height: u32) -> Result<Self, HeadlessError> {
-        Self::build(width, height, false, |_| {})
+        Self::build(width, height, false, None, |_| {})
+    }
+
+    /// [`Self::new`] with the asset server reading from `root` instead of `assets/`
+    /// (a folder of glTF files to load as a game would).
+    pub fn with_asset_root(width: u32, height: u32, root: &Path) -> Result<Self, HeadlessError> {
+        Self::build(width, height, false, Some(root), |_| {})
     }
 
     /// [`Self::new`] with more plugins (a game's materials, say), added before the app
     /// is finished as plugins must be.
     pub fn with_plugins<M>(width: u32, height: u32, plugins: impl bevy::app::Plugins<M>) -> Result<Self, HeadlessError> {
-        Self::build(width, height, false, |app| {
+        Self::build(width, height, false, None, |app| {
             app.add_plugins(plugins);
         })
     }
@@ -137,10 +143,10 @@ impl HeadlessRenderer {
     /// queries the adapter has, so that [`Self::gpu_pass_times`] reads every timed
     /// pass's GPU time.
     pub fn timed(width: u32, height: u32) -> Result<Self, HeadlessError> {
-        Self::build(width, height, true, |_| {})
+        Self::build(width, height, true, None, |_| {})
     }
 
-    fn build(width: u32, height: u32, timed: bool, more: impl FnOnce(&mut App)) -> Result<Self, HeadlessError> {
+    fn build(width: u32, height: u32, timed: bool, assets: Option<&Path>, more: impl FnOnce(&mut App)) -> Result<Self, HeadlessError> {
         use bevy::render::settings::{RenderCreation, WgpuSettings};
         let adapter = probe_adapter()?;
         let features = if timed { adapter.timestamps } else { wgpu::Features::empty() };
@@ -149,6 +155,7 @@ impl HeadlessRenderer {
         let plugins = DefaultPlugins
             .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
             .set(RenderPlugin { render_creation, synchronous_pipeline_compilation: true, ..default() })
+            .set(AssetPlugin { file_path: assets.map_or_else(|| AssetPlugin::default().file_path, |root| root.to_string_lossy().into_owned()), ..default() })
             .disable::<WinitPlugin>()
             // Each update renders the frame it extracted, and the render world stays
             // in the app where tests can read the GPU's buffers.
