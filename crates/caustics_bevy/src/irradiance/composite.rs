@@ -1,11 +1,21 @@
-//! The composite: receivers drawn a second time into the transparent phase (after
-//! every opaque surface, sorted with the transparent ones), depth-tested and
-//! additively blended. See the module docs of [`super`].
+//! The composite: receivers drawn a second time, depth-tested against the finished
+//! opaque depth and additively blended, in a phase of their own
+//! ([`CausticComposite3d`]) between Bevy's opaque and transmissive passes — so that
+//! the copy of the opaque image that Bevy's transmission samples already holds the
+//! caustics, and transparent surfaces drawn later blend over them. See the module
+//! docs of [`super`].
 
 use super::{ExtractedReceivers, GpuViewCaustics, ViewCausticIrradiance, ViewCausticWork};
 use crate::components::CausticReceiver;
 use crate::report::PassRecorder;
-use bevy::core_pipeline::core_3d::{CORE_3D_DEPTH_FORMAT, Transparent3d, TransparentSortingInfo3d};
+use bevy::camera::{MainPassResolutionOverride, Viewport};
+use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
+use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
+use bevy::render::camera::ExtractedCamera;
+use bevy::render::diagnostic::RecordDiagnostics;
+use bevy::render::renderer::{RenderContext, ViewQuery};
+use bevy::render::view::{RetainedViewEntity, ViewDepthTexture, ViewTarget};
+use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
 use bevy::ecs::query::ROQueryItem;
 use bevy::ecs::system::{SystemParamItem, lifetimeless::{Read, SRes}};
 use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef};
@@ -20,8 +30,9 @@ use bevy::render::{
     mesh::{RenderMesh, allocator::MeshAllocator},
     render_asset::RenderAssets,
     render_phase::{
-        AddRenderCommand, DrawFunctions, PhaseItem, PhaseItemExtraIndex, RenderCommand, RenderCommandResult,
-        SetItemPipeline, TrackedRenderPass, ViewSortedRenderPhases,
+        AddRenderCommand, CachedRenderPipelinePhaseItem, DrawFunctionId, DrawFunctions, PhaseItem, PhaseItemExtraIndex,
+        RenderCommand, RenderCommandResult, SetItemPipeline, SortedPhaseItem, SortedRenderPhasePlugin, TrackedRenderPass,
+        ViewSortedRenderPhases,
     },
     render_resource::{binding_types::*, *},
     renderer::{RenderDevice, RenderQueue},
@@ -29,6 +40,80 @@ use bevy::render::{
     texture::{FallbackImage, GpuImage},
     view::{ExtractedView, RenderVisibleEntities},
 };
+use bevy::math::FloatOrd;
+use bevy::ecs::entity::EntityHash;
+use indexmap::IndexMap;
+use std::ops::Range;
+
+/// A receiver drawn again with its caustic light: the composite's phase item, sorted
+/// front to back (additive blending needs no order; nearer receivers hide farther
+/// fragments from the depth test).
+pub struct CausticComposite3d {
+    /// The receiver's centre, from which `distance` is measured each frame.
+    pub mesh_center: Vec3,
+    pub distance: f32,
+    pub pipeline: CachedRenderPipelineId,
+    pub entity: (Entity, MainEntity),
+    pub draw_function: DrawFunctionId,
+    pub batch_range: Range<u32>,
+    pub extra_index: PhaseItemExtraIndex,
+    pub indexed: bool,
+}
+
+impl PhaseItem for CausticComposite3d {
+    fn entity(&self) -> Entity {
+        self.entity.0
+    }
+
+    fn main_entity(&self) -> MainEntity {
+        self.entity.1
+    }
+
+    fn draw_function(&self) -> DrawFunctionId {
+        self.draw_function
+    }
+
+    fn batch_range(&self) -> &Range<u32> {
+        &self.batch_range
+    }
+
+    fn batch_range_mut(&mut self) -> &mut Range<u32> {
+        &mut self.batch_range
+    }
+
+    fn extra_index(&self) -> PhaseItemExtraIndex {
+        self.extra_index.clone()
+    }
+
+    fn batch_range_and_extra_index_mut(&mut self) -> (&mut Range<u32>, &mut PhaseItemExtraIndex) {
+        (&mut self.batch_range, &mut self.extra_index)
+    }
+}
+
+impl SortedPhaseItem for CausticComposite3d {
+    type SortKey = std::cmp::Reverse<FloatOrd>;
+
+    fn sort_key(&self) -> Self::SortKey {
+        std::cmp::Reverse(FloatOrd(self.distance))
+    }
+
+    fn recalculate_sort_keys(items: &mut IndexMap<(Entity, MainEntity), Self, EntityHash>, view: &ExtractedView) {
+        let rangefinder = view.rangefinder3d();
+        for item in items.values_mut() {
+            item.distance = rangefinder.distance(&item.mesh_center);
+        }
+    }
+
+    fn indexed(&self) -> bool {
+        self.indexed
+    }
+}
+
+impl CachedRenderPipelinePhaseItem for CausticComposite3d {
+    fn cached_pipeline(&self) -> CachedRenderPipelineId {
+        self.pipeline
+    }
+}
 
 /// The composite's pipeline: Bevy's mesh pipeline layouts plus the view's caustic
 /// buffer (group 1) and the receiver's albedo (group 3).
@@ -40,11 +125,77 @@ pub struct CausticCompositePipeline {
     shader: Handle<Shader>,
 }
 
-pub(super) fn build(render_app: &mut SubApp) {
+pub(super) fn build(app: &mut App) {
+    app.add_plugins(SortedRenderPhasePlugin::<CausticComposite3d, MeshPipeline>::new(default()));
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
     render_app
         .init_resource::<SpecializedMeshPipelines<CausticCompositePipeline>>()
         .init_resource::<ReceiverBindGroups>()
-        .add_render_command::<Transparent3d, DrawCausticComposite>();
+        .init_resource::<DrawFunctions<CausticComposite3d>>()
+        .add_render_command::<CausticComposite3d, DrawCausticComposite>()
+        .add_systems(ExtractSchedule, extract_phases)
+        .add_systems(Render, bevy::render::render_phase::sort_phase_system::<CausticComposite3d>.in_set(RenderSystems::PhaseSort))
+        .add_systems(
+            Core3d,
+            draw_composite
+                .after(bevy::core_pipeline::core_3d::main_opaque_pass_3d)
+                .before(bevy::pbr::main_transmissive_pass_3d)
+                .before(bevy::core_pipeline::core_3d::main_transparent_pass_3d)
+                .in_set(Core3dSystems::MainPass),
+        );
+}
+
+/// Gives every 3D camera with caustics work its composite phase for the frame, and
+/// lets those of other cameras go.
+fn extract_phases(
+    mut phases: ResMut<ViewSortedRenderPhases<CausticComposite3d>>,
+    cameras: Extract<Query<(Entity, &Camera), (With<Camera3d>, With<crate::CausticsSettings>)>>,
+    mut live: Local<bevy::platform::collections::HashSet<RetainedViewEntity>>,
+) {
+    live.clear();
+    for (entity, camera) in &cameras {
+        if camera.is_active {
+            let view = RetainedViewEntity::new(entity.into(), None, 0);
+            phases.prepare_for_new_frame(view);
+            live.insert(view);
+        }
+    }
+    phases.retain(|view, _| live.contains(view));
+}
+
+/// Draws the view's composite phase onto its image, loading the opaque pass's colour
+/// and depth.
+fn draw_composite(
+    world: &World,
+    view: ViewQuery<(&ExtractedCamera, &ExtractedView, &ViewTarget, &ViewDepthTexture, Option<&MainPassResolutionOverride>)>,
+    phases: Res<ViewSortedRenderPhases<CausticComposite3d>>,
+    mut ctx: RenderContext,
+) {
+    let view_entity = view.entity();
+    let (camera, extracted_view, target, depth, resolution_override) = view.into_inner();
+    let Some(phase) = phases.get(&extracted_view.retained_view_entity).filter(|p| !p.items.is_empty()) else {
+        return;
+    };
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+        label: Some("caustic_composite"),
+        color_attachments: &[Some(target.get_color_attachment())],
+        depth_stencil_attachment: Some(depth.get_attachment(StoreOp::Store)),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    let span = diagnostics.pass_span(&mut pass, "caustics/composite");
+    if let Some(viewport) = Viewport::from_viewport_and_override(camera.viewport.as_ref(), resolution_override) {
+        pass.set_camera_viewport(&viewport);
+    }
+    if let Err(err) = phase.render(&mut pass, world, view_entity) {
+        error!("bevy_caustics: the caustic composite did not draw: {err:?}");
+    }
+    span.end(&mut pass);
 }
 
 pub(super) fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipeline>, asset_server: Res<AssetServer>) {
@@ -199,14 +350,14 @@ pub(super) fn prepare_receiver_bind_groups(
 }
 
 /// Queues every visible receiver of every view with caustics work into the view's
-/// transparent phase.
+/// composite phase.
 #[expect(clippy::too_many_arguments)]
 pub(super) fn queue(
-    draw_functions: Res<DrawFunctions<Transparent3d>>,
+    draw_functions: Res<DrawFunctions<CausticComposite3d>>,
     pipeline: Res<CausticCompositePipeline>,
     mut pipelines: ResMut<SpecializedMeshPipelines<CausticCompositePipeline>>,
     pipeline_cache: Res<PipelineCache>,
-    mut phases: ResMut<ViewSortedRenderPhases<Transparent3d>>,
+    mut phases: ResMut<ViewSortedRenderPhases<CausticComposite3d>>,
     views: Query<(&ExtractedView, &RenderVisibleEntities), With<ViewCausticWork>>,
     view_key_cache: Res<ViewKeyCache>,
     render_meshes: Res<RenderAssets<RenderMesh>>,
@@ -245,10 +396,8 @@ pub(super) fn queue(
                 batched.as_deref(),
             )
             .transform_point3(mesh.aabb_center);
-            // Keyed by the render entity (materials use a placeholder) so the receiver's
-            // own transparent draw, if any, is kept.
-            phase.add_transient(Transparent3d {
-                sorting_info: TransparentSortingInfo3d::Sorted { mesh_center: center, depth_bias: 0.0 },
+            phase.add_transient(CausticComposite3d {
+                mesh_center: center,
                 entity: (*render_entity, *main_entity),
                 draw_function,
                 pipeline: pipeline_id,

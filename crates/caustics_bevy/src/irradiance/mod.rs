@@ -9,7 +9,9 @@
 //! opaque pass and depth-tested against it, adding the Lambertian radiance
 //! `albedo/π · E · exposure` — what `bevy_pbr` adds for the same irradiance from a
 //! light — so caustics land on receivers only, with their unmodified
-//! `StandardMaterial` colour and texture, and only where they are visible.
+//! `StandardMaterial` colour and texture, and only where they are visible. It runs
+//! before Bevy's transmissive pass copies the opaque image, so glass and water drawn
+//! with `specular_transmission` show the caustics behind them.
 //!
 //! An application can supply the buffer itself with [`InjectedIrradiance`] (the demo
 //! injects the CPU reference tracer's irradiance this way). A camera opts in with
@@ -354,7 +356,7 @@ pub(crate) fn build(app: &mut App) {
             ),
         )
         .add_systems(Core3d, timed(&cpu.render, inject_irradiance).after(Core3dSystems::Prepass).before(Core3dSystems::MainPass));
-    composite::build(render_app);
+    composite::build(app);
 }
 
 /// A material whose receivers' albedo the composite reads: its `StandardMaterial`
