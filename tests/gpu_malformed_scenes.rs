@@ -4,8 +4,9 @@
 //! loads or fails, never hangs — within a bounded number of frames; frames keep coming
 //! back with every pixel of the caustic irradiance buffer finite, whatever the meshes
 //! hold (NaN or infinite positions and normals, zero scales, absurd counts: their
-//! generators are skipped with a warning); and the controls load, are tagged and cast
-//! caustics. The CLI's run of the same corpus is `crates/caustics_cli/tests/malformed.rs`.
+//! generators are skipped with a warning); the controls load and are tagged; and the
+//! app agrees with the CLI: what it renders casts caustics, a generator mesh it refuses
+//! casts none. The CLI's run of the same corpus is `crates/caustics_cli/tests/malformed.rs`.
 //!
 //! Two files give Bevy a mesh without positions, which Bevy's own prepass and shadow
 //! pipelines cannot draw (wgpu's validation fails and Bevy quits, with or without this
@@ -36,6 +37,14 @@ enum Ended {
     Failed(String),
 }
 
+/// The CLI's outcome for `file` (`renders` or `fails`) and its message, from
+/// `expected.tsv`.
+fn cli_outcome<'a>(expected: &'a str, file: &str) -> (&'a str, &'a str) {
+    let line = expected.lines().find(|l| l.split('\t').next() == Some(file)).unwrap_or_else(|| panic!("{file} is not in expected.tsv"));
+    let mut fields = line.split('\t').skip(1);
+    (fields.next().unwrap_or_default(), fields.next().unwrap_or_default())
+}
+
 #[test]
 fn malformed_files_load_or_fail_cleanly_in_an_app() {
     let corpus = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/malformed");
@@ -47,6 +56,7 @@ fn malformed_files_load_or_fail_cleanly_in_an_app() {
     files.sort();
     assert!(files.len() >= 30, "the corpus has {} glTF and GLB files", files.len());
 
+    let expected = std::fs::read_to_string(corpus.join("expected.tsv")).expect("the corpus's expected outcomes");
     let mut renderer = HeadlessRenderer::with_asset_root(SIZE, SIZE, &corpus).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let camera = renderer.world_mut().spawn((support::top_down_camera(target, 4.0, SIZE, Vec3::ZERO), Msaa::Off)).id();
@@ -107,7 +117,15 @@ fn malformed_files_load_or_fail_cleanly_in_an_app() {
         eprintln!("{file}: {ended:?}{}", if lit { ", caustics drawn" } else { "" });
         if control {
             assert!(matches!(ended, Ended::Loaded { generators: 1.., receivers: 1.., .. }), "{file}: the control is not tagged: {ended:?}");
-            assert!(lit, "{file}: the control casts no caustics");
+        }
+        // The app agrees with the CLI: a file it renders casts caustics here too, and a
+        // generator mesh it refuses (`glass.glass: …`) is skipped here.
+        match cli_outcome(&expected, file) {
+            ("renders", _) => assert!(lit, "{file}: the CLI renders it, and it casts no caustics here"),
+            ("fails", why) if why.starts_with("glass.glass:") && matches!(ended, Ended::Loaded { .. }) => {
+                assert!(!lit, "{file}: the CLI refuses its generator ({why}), and it casts caustics here")
+            }
+            _ => {}
         }
         outcomes.push(ended);
         let world = renderer.world_mut();

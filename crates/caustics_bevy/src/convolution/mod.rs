@@ -147,7 +147,7 @@ pub struct PoolRipplesPlugin;
 
 impl Plugin for PoolRipplesPlugin {
     fn build(&self, app: &mut App) {
-        app.register_type::<PoolRipples>().add_message::<DropPebble>();
+        app.register_type::<PoolRipples>().add_message::<DropPebble>().init_resource::<crate::CausticsGpuBudget>();
         ripples::build(app);
     }
 }

@@ -144,6 +144,10 @@ struct GatherState {
 /// The triangle indices of a mesh; an error without triangles or with an index past
 /// its vertices.
 fn triangle_indices(mesh: &Mesh) -> Result<(usize, Vec<u32>), String> {
+    let topology = mesh.primitive_topology();
+    if topology != bevy::mesh::PrimitiveTopology::TriangleList {
+        return Err(format!("is a {topology:?}, not a triangle list"));
+    }
     let vertices = mesh.count_vertices();
     let indices: Vec<u32> = match mesh.indices() {
         Some(Indices::U16(i)) => i.iter().map(|&i| u32::from(i)).collect(),
@@ -158,6 +162,22 @@ fn triangle_indices(mesh: &Mesh) -> Result<(usize, Vec<u32>), String> {
         return Err(format!("has index {bad} past its {vertices} vertices"));
     }
     Ok((vertices, indices[..triangles].to_vec()))
+}
+
+/// What makes `mesh`'s first unusable vertex so: a position that is not finite, or a
+/// normal that is NaN, infinite or zero. The GPU build would drop its triangles
+/// without a word; the generator is skipped with a warning instead, as the other
+/// techniques skip such a mesh (`core_mesh`).
+fn unusable_vertex(mesh: &Mesh) -> Option<String> {
+    use bevy::mesh::VertexAttributeValues::Float32x3;
+    let first = |attribute, bad: fn(&Vec3) -> bool| match mesh.attribute(attribute) {
+        Some(Float32x3(values)) => values.iter().map(|v| Vec3::from_array(*v)).position(|v| bad(&v)),
+        _ => None,
+    };
+    if let Some(vertex) = first(Mesh::ATTRIBUTE_POSITION, |p| !p.is_finite()) {
+        return Some(format!("has vertex {vertex} with a position that is not finite"));
+    }
+    first(Mesh::ATTRIBUTE_NORMAL, |n| !n.is_finite() || *n == Vec3::ZERO).map(|vertex| format!("has vertex {vertex} with a normal that is NaN, infinite or zero"))
 }
 
 impl Topology {
@@ -271,7 +291,11 @@ fn gather_sources(
         let topology = match state.topologies.get(&entity) {
             Some(known) if known.fits(mesh) => Ok(known.clone()),
             _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
-        };
+        }
+        .and_then(|topology| match unusable_vertex(mesh) {
+            Some(problem) => Err(problem),
+            None => Ok(topology),
+        });
         match topology {
             Ok(topology) => {
                 state.warned.remove(&entity);
