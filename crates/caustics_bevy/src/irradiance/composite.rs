@@ -147,11 +147,14 @@ pub(super) fn build(app: &mut App) {
         );
 }
 
+/// The 3D cameras that show caustics.
+type CausticsCameras = Query<'static, 'static, (Entity, &'static Camera), (With<Camera3d>, With<crate::CausticsSettings>)>;
+
 /// Gives every 3D camera with caustics work its composite phase for the frame, and
 /// lets those of other cameras go.
 fn extract_phases(
     mut phases: ResMut<ViewSortedRenderPhases<CausticComposite3d>>,
-    cameras: Extract<Query<(Entity, &Camera), (With<Camera3d>, With<crate::CausticsSettings>)>>,
+    cameras: Extract<CausticsCameras>,
     mut live: Local<bevy::platform::collections::HashSet<RetainedViewEntity>>,
 ) {
     live.clear();
