@@ -267,10 +267,10 @@ fn set_up_planes(
     let builds = !inputs.is_empty() && !lights.is_empty();
     if builds && fitted != core_settings && state.lowered != Some(core_settings) {
         warn!(
-            "bevy_caustics: {} lights' illumination textures of {} planes at {}² do not fit this GPU or CausticsGpuBudget ({}); they use {} planes at {}²",
-            lights.len(),
+            "bevy_caustics: illumination textures of {} planes at {}² for {} light(s) do not fit this GPU or CausticsGpuBudget ({}); they use {} planes at {}²",
             core_settings.planes,
             core_settings.texture_size,
+            lights.len(),
             mib(budget.bytes),
             fitted.planes,
             fitted.texture_size
