@@ -1,15 +1,21 @@
 //! An egui window showing what the caustics plugin does: the entities it sees, the
-//! technique each generator draws with and why, the passes that ran in the last frame,
-//! and every invalid entity with its reason.
-//! Behind the `egui` cargo feature.
+//! technique each generator draws with and why, with a switch to any other, the passes
+//! that ran in the last frame with their GPU times (timestamp queries, through Bevy's
+//! `RenderDiagnosticsPlugin`) and a running graph of them, and every invalid entity
+//! with its reason. Behind the `egui` cargo feature.
 
-use crate::{CausticGenerator, CausticPassReport, CausticReceiver, InvalidCausticParams, ParticipatingMedium};
+use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
+use crate::technique::CausticTechniqueChoice;
+use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
+use bevy::render::diagnostic::RenderDiagnosticsPlugin;
 /// The egui integration the panel uses, for applications that add windows of their own.
 pub use bevy_egui;
 use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 
-/// Adds the "Caustics" window (and `EguiPlugin` if the app has none).
+/// Adds the "Caustics" window, and `EguiPlugin` and `RenderDiagnosticsPlugin` if the
+/// app has none. The GPU times need the adapter's `TIMESTAMP_QUERY` feature, which
+/// Bevy requests by default where the adapter has it.
 pub struct CausticsDebugPanelPlugin;
 
 impl Plugin for CausticsDebugPanelPlugin {
@@ -17,30 +23,66 @@ impl Plugin for CausticsDebugPanelPlugin {
         if !app.is_plugin_added::<EguiPlugin>() {
             app.add_plugins(EguiPlugin::default());
         }
+        if !app.is_plugin_added::<RenderDiagnosticsPlugin>() {
+            app.add_plugins(RenderDiagnosticsPlugin);
+        }
         app.add_systems(EguiPrimaryContextPass, panel);
     }
 }
 
+/// Every choice a generator can ask for, as the panel's switch offers them.
+const TECHNIQUES: [(CausticTechnique, &str); 5] = [
+    (CausticTechnique::Auto, "Auto"),
+    (CausticTechnique::WarpedVolumes, "warped volumes"),
+    (CausticTechnique::IlluminationTextures, "illumination textures"),
+    (CausticTechnique::Convolution, "convolution"),
+    (CausticTechnique::HierarchicalMaps, "hierarchical maps"),
+];
+
+/// The spans the graph draws, one colour each in this order.
+const COLOURS: [egui::Color32; 6] = [
+    egui::Color32::from_rgb(102, 194, 165),
+    egui::Color32::from_rgb(252, 141, 98),
+    egui::Color32::from_rgb(141, 160, 203),
+    egui::Color32::from_rgb(231, 138, 195),
+    egui::Color32::from_rgb(166, 216, 84),
+    egui::Color32::from_rgb(255, 217, 47),
+];
+
+#[allow(clippy::too_many_arguments)]
 fn panel(
     mut contexts: EguiContexts,
     report: Res<CausticPassReport>,
-    generators: Query<(), With<CausticGenerator>>,
+    diagnostics: Option<Res<DiagnosticsStore>>,
+    mut generators: Query<(Entity, &mut CausticGenerator, Option<&CausticTechniqueChoice>)>,
     receivers: Query<(), With<CausticReceiver>>,
     media: Query<(), With<ParticipatingMedium>>,
     invalid: Query<(Entity, &InvalidCausticParams)>,
     names: Query<&Name>,
 ) -> Result {
     let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
-    egui::Window::new("Caustics").default_width(280.0).show(contexts.ctx_mut()?, |ui| {
-        ui.label(format!(
-            "{} generators, {} receivers, {} media",
-            generators.iter().count(),
-            receivers.iter().count(),
-            media.iter().count()
-        ));
+    let passes = diagnostics.as_deref().map(gpu_passes).unwrap_or_default();
+    egui::Window::new("Caustics").default_width(320.0).show(contexts.ctx_mut()?, |ui| {
+        ui.label(format!("{} generators, {} receivers, {} media", generators.iter().count(), receivers.iter().count(), media.iter().count()));
         ui.separator();
-        for (entity, choice) in &report.generators {
-            ui.label(format!("{}: {choice}", label(*entity)));
+        for (entity, mut generator, choice) in &mut generators {
+            let asked = generator.technique;
+            let mut technique = asked;
+            ui.horizontal(|ui| {
+                ui.label(label(entity));
+                egui::ComboBox::from_id_salt(entity)
+                    .selected_text(TECHNIQUES.iter().find(|(t, _)| *t == asked).map_or("?", |(_, name)| name))
+                    .show_ui(ui, |ui| {
+                        for (t, name) in TECHNIQUES {
+                            ui.selectable_value(&mut technique, t, name);
+                        }
+                    });
+            });
+            let drawn = choice.map_or_else(|| "no technique (see below)".to_string(), |c| c.0.to_string());
+            ui.label(egui::RichText::new(format!("  {drawn}")).small());
+            if technique != asked {
+                generator.technique = technique;
+            }
         }
         ui.separator();
         ui.label("Passes in the last frame:");
@@ -50,9 +92,69 @@ fn panel(
         for (pass, views) in &report.passes {
             ui.label(format!("  {pass}: {views} view(s)"));
         }
+        ui.separator();
+        if passes.is_empty() {
+            ui.label("GPU times: none (the adapter has no timestamp queries, or no pass ran)");
+        } else {
+            ui.label("GPU time this frame (ms):");
+            for (i, pass) in passes.iter().enumerate() {
+                ui.colored_label(COLOURS[i % COLOURS.len()], format!("  {}: {:.3}", pass.span, pass.history.last().copied().unwrap_or(0.0)));
+            }
+            graph(ui, &passes);
+        }
         for (entity, InvalidCausticParams(reason)) in &invalid {
             ui.colored_label(egui::Color32::YELLOW, format!("{} skipped: {reason}", label(entity)));
         }
     });
     Ok(())
+}
+
+/// A caustics pass's GPU times (ms), oldest first, ending with this frame's.
+struct GpuPass {
+    span: String,
+    history: Vec<f64>,
+}
+
+/// The plugin's GPU spans (`caustics/…`, `caustic_maps/…`, …) that ran in the newest
+/// frame whose timestamps have arrived, with the history Bevy keeps of each.
+fn gpu_passes(store: &DiagnosticsStore) -> Vec<GpuPass> {
+    let spans: Vec<_> = store
+        .iter()
+        .filter_map(|d| {
+            let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+            span.starts_with("caustic").then_some((span, d.measurement()?.time, d))
+        })
+        .collect();
+    let newest = spans.iter().map(|(_, time, _)| *time).max();
+    let mut passes: Vec<GpuPass> = spans
+        .into_iter()
+        .filter(|(_, time, _)| Some(*time) == newest)
+        .map(|(span, _, d)| GpuPass { span: span.to_owned(), history: d.values().copied().collect() })
+        .collect();
+    passes.sort_by(|a, b| a.span.cmp(&b.span));
+    passes
+}
+
+/// Each pass's GPU time over the frames Bevy keeps, one line each, on a shared scale.
+fn graph(ui: &mut egui::Ui, passes: &[GpuPass]) {
+    let (response, painter) = ui.allocate_painter(egui::vec2(ui.available_width(), 90.0), egui::Sense::hover());
+    let rect = response.rect;
+    painter.rect_filled(rect, 2.0, egui::Color32::from_gray(24));
+    let top = passes.iter().flat_map(|p| p.history.iter().copied()).fold(0.0, f64::max).max(1e-3);
+    let frames = passes.iter().map(|p| p.history.len()).max().unwrap_or(0).max(2);
+    for (i, pass) in passes.iter().enumerate() {
+        // Right-aligned: the newest frame at the right edge for every span.
+        let start = frames - pass.history.len();
+        let points = pass
+            .history
+            .iter()
+            .enumerate()
+            .map(|(k, ms)| {
+                let x = rect.left() + rect.width() * (start + k) as f32 / (frames - 1) as f32;
+                egui::pos2(x, rect.bottom() - rect.height() * (ms / top) as f32)
+            })
+            .collect();
+        painter.add(egui::Shape::line(points, egui::Stroke::new(1.5, COLOURS[i % COLOURS.len()])));
+    }
+    painter.text(rect.left_top() + egui::vec2(4.0, 2.0), egui::Align2::LEFT_TOP, format!("{top:.2} ms"), egui::FontId::monospace(10.0), egui::Color32::GRAY);
 }
