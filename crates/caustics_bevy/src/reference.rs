@@ -163,22 +163,114 @@ pub fn bevy_mesh(mesh: &TriMesh) -> Mesh {
 /// through generators — the surface the composite shades, since Bevy draws
 /// generators without refraction. Row-major, zero where no receiver is seen.
 pub fn view_irradiance(tracer: &PhotonTracer, photons: &PhotonMap, camera: &PinholeCamera) -> Vec<Vec3> {
+    view_irradiance_on(tracer, photons, camera, |_| true).into_iter().map(|e| e.unwrap_or(Vec3::ZERO)).collect()
+}
+
+/// [`view_irradiance`] on the receivers `shown` (by index in the scene) only: `None`
+/// where a pixel sees no receiver, or one that is not shown (an occluder, say).
+pub fn view_irradiance_on(tracer: &PhotonTracer, photons: &PhotonMap, camera: &PinholeCamera, shown: impl Fn(usize) -> bool + Sync) -> Vec<Option<Vec3>> {
     (0..camera.width * camera.height)
         .into_par_iter()
         .map(|i| {
             let (mut origin, dir) = camera.ray(i % camera.width, i / camera.width);
             // A few generator layers at most (both faces of a closed glass object).
             for _ in 0..8 {
-                let Some(hit) = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY) else { break };
+                let hit = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY)?;
                 let p = origin + dir * hit.t;
-                if let Surface::Receiver(_) = hit.surface {
-                    return to_bevy(photons.irradiance_at(p, hit.geometric_normal));
+                if let Surface::Receiver(index) = hit.surface {
+                    return shown(index as usize).then(|| to_bevy(photons.irradiance_at(p, hit.geometric_normal)));
                 }
                 origin = p + dir * (1e-4 * (1.0 + p.abs().max_element()));
             }
-            Vec3::ZERO
+            None
         })
         .collect()
+}
+
+/// The scene the caustics plugin sees in `world` now, as the core crate's: every
+/// valid, visible [`CausticGenerator`] (whatever its technique), the visible
+/// [`CausticReceiver`]s with their `StandardMaterial` base colour as albedo, then every
+/// other mesh that blocks caustic light ([`blocks_caustic_light`]) as a receiver too,
+/// and every visible light. Returns it with the number of its receivers that are
+/// `CausticReceiver`s (they come first). A mesh that is not loaded or that the core
+/// refuses is left out and named in the error list.
+pub fn scene_from_world(world: &mut World) -> (Scene, usize, Vec<String>) {
+    use caustics_core::scene::{Generator, Receiver};
+    let mut scene = Scene::default();
+    let mut skipped = Vec::new();
+    let mut generators = world.query_filtered::<(Entity, &CausticGenerator, MeshComponents), Without<crate::InvalidCausticParams>>();
+    let mut meshes_of = world.query_filtered::<(Entity, OccluderComponents, Option<&MeshMaterial3d<StandardMaterial>>), Without<CausticGenerator>>();
+    let mut lights = world.query_filtered::<LightComponents, AnyLight>();
+    let meshes = world.resource::<Assets<Mesh>>();
+    let materials = world.resource::<Assets<StandardMaterial>>();
+    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match meshes.get(&mesh.0).map(|m| core_mesh(m, transform)) {
+        Some(Ok(mesh)) => Some(mesh),
+        Some(Err(e)) => {
+            skipped.push(format!("{entity}: {e}"));
+            None
+        }
+        None => {
+            skipped.push(format!("{entity}: its mesh is not loaded"));
+            None
+        }
+    };
+    for (entity, generator, (mesh, transform, visible, _)) in generators.iter(world) {
+        if let Some(mesh) = visible.get().then(|| core(entity, mesh, transform)).flatten() {
+            scene.generators.push(Generator { mesh, interaction: generator.specular_interaction(), double_sided: generator.double_sided });
+        }
+    }
+    let mut occluders = Vec::new();
+    for (entity, ((mesh, transform, visible, _), receiver, no_shadows), material) in meshes_of.iter(world) {
+        if !blocks_caustic_light(visible, receiver, no_shadows) {
+            continue;
+        }
+        let Some(mesh) = core(entity, mesh, transform) else { continue };
+        let c = material.and_then(|m| materials.get(&m.0)).map_or(LinearRgba::WHITE, |m| m.base_color.to_linear());
+        let receiver_of = Receiver { mesh, albedo: glam::Vec3::new(c.red, c.green, c.blue) };
+        if receiver {
+            scene.receivers.push(receiver_of);
+        } else {
+            occluders.push(receiver_of);
+        }
+    }
+    let shown = scene.receivers.len();
+    scene.receivers.extend(occluders);
+    for (directional, point, spot, transform, visible) in lights.iter(world) {
+        if let Some(light) = visible.get().then(|| core_light(directional, point, spot, transform)).flatten() {
+            scene.lights.push(light);
+        }
+    }
+    (scene, shown, skipped)
+}
+
+/// The ground truth of a view: `scene` traced with `photons` per light, gathered with
+/// a kernel of `radius` metres at the surface each pixel of `camera` sees, on the first
+/// `shown` receivers only (as [`scene_from_world`] orders them). `progress(done,
+/// total)` is called between batches of photons.
+pub fn trace_view(
+    scene: &Scene,
+    shown: usize,
+    camera: &PinholeCamera,
+    photons: u64,
+    radius: f32,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<Vec<Option<Vec3>>, String> {
+    use caustics_core::estimate::PhotonList;
+    use caustics_core::tracer::TraceSettings;
+    let tracer = PhotonTracer::new(scene).map_err(|e| e.to_string())?;
+    let mut list = PhotonList::default();
+    tracer.trace(&TraceSettings { photons_per_light: photons, ..default() }, &mut list, progress);
+    let map = PhotonMap::new(list.0, radius);
+    Ok(view_irradiance_on(&tracer, &map, camera, |i| i < shown))
+}
+
+/// Relative L2 error (`caustics_core::metrics::relative_l2`, of the mean of RGB, as the
+/// bench measures) of a view's caustic irradiance against [`trace_view`]'s, over the
+/// pixels where the reference sees a shown receiver; `None` when there are none.
+pub fn view_error(image: &[Vec3], reference: &[Option<Vec3>]) -> Option<f32> {
+    let mean = |e: Vec3| (e.x + e.y + e.z) / 3.0;
+    let (a, b): (Vec<f32>, Vec<f32>) = image.iter().zip(reference).filter_map(|(e, r)| Some((mean(*e), mean((*r)?)))).unzip();
+    (!b.is_empty()).then(|| caustics_core::metrics::relative_l2(&a, &b))
 }
 
 /// The pinhole camera that matches a Bevy perspective camera at `transform`.
@@ -305,4 +397,48 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, technique: Option<C
     }
     // Core scenes are lit by their lights alone.
     world.insert_resource(bevy::light::GlobalAmbientLight { brightness: 0.0, ..default() });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A mesh entity as the plugin's systems leave it: placed and visible (or not).
+    fn place(world: &mut World, mesh: Mesh, at: Vec3, visible: bool) -> EntityWorldMut<'_> {
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(mesh);
+        let visibility = if visible { InheritedVisibility::VISIBLE } else { InheritedVisibility::HIDDEN };
+        world.spawn((Mesh3d(mesh), GlobalTransform::from_translation(at), visibility))
+    }
+
+    #[test]
+    fn the_world_becomes_the_scene_the_techniques_see_and_its_view_is_measured_on_receivers_only() {
+        let mut world = World::new();
+        world.insert_resource(Assets::<Mesh>::default());
+        world.insert_resource(Assets::<StandardMaterial>::default());
+        let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::linear_rgb(0.5, 0.5, 0.5), ..default() });
+        place(&mut world, Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh().build(), Vec3::ZERO, true).insert((CausticReceiver, MeshMaterial3d(grey)));
+        // An occluder on the floor's left half, a hidden receiver, a glass ball over the right half.
+        place(&mut world, Cuboid::new(1.0, 0.2, 4.0).mesh().build(), Vec3::new(-1.0, 0.1, 0.0), true);
+        place(&mut world, Plane3d::new(Vec3::Y, Vec2::splat(9.0)).mesh().build(), Vec3::Y * 0.05, false).insert(CausticReceiver);
+        place(&mut world, Sphere::new(0.3).mesh().ico(3).expect("an icosphere"), Vec3::new(1.0, 0.8, 0.0), true).insert(CausticGenerator::refractive(1.5));
+        world.spawn((DirectionalLight { illuminance: 1000.0, ..default() }, GlobalTransform::from(Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)), InheritedVisibility::VISIBLE));
+
+        let (scene, shown, skipped) = scene_from_world(&mut world);
+        assert!(skipped.is_empty(), "{skipped:?}");
+        assert_eq!((scene.generators.len(), scene.receivers.len(), shown, scene.lights.len()), (1, 2, 1, 1));
+        assert_eq!(scene.receivers[0].albedo, glam::Vec3::splat(0.5));
+        assert!(matches!(scene.lights[0].kind, LightKind::Directional { irradiance: 1000.0, .. }));
+
+        // Straight down on the floor: the occluder's pixels are not measured, the floor's are.
+        let camera = PinholeCamera { position: glam::Vec3::Y * 4.0, look_at: glam::Vec3::ZERO, up: glam::Vec3::Z, fov_y: 0.9, width: 48, height: 48 };
+        let reference = trace_view(&scene, shown, &camera, 1 << 18, 0.05, &|_, _| {}).expect("a valid scene");
+        let measured = reference.iter().filter(|e| e.is_some()).count();
+        assert!((48 * 48 / 4..48 * 48 * 3 / 4).contains(&measured), "{measured} of {} pixels on the floor", 48 * 48);
+        // The ball's light lands under it, on the floor.
+        assert!(reference.iter().flatten().any(|e| e.x > 1000.0), "a focus brighter than the light");
+        let same: Vec<Vec3> = reference.iter().map(|e| e.unwrap_or(Vec3::splat(1e9))).collect();
+        assert_eq!(view_error(&same, &reference), Some(0.0), "pixels off the receivers do not count");
+        assert_eq!(view_error(&vec![Vec3::ZERO; same.len()], &reference), Some(1.0));
+        assert_eq!(view_error(&same, &vec![None; same.len()]), None);
+    }
 }
