@@ -1,119 +1,465 @@
-//! The main demo: a rippled pool under the sun, its ripples moving. The caustics on
-//! the pool floor are the plugin's warped caustic volumes, rebuilt every frame from
-//! the animated water mesh. With `--reference` they come instead from the
-//! ground-truth photon tracer (`caustics_core`, still water), evaluated at the surface
-//! each pixel sees and handed to the plugin as injected irradiance.
+//! The main demo: a tiled pool under the sun, with a shelf and steps, a ladder and a
+//! glass ball bobbing on the water. Every caustics generator is on
+//! `CausticTechnique::Auto`, so the scene is also the proof of the default: the rippling
+//! water (a pool) draws with warped caustic volumes, onto the floor, the walls and the
+//! steps, with light shafts in the water (a participating medium); the ball (a closed
+//! refractor) with hierarchical caustic maps, its light through two interfaces spread
+//! around its shadow on the floor. The water is Bevy's `specular_transmission`: the
+//! pool is seen through it, caustics included, and the sky is reflected in it.
 //!
-//! `cargo run --example demo` opens a window when there is a display; otherwise, or
-//! with `--headless`, it renders offscreen and writes a PNG (`--out`, default
-//! `target/demo.png`). `--reference --photons N` sets the tracer's photon count.
+//! `cargo run --example demo` opens a window when there is a display: drag the mouse on
+//! the water to make ripples, arrow keys move the sun, and the "Caustics" panel
+//! switches each generator's technique and graphs every pass's GPU time. Without a
+//! display, or with `--headless`, it runs 1.2 seconds of the pool offscreen (the ball
+//! bobbing, the first raindrops spreading) and writes the last frame as a PNG (`--out`,
+//! default `target/demo.png`); `--frames N` sets how many 50 ms frames.
+//!
+//! `--compare` (headless) measures that last frame against the ground-truth tracer: see
+//! [`compare`]; `--photons N` sets the tracer's photons per light. `--sequence N` writes
+//! the `N` frames after it as PNGs (see [`write_sequence`]).
 
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::RenderTarget;
+use bevy::camera::{Exposure, RenderTarget};
+use bevy::light::GlobalAmbientLight;
+use bevy::math::Affine2;
 use bevy::prelude::*;
-use bevy_caustics::caustics_core::{
-    estimate::{PhotonList, PhotonMap},
-    mesh::TriMesh,
-    scenes::{Wave, wave_heightfield, wave_pool},
-    tracer::{PhotonTracer, TraceSettings},
-};
-use bevy_caustics::headless::irradiance_image;
-use bevy_caustics::reference::{bevy_mesh, pinhole, view_irradiance};
-use bevy_caustics::{CausticGenerator, CausticsSettings, InjectedIrradiance};
+use bevy::time::TimeUpdateStrategy;
+use bevy::window::PrimaryWindow;
+use bevy_caustics::prelude::*;
+use std::f32::consts::{FRAC_PI_2, TAU};
 use std::process::ExitCode;
+use std::time::Duration;
 
 const WIDTH: u32 = 960;
 const HEIGHT: u32 = 540;
-/// Sun illuminance (lux): Bevy's daylight default.
+/// The pool is `SIZE` metres square and `DEPTH` deep; its walls stand `COPING` above
+/// the water.
+const SIZE: f32 = 4.0;
+const DEPTH: f32 = 1.2;
+const COPING: f32 = 0.15;
+/// The glass ball's radius (m), where it bobs (x, z), its centre's mean height and how
+/// it bobs: amplitude (m) and period (s). At the bottom of each bob it dips 2 cm into
+/// the water and starts a ripple; the rest of the time it is clear of the water, which
+/// it would otherwise cut through (the water's mesh runs on under it, and light inside
+/// the glass would meet it).
+const BALL_RADIUS: f32 = 0.3;
+const BALL_AT: Vec2 = Vec2::new(0.5, 0.1);
+const BALL_HEIGHT: f32 = BALL_RADIUS + 0.06;
+const BOB: (f32, f32) = (0.08, 1.2);
+/// A touch on the water: the ripple's height at its start (m).
+const TOUCH: f32 = 0.02;
+/// Touches on the water in the first frames (frame, x, z): a handful of raindrops to
+/// start the ripples with.
+const RAIN: [(u32, Vec2); 6] = [
+    (0, Vec2::new(-0.9, 0.9)),
+    (0, Vec2::new(-0.4, -1.0)),
+    (2, Vec2::new(1.2, -0.9)),
+    (4, Vec2::new(-1.3, -0.2)),
+    (6, Vec2::new(0.1, 1.3)),
+    (9, Vec2::new(0.9, 1.2)),
+];
+/// Headless: frames rendered 50 ms apart.
+const FRAMES: u32 = 24;
+/// The sun: Bevy's daylight illuminance, from `SUN_AZIMUTH` (radians about +y from +x)
+/// and `SUN_ELEVATION` above the horizon.
 const SUN_LUX: f32 = light_consts::lux::AMBIENT_DAYLIGHT;
-const CAMERA_POSITION: Vec3 = Vec3::new(0.0, 3.4, 3.9);
-const CAMERA_TARGET: Vec3 = Vec3::new(0.0, 0.0, 0.3);
-const FOV_Y: f32 = std::f32::consts::FRAC_PI_4;
+const SUN_AZIMUTH: f32 = 2.8;
+const SUN_ELEVATION: f32 = 0.95;
 
 fn main() -> ExitCode {
     support::exit_code("demo", run)
 }
 
 fn run() -> Result<(), String> {
-    let args = support::Args::parse("demo", &["photons"], &["reference"])?;
-    let irradiance = if args.has("reference") { Some(trace_caustics(args.number("photons", 4u64 << 20)?)?) } else { None };
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_pool(world, target, irradiance.clone());
-    support::show(&args, "rippled pool", (WIDTH, HEIGHT), 8, spawn, ripple)
+    let args = support::Args::parse("demo", &["frames", "photons", "sequence"], &["compare"])?;
+    let frames: u32 = args.number("frames", FRAMES)?;
+    let headless = args.headless;
+    if args.has("compare") {
+        return compare(&args, frames, args.number("photons", 1u64 << 23)?);
+    }
+    let sequence: u32 = args.number("sequence", 0)?;
+    if sequence > 0 {
+        return write_sequence(&args, frames, sequence);
+    }
+    let spawn = move |world: &mut World, target: RenderTarget| spawn_pool(world, target, headless);
+    support::show(&args, "pool", (WIDTH, HEIGHT), frames, spawn, (touch_water, move_sun))
 }
 
-/// The view's caustic irradiance (lux), one value per pixel, from the ground-truth tracer.
-fn trace_caustics(photons: u64) -> Result<Vec<Vec3>, String> {
-    let pool = wave_pool(129, 128);
-    let tracer = PhotonTracer::new(&pool.scene).map_err(|e| e.to_string())?;
-    let mut list = PhotonList::default();
-    let settings = TraceSettings { photons_per_light: photons, ..default() };
-    eprintln!("tracing {photons} photons through the water…");
-    tracer.trace(&settings, &mut list, &|done, total| {
-        if done == total || done % (total / 4).max(1) < 65536 {
-            eprintln!("  {:3.0} %", 100.0 * done as f64 / total as f64);
-        }
+/// `--sequence N` (headless): after the usual frames, the next `N` rendered frames as
+/// `<out stem>-000.png`, … (`scripts/animation.sh` makes the README's animation of them).
+fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), String> {
+    use bevy_caustics::headless::HeadlessRenderer;
+    let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
+    let target = renderer.render_target();
+    spawn_pool(renderer.world_mut(), target, true);
+    renderer.render(frames).map_err(|e| e.to_string())?;
+    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+    for i in 0..count {
+        let image = renderer.render(0).map_err(|e| e.to_string())?;
+        let path = args.out.with_file_name(format!("{stem}-{i:03}.png"));
+        image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
+        eprintln!("wrote {} ({} of {count})", path.display(), i + 1);
+    }
+    Ok(())
+}
+
+/// What each generator asks for in one row of the comparison: `Auto`, then every
+/// technique asked of every generator (one it does not apply to falls back to `Auto`'s
+/// pick, which the row says).
+const COMPARED: [(CausticTechnique, &str); 5] = [
+    (CausticTechnique::Auto, "auto"),
+    (CausticTechnique::WarpedVolumes, "volumes"),
+    (CausticTechnique::HierarchicalMaps, "maps"),
+    (CausticTechnique::IlluminationTextures, "textures"),
+    (CausticTechnique::Convolution, "convolution"),
+];
+
+/// `--compare`: renders the demo headless to its last frame, then, with time stopped,
+/// traces that frame's scene with the ground-truth tracer (`photons` per light, on a
+/// background thread) while it renders the same frame with every generator asking for
+/// each technique in turn. Prints a Markdown table of each one's relative L2 and L1
+/// against the tracer over the receivers in view (`reference::view_error`) and its GPU
+/// time, and writes beside `--out` a split image per technique: left the technique,
+/// right the reference.
+fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String> {
+    use bevy_caustics::headless::HeadlessRenderer;
+    use bevy_caustics::reference::{pinhole, scene_from_world, trace_view, view_error};
+    let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
+    let target = renderer.render_target();
+    spawn_pool(renderer.world_mut(), target, true);
+    renderer.render(frames).map_err(|e| e.to_string())?;
+    let world = renderer.world_mut();
+    world.resource_mut::<Time<Virtual>>().pause();
+    let (camera, transform, projection) = world.query::<(Entity, &GlobalTransform, &Projection)>().single(world).map_err(|e| e.to_string())?;
+    let Projection::Perspective(perspective) = projection else { return Err("the demo's camera is a perspective one".into()) };
+    let view = pinhole(&transform.compute_transform(), perspective.fov, WIDTH, HEIGHT);
+    let (scene, shown, skipped) = scene_from_world(world);
+    for s in skipped {
+        eprintln!("left out of the reference: {s}");
+    }
+    let tracer = std::thread::spawn(move || {
+        let progress = |done: u64, total: u64| {
+            if done == total || done % (total / 8).max(1) < (1 << 14) {
+                eprintln!("  reference: {:3.0} % of {total} photons", 100.0 * done as f64 / total as f64);
+            }
+        };
+        trace_view(&scene, shown, &view, photons, 0.015, &progress)
     });
-    let map = PhotonMap::new(list.0, 0.02);
-    let camera = pinhole(&Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y), FOV_Y, WIDTH, HEIGHT);
-    eprintln!("gathering caustic irradiance for {WIDTH}×{HEIGHT} pixels…");
-    // The pool's light has irradiance 1; the sun here has SUN_LUX.
-    Ok(view_irradiance(&tracer, &map, &camera).into_iter().map(|e| e * SUN_LUX).collect())
-}
-
-/// The water of `shared/reference`'s pool, its waves moved on by `time` seconds.
-fn water_surface(time: f32) -> TriMesh {
-    let waves = [
-        Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: -1.3 * time },
-        Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 - 1.1 * time },
-    ];
-    wave_heightfield(129, 4.0, 0.8, &waves)
-}
-
-/// The animated generator: the water mesh rewritten in place every frame. The plugin
-/// sees the mesh asset change and rebuilds the caustic volumes.
-#[derive(Component)]
-struct Water;
-
-fn ripple(time: Res<Time>, water: Query<&Mesh3d, With<Water>>, mut meshes: ResMut<Assets<Mesh>>) {
-    for mesh in &water {
-        if let Some(mut mesh) = meshes.get_mut(&mesh.0) {
-            *mesh = bevy_mesh(&water_surface(time.elapsed_secs()));
+    let mut rows = Vec::new();
+    for (technique, name) in COMPARED {
+        let world = renderer.world_mut();
+        for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
+            generator.technique = technique;
         }
+        let image = renderer.render(6).map_err(|e| e.to_string())?;
+        let irradiance = renderer.caustic_irradiance(camera).map_err(|e| e.to_string())?;
+        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| span.starts_with("caustic")).map(|(_, ms)| ms).sum();
+        let drawn: Vec<String> = renderer.pass_report().generators.iter().map(|(_, choice)| choice.to_string()).collect();
+        rows.push((name, image, irradiance, gpu_ms, drawn));
+    }
+    let reference = tracer.join().map_err(|_| "the reference tracer panicked")??;
+    // The reference's view: the same frame with the tracer's irradiance injected and no
+    // generator drawing.
+    let world = renderer.world_mut();
+    let generators: Vec<Entity> = world.query_filtered::<Entity, With<CausticGenerator>>().iter(world).collect();
+    for entity in generators {
+        world.entity_mut(entity).remove::<CausticGenerator>();
+    }
+    let injected = reference.iter().map(|e| e.unwrap_or(Vec3::ZERO)).collect::<Vec<_>>();
+    let injected = world.resource_mut::<Assets<Image>>().add(bevy_caustics::headless::irradiance_image(WIDTH, HEIGHT, &injected));
+    world.entity_mut(camera).insert(bevy_caustics::InjectedIrradiance(injected));
+    let truth = renderer.render(6).map_err(|e| e.to_string())?;
+    let adapter = renderer.adapter.name.clone();
+    println!("| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) |");
+    println!("|---|---|---:|---:|---:|");
+    for (name, image, irradiance, gpu_ms, drawn) in rows {
+        let error = view_error(&irradiance, &reference).map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
+        println!("| {name} | {} | {error} | {gpu_ms:.1} |", drawn.join("; "));
+        let split = split_view(&image, &truth);
+        let path = args.out.with_file_name(format!("{}-{name}-vs-reference.png", args.out.file_stem().unwrap_or_default().to_string_lossy()));
+        split.save_png(&path, 1.0).map_err(|e| e.to_string())?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// Left half from `left`, right half from `right`, a white line between.
+fn split_view(left: &bevy_caustics::headless::RenderedImage, right: &bevy_caustics::headless::RenderedImage) -> bevy_caustics::headless::RenderedImage {
+    let w = left.width;
+    let pixels = left
+        .pixels
+        .iter()
+        .zip(&right.pixels)
+        .enumerate()
+        .map(|(i, (l, r))| match (i as u32 % w).cmp(&(w / 2)) {
+            std::cmp::Ordering::Less => *l,
+            std::cmp::Ordering::Equal => Vec4::ONE,
+            std::cmp::Ordering::Greater => *r,
+        })
+        .collect();
+    bevy_caustics::headless::RenderedImage { width: w, height: left.height, pixels }
+}
+
+/// The glass ball, bobbing on the water.
+#[derive(Component)]
+struct Ball;
+
+/// The sun, moved by the arrow keys.
+#[derive(Component)]
+struct Sun {
+    azimuth: f32,
+    elevation: f32,
+}
+
+impl Sun {
+    fn transform(&self) -> Transform {
+        let (sin_e, cos_e) = self.elevation.sin_cos();
+        let towards_sun = Vec3::new(cos_e * self.azimuth.cos(), sin_e, cos_e * self.azimuth.sin());
+        Transform::default().looking_to(-towards_sun, Vec3::Y)
     }
 }
 
-/// The pool; with `injected` irradiance (the tracer's), shown instead of live caustics.
-fn spawn_pool(world: &mut World, target: RenderTarget, injected: Option<Vec<Vec3>>) {
-    let water = bevy_mesh(&water_surface(0.0));
-    let injected = injected.map(|e| world.resource_mut::<Assets<Image>>().add(irradiance_image(WIDTH, HEIGHT, &e)));
-    support::textured_floor(world, support::tiles(), bevy::math::Affine2::from_scale(Vec2::splat(16.0)), 8.0, 0.9);
-    let water_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::srgba(0.55, 0.8, 0.9, 0.3),
-        alpha_mode: AlphaMode::Blend,
-        perceptual_roughness: 0.05,
+fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
+    world.insert_resource(GlobalAmbientLight { brightness: 800.0, color: Color::srgb(0.75, 0.85, 1.0), ..default() });
+    world.insert_resource(ClearColor(Color::srgb(0.45, 0.65, 0.95)));
+    let tiles = world.resource_mut::<Assets<Image>>().add(support::tiles());
+    // One tile every 25 cm on a surface of `size` metres (each mesh's UVs span [0, 1]²).
+    let tiled = |size: Vec2| StandardMaterial {
+        base_color_texture: Some(tiles.clone()),
+        uv_transform: Affine2::from_scale(size * 4.0),
+        perceptual_roughness: 0.8,
+        ..default()
+    };
+    let floor = world.resource_mut::<Assets<StandardMaterial>>().add(tiled(Vec2::splat(SIZE)));
+    let plane = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(SIZE / 2.0)).mesh());
+    world.spawn((Mesh3d(plane), MeshMaterial3d(floor), Transform::from_xyz(0.0, -DEPTH, 0.0), CausticReceiver));
+    spawn_walls(world, &tiled);
+    spawn_steps(world, &tiled);
+    spawn_deck(world);
+    spawn_ladder(world);
+
+    let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(0.8, 0.95, 1.0),
+        specular_transmission: 0.92,
+        // Seen through the water, the pool turns blue with depth as real water does.
+        thickness: 0.3,
+        attenuation_color: Color::srgb(0.45, 0.8, 0.85),
+        attenuation_distance: 3.0,
+        ior: 1.333,
+        perceptual_roughness: 0.04,
         reflectance: 0.5,
         ..default()
     });
-    let water = world.resource_mut::<Assets<Mesh>>().add(water);
-    let mut water = world.spawn((Mesh3d(water), MeshMaterial3d(water_material)));
-    if injected.is_none() {
-        water.insert((CausticGenerator::refractive(1.333), Water));
-    }
     world.spawn((
+        Name::new("water"),
+        PoolRipples { columns: 128, rows: 128, cell_size: SIZE / 128.0, depth: DEPTH, ..default() },
+        CausticGenerator::refractive(1.333),
+        MeshMaterial3d(water),
+    ));
+    // The water body scatters the focused light into shafts.
+    world.spawn((
+        Name::new("pool water (medium)"),
+        ParticipatingMedium { scattering: 0.25, absorption: 0.05, asymmetry: 0.6 },
+        Transform::from_xyz(0.0, -DEPTH / 2.0, 0.0).with_scale(Vec3::new(SIZE, DEPTH, SIZE)),
+    ));
+
+    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(0.95, 0.98, 1.0),
+        specular_transmission: 0.95,
+        thickness: 2.0 * BALL_RADIUS,
+        ior: 1.5,
+        perceptual_roughness: 0.02,
+        reflectance: 0.6,
+        ..default()
+    });
+    let sphere = Sphere::new(BALL_RADIUS).mesh().ico(4).expect("an icosphere of 4 subdivisions");
+    let sphere = world.resource_mut::<Assets<Mesh>>().add(sphere);
+    world.spawn((
+        Name::new("glass ball"),
+        Ball,
+        Mesh3d(sphere),
+        MeshMaterial3d(glass),
+        CausticGenerator::refractive(1.5),
+        Transform::from_xyz(BALL_AT.x, BALL_HEIGHT, BALL_AT.y),
+    ));
+
+    let sun = Sun { azimuth: SUN_AZIMUTH, elevation: SUN_ELEVATION };
+    world.spawn((
+        Name::new("sun"),
+        // The water casts the sun's shadow: under it, the caustics carry the light that
+        // the water lets through.
         DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
-        Transform::default().looking_to(Vec3::new(0.3, -1.0, -0.2), Vec3::Y),
+        sun.transform(),
+        sun,
     ));
-    let mut camera = world.spawn((
+    let sky = support::sky(world, 1500.0);
+    world.spawn((
         Camera3d::default(),
-        // Caustics are added to the linear HDR image, before tonemapping.
         CausticsSettings::default(),
+        sky,
         target,
-        Projection::from(PerspectiveProjection { fov: FOV_Y, ..default() }),
-        Transform::from_translation(CAMERA_POSITION).looking_at(CAMERA_TARGET, Vec3::Y),
+        Exposure { ev100: 11.5 },
+        Projection::from(PerspectiveProjection { fov: 0.9, ..default() }),
+        Transform::from_xyz(-1.3, 1.8, 3.5).looking_at(Vec3::new(0.3, -0.9, -0.7), Vec3::Y),
     ));
-    if let Some(injected) = injected {
-        camera.insert(InjectedIrradiance(injected));
+    world.schedule_scope(Update, |_, schedule| {
+        schedule.add_systems(bob_ball);
+        schedule.add_systems(rain);
+    });
+    if headless {
+        world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
+    }
+}
+
+/// The pool's tiles on a surface of so many metres.
+type Tiled<'a> = dyn Fn(Vec2) -> StandardMaterial + 'a;
+
+/// Four tiled walls from the floor to the coping; caustics land on them.
+fn spawn_walls(world: &mut World, tiled: &Tiled) {
+    let height = DEPTH + COPING;
+    // Both faces cast the sun's shadow: the wall the sun stands behind shades the floor
+    // beside it, which the water's shadow does not reach.
+    let material = StandardMaterial { double_sided: true, cull_mode: None, ..tiled(Vec2::new(SIZE, height)) };
+    let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
+    let wall = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Z, Vec2::new(SIZE / 2.0, height / 2.0)).mesh());
+    for turn in 0..4 {
+        let rotation = Quat::from_rotation_y(turn as f32 * FRAC_PI_2);
+        let centre = rotation * Vec3::new(0.0, height / 2.0 - DEPTH, -SIZE / 2.0);
+        world.spawn((
+            Mesh3d(wall.clone()),
+            MeshMaterial3d(material.clone()),
+            Transform::from_translation(centre).with_rotation(rotation),
+            CausticReceiver,
+        ));
+    }
+}
+
+/// Three wide tiled steps down from the left wall, near its far end, the top one a
+/// shelf 15 cm under the water.
+fn spawn_steps(world: &mut World, tiled: &Tiled) {
+    const WIDTH: f32 = 1.4;
+    const SHELF: f32 = 1.0;
+    const TREAD: f32 = 0.4;
+    let rise = (DEPTH - 0.15) / 3.0;
+    for step in 0..3 {
+        let (height, length) = ((step + 1) as f32 * rise, SHELF + (2 - step) as f32 * TREAD);
+        let material = world.resource_mut::<Assets<StandardMaterial>>().add(tiled(Vec2::new(length, WIDTH)));
+        let block = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(length, height, WIDTH).mesh());
+        let centre = Vec3::new(-SIZE / 2.0 + length / 2.0, height / 2.0 - DEPTH, -SIZE / 2.0 + 0.4 + WIDTH / 2.0);
+        world.spawn((Mesh3d(block), MeshMaterial3d(material), Transform::from_translation(centre), CausticReceiver));
+    }
+}
+
+/// Pale stone around the pool, level with the coping.
+fn spawn_deck(world: &mut World) {
+    const WIDE: f32 = 6.0;
+    const THICK: f32 = 0.3;
+    // Sandstone slabs half a metre wide.
+    let slabs = world.resource_mut::<Assets<Image>>().add(support::texture(64, |u, v| {
+        let joint = u < 2.0 / 64.0 || v < 2.0 / 64.0;
+        if joint { [90, 84, 74] } else { [168, 150, 124] }
+    }));
+    let y = COPING - THICK / 2.0;
+    let offset = (SIZE + WIDE) / 2.0;
+    let (side, end) = (Vec2::new(SIZE + 2.0 * WIDE, WIDE), Vec2::new(WIDE, SIZE));
+    for (size, at) in [(side, Vec3::new(0.0, y, offset)), (side, Vec3::new(0.0, y, -offset)), (end, Vec3::new(offset, y, 0.0)), (end, Vec3::new(-offset, y, 0.0))] {
+        let stone = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+            base_color_texture: Some(slabs.clone()),
+            uv_transform: Affine2::from_scale(2.0 * size),
+            perceptual_roughness: 0.9,
+            ..default()
+        });
+        let slab = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(size.x, THICK, size.y).mesh());
+        world.spawn((Mesh3d(slab), MeshMaterial3d(stone), Transform::from_translation(at)));
+    }
+}
+
+/// A steel ladder on the right wall: two rails and four rungs.
+fn spawn_ladder(world: &mut World) {
+    const RAIL: f32 = 0.022;
+    const HALF_WIDTH: f32 = 0.25;
+    let steel = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(0.9, 0.9, 0.92),
+        metallic: 1.0,
+        perceptual_roughness: 0.15,
+        ..default()
+    });
+    let x = SIZE / 2.0 - 0.12;
+    let (bottom, top) = (-DEPTH + 0.1, COPING + 0.7);
+    let rail = world.resource_mut::<Assets<Mesh>>().add(Cylinder::new(RAIL, top - bottom).mesh());
+    let rung = world.resource_mut::<Assets<Mesh>>().add(Cylinder::new(RAIL * 0.8, 2.0 * HALF_WIDTH).mesh());
+    for z in [-HALF_WIDTH, HALF_WIDTH] {
+        let at = Vec3::new(x, (top + bottom) / 2.0, 0.4 + z);
+        world.spawn((Mesh3d(rail.clone()), MeshMaterial3d(steel.clone()), Transform::from_translation(at)));
+    }
+    for i in 0..4 {
+        let at = Vec3::new(x, bottom + 0.2 + 0.28 * i as f32, 0.4);
+        world.spawn((Mesh3d(rung.clone()), MeshMaterial3d(steel.clone()), Transform::from_translation(at).with_rotation(Quat::from_rotation_x(FRAC_PI_2))));
+    }
+}
+
+/// The ball bobs; each time it dips into the water it starts a ripple.
+fn bob_ball(time: Res<Time>, mut ball: Query<&mut Transform, With<Ball>>, mut touches: MessageWriter<DropPebble>) {
+    let (amplitude, period) = BOB;
+    let phase = |t: f32| (t / period * TAU).sin();
+    let (now, before) = (time.elapsed_secs(), time.elapsed_secs() - time.delta_secs());
+    for mut transform in &mut ball {
+        transform.translation.y = BALL_HEIGHT + amplitude * phase(now);
+        // Its lowest point going into the water.
+        let bottom = |t: f32| BALL_HEIGHT + amplitude * phase(t) - BALL_RADIUS;
+        if bottom(before) > 0.0 && bottom(now) <= 0.0 {
+            touches.write(DropPebble { position: transform.translation, strength: TOUCH });
+        }
+    }
+}
+
+/// The first frames' raindrops, each at its frame.
+fn rain(mut frame: Local<u32>, mut touches: MessageWriter<DropPebble>) {
+    for (_, at) in RAIN.iter().filter(|(when, _)| *when == *frame) {
+        touches.write(DropPebble { position: Vec3::new(at.x, 0.0, at.y), strength: TOUCH });
+    }
+    *frame += 1;
+}
+
+/// Dragging on the water with the left button makes ripples along the path, one every
+/// 10 cm of it.
+fn touch_water(
+    buttons: Res<ButtonInput<MouseButton>>,
+    window: Single<&Window, With<PrimaryWindow>>,
+    camera: Single<(&Camera, &GlobalTransform)>,
+    mut last: Local<Option<Vec3>>,
+    mut touches: MessageWriter<DropPebble>,
+) {
+    if !buttons.pressed(MouseButton::Left) {
+        *last = None;
+        return;
+    }
+    let (camera, transform) = *camera;
+    let Some(ray) = window.cursor_position().and_then(|cursor| camera.viewport_to_world(transform, cursor).ok()) else {
+        return;
+    };
+    let Some(at) = ray.intersect_plane(Vec3::ZERO, InfinitePlane3d::new(Vec3::Y)).map(|d| ray.get_point(d)) else {
+        return;
+    };
+    if at.x.abs().max(at.z.abs()) < SIZE / 2.0 && last.is_none_or(|l| l.distance(at) > 0.1) {
+        touches.write(DropPebble { position: at, strength: TOUCH });
+        *last = Some(at);
+    }
+}
+
+/// Arrow keys: left and right turn the sun about the vertical, up and down raise and
+/// lower it (between 10° and 85°).
+fn move_sun(keys: Res<ButtonInput<KeyCode>>, time: Res<Time>, mut sun: Query<(&mut Sun, &mut Transform)>) {
+    let axis = |minus, plus| keys.pressed(plus) as i32 as f32 - keys.pressed(minus) as i32 as f32;
+    let (turn, raise) = (axis(KeyCode::ArrowLeft, KeyCode::ArrowRight), axis(KeyCode::ArrowDown, KeyCode::ArrowUp));
+    if turn == 0.0 && raise == 0.0 {
+        return;
+    }
+    for (mut sun, mut transform) in &mut sun {
+        sun.azimuth += turn * 0.8 * time.delta_secs();
+        sun.elevation = (sun.elevation + raise * 0.5 * time.delta_secs()).clamp(10f32.to_radians(), 85f32.to_radians());
+        *transform = sun.transform();
     }
 }

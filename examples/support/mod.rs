@@ -101,6 +101,12 @@ pub fn show<M>(
         let target = renderer.render_target();
         spawn(renderer.world_mut(), target);
         let image = renderer.render(frames).map_err(|e| e.to_string())?;
+        let report = renderer.pass_report();
+        for (entity, choice) in &report.generators {
+            eprintln!("generator {entity}: {choice}");
+        }
+        let passes: Vec<String> = report.passes.iter().map(|(pass, views)| format!("{pass} ({views} views)")).collect();
+        eprintln!("caustics passes in the last frame: {}", if passes.is_empty() { "none".to_string() } else { passes.join(", ") });
         image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
         eprintln!("wrote {}", args.out.display());
         return Ok(());

@@ -264,13 +264,25 @@ pub fn trace_view(
     Ok(view_irradiance_on(&tracer, &map, camera, |i| i < shown))
 }
 
-/// Relative L2 error (`caustics_core::metrics::relative_l2`, of the mean of RGB, as the
-/// bench measures) of a view's caustic irradiance against [`trace_view`]'s, over the
-/// pixels where the reference sees a shown receiver; `None` when there are none.
-pub fn view_error(image: &[Vec3], reference: &[Option<Vec3>]) -> Option<f32> {
+/// A view's caustic irradiance against [`trace_view`]'s, as the bench measures a
+/// region: relative L2 (the figure of merit) and relative L1 (robust to the few pixels
+/// at a focus or cusp that dominate L2) of the mean of RGB, over the pixels that see a
+/// shown receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewError {
+    pub l2: f32,
+    pub l1: f32,
+    /// Pixels measured.
+    pub pixels: usize,
+}
+
+/// [`ViewError`] of `image` against `reference`; `None` when no pixel sees a shown
+/// receiver.
+pub fn view_error(image: &[Vec3], reference: &[Option<Vec3>]) -> Option<ViewError> {
+    use caustics_core::metrics::{relative_l1, relative_l2};
     let mean = |e: Vec3| (e.x + e.y + e.z) / 3.0;
     let (a, b): (Vec<f32>, Vec<f32>) = image.iter().zip(reference).filter_map(|(e, r)| Some((mean(*e), mean((*r)?)))).unzip();
-    (!b.is_empty()).then(|| caustics_core::metrics::relative_l2(&a, &b))
+    (!b.is_empty()).then(|| ViewError { l2: relative_l2(&a, &b), l1: relative_l1(&a, &b), pixels: b.len() })
 }
 
 /// The pinhole camera that matches a Bevy perspective camera at `transform`.
@@ -437,8 +449,8 @@ mod tests {
         // The ball's light lands under it, on the floor.
         assert!(reference.iter().flatten().any(|e| e.x > 1000.0), "a focus brighter than the light");
         let same: Vec<Vec3> = reference.iter().map(|e| e.unwrap_or(Vec3::splat(1e9))).collect();
-        assert_eq!(view_error(&same, &reference), Some(0.0), "pixels off the receivers do not count");
-        assert_eq!(view_error(&vec![Vec3::ZERO; same.len()], &reference), Some(1.0));
+        assert_eq!(view_error(&same, &reference), Some(ViewError { l2: 0.0, l1: 0.0, pixels: measured }), "pixels off the receivers do not count");
+        assert_eq!(view_error(&vec![Vec3::ZERO; same.len()], &reference), Some(ViewError { l2: 1.0, l1: 1.0, pixels: measured }));
         assert_eq!(view_error(&same, &vec![None; same.len()]), None);
     }
 }

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The README's looping animation of the demo: frames of the pool rendered headless
+# (`demo --sequence`), assembled into a GIF at half size with ImageMagick (installed
+# with apt-get when missing). Writes target/animation/demo.gif, or the path given.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+out="${1:-target/animation/demo.gif}"
+frames="$(dirname "$out")/frames"
+rm -rf "$frames" && mkdir -p "$frames"
+if ! dpkg -s imagemagick > /dev/null 2>&1; then
+    apt-get install -y imagemagick
+fi
+# The ripples of the first raindrops and three bobs of the ball, 20 frames a second.
+cargo run --locked --example demo -- --headless --frames 4 --sequence 72 --out "$frames/frame.png"
+convert -delay 5 -loop 0 "$frames"/frame-*.png -resize 50% -layers Optimize "$out"
+echo "wrote $out ($(du -h "$out" | cut -f1))"
