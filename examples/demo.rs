@@ -105,17 +105,6 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
     Ok(())
 }
 
-/// What each generator asks for in one row of the comparison: `Auto`, then every
-/// technique asked of every generator (one it does not apply to falls back to `Auto`'s
-/// pick, which the row says).
-const COMPARED: [(CausticTechnique, &str); 5] = [
-    (CausticTechnique::Auto, "auto"),
-    (CausticTechnique::WarpedVolumes, "volumes"),
-    (CausticTechnique::HierarchicalMaps, "maps"),
-    (CausticTechnique::IlluminationTextures, "textures"),
-    (CausticTechnique::Convolution, "convolution"),
-];
-
 /// `--compare`: renders the demo headless to its last frame, then, with time stopped,
 /// traces that frame's scene with the ground-truth tracer (`photons` per light, on a
 /// background thread) while it renders the same frame with every generator asking for
@@ -148,7 +137,10 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         trace_view(&scene, shown, &view, photons, 0.015, &progress)
     });
     let mut rows = Vec::new();
-    for (technique, name) in COMPARED {
+    // `Auto`, then every technique asked of every generator (one it does not apply to
+    // falls back to `Auto`'s pick, which the row says).
+    for technique in CausticTechnique::ALL {
+        let name = technique.label();
         let world = renderer.world_mut();
         for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
             generator.technique = technique;
@@ -178,7 +170,8 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         let error = view_error(&irradiance, &reference).map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
         println!("| {name} | {} | {error} | {gpu_ms:.1} |", drawn.join("; "));
         let split = split_view(&image, &truth);
-        let path = args.out.with_file_name(format!("{}-{name}-vs-reference.png", args.out.file_stem().unwrap_or_default().to_string_lossy()));
+        let stem = args.out.file_stem().unwrap_or_default().to_string_lossy();
+        let path = args.out.with_file_name(format!("{stem}-{}-vs-reference.png", name.to_lowercase().replace(' ', "-")));
         split.save_png(&path, 1.0).map_err(|e| e.to_string())?;
         eprintln!("wrote {}", path.display());
     }
@@ -436,13 +429,7 @@ fn touch_water(
         *last = None;
         return;
     }
-    let (camera, transform) = *camera;
-    let Some(ray) = window.cursor_position().and_then(|cursor| camera.viewport_to_world(transform, cursor).ok()) else {
-        return;
-    };
-    let Some(at) = ray.intersect_plane(Vec3::ZERO, InfinitePlane3d::new(Vec3::Y)).map(|d| ray.get_point(d)) else {
-        return;
-    };
+    let Some(at) = support::cursor_on_water(&window, *camera) else { return };
     if at.x.abs().max(at.z.abs()) < SIZE / 2.0 && last.is_none_or(|l| l.distance(at) > 0.1) {
         touches.write(DropPebble { position: at, strength: TOUCH });
         *last = Some(at);

@@ -157,11 +157,7 @@ fn drop_pebble_on_click(
     if !buttons.just_pressed(MouseButton::Left) {
         return;
     }
-    let (camera, transform) = *camera;
-    let Some(ray) = window.cursor_position().and_then(|cursor| camera.viewport_to_world(transform, cursor).ok()) else {
-        return;
-    };
-    if let Some(distance) = ray.intersect_plane(Vec3::ZERO, InfinitePlane3d::new(Vec3::Y)) {
-        pebbles.write(DropPebble { position: ray.get_point(distance), strength: PEBBLE });
+    if let Some(at) = support::cursor_on_water(&window, *camera) {
+        pebbles.write(DropPebble { position: at, strength: PEBBLE });
     }
 }

@@ -129,6 +129,13 @@ pub fn show<M>(
     Ok(())
 }
 
+/// Where the cursor's ray meets the water's rest level `y = 0` (the pool examples'
+/// pebbles and touches).
+pub fn cursor_on_water(window: &Window, (camera, transform): (&Camera, &GlobalTransform)) -> Option<Vec3> {
+    let ray = window.cursor_position().and_then(|cursor| camera.viewport_to_world(transform, cursor).ok())?;
+    ray.intersect_plane(Vec3::ZERO, InfinitePlane3d::new(Vec3::Y)).map(|d| ray.get_point(d))
+}
+
 /// An sRGB texture of `size`² texels from a colour function of (u, v) ∈ [0, 1)², repeating.
 pub fn texture(size: u32, color: impl Fn(f32, f32) -> [u8; 3]) -> Image {
     let data = (0..size * size)

@@ -30,15 +30,6 @@ impl Plugin for CausticsDebugPanelPlugin {
     }
 }
 
-/// Every choice a generator can ask for, as the panel's switch offers them.
-const TECHNIQUES: [(CausticTechnique, &str); 5] = [
-    (CausticTechnique::Auto, "Auto"),
-    (CausticTechnique::WarpedVolumes, "warped volumes"),
-    (CausticTechnique::IlluminationTextures, "illumination textures"),
-    (CausticTechnique::Convolution, "convolution"),
-    (CausticTechnique::HierarchicalMaps, "hierarchical maps"),
-];
-
 /// The spans the graph draws, one colour each in this order.
 const COLOURS: [egui::Color32; 6] = [
     egui::Color32::from_rgb(102, 194, 165),
@@ -71,10 +62,10 @@ fn panel(
             ui.horizontal(|ui| {
                 ui.label(label(entity));
                 egui::ComboBox::from_id_salt(entity)
-                    .selected_text(TECHNIQUES.iter().find(|(t, _)| *t == asked).map_or("?", |(_, name)| name))
+                    .selected_text(asked.label())
                     .show_ui(ui, |ui| {
-                        for (t, name) in TECHNIQUES {
-                            ui.selectable_value(&mut technique, t, name);
+                        for t in CausticTechnique::ALL {
+                            ui.selectable_value(&mut technique, t, t.label());
                         }
                     });
             });

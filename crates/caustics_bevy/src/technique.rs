@@ -49,6 +49,20 @@ impl Default for AvailableCausticTechniques {
 }
 
 impl CausticTechnique {
+    /// `Auto`, then every technique.
+    pub const ALL: [CausticTechnique; 5] = [
+        CausticTechnique::Auto,
+        CausticTechnique::WarpedVolumes,
+        CausticTechnique::IlluminationTextures,
+        CausticTechnique::Convolution,
+        CausticTechnique::HierarchicalMaps,
+    ];
+
+    /// `Auto`, or the technique's name (`warped volumes`).
+    pub fn label(self) -> &'static str {
+        self.requested().map_or("Auto", Technique::label)
+    }
+
     /// The technique asked for; `None` for `Auto`.
     pub fn requested(self) -> Option<Technique> {
         match self {
