@@ -147,7 +147,8 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         }
         let image = renderer.render(6).map_err(|e| e.to_string())?;
         let irradiance = renderer.caustic_irradiance(camera).map_err(|e| e.to_string())?;
-        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| span.starts_with("caustic")).map(|(_, ms)| ms).sum();
+        let ours = |span: &str| bevy_caustics::headless::CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
+        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| ours(span)).map(|(_, ms)| ms).sum();
         let drawn: Vec<String> = renderer.pass_report().generators.iter().map(|(_, choice)| choice.to_string()).collect();
         rows.push((name, image, irradiance, gpu_ms, drawn));
     }

@@ -106,14 +106,15 @@ struct GpuPass {
     history: Vec<f64>,
 }
 
-/// The plugin's GPU spans (`caustics/…`, `caustic_maps/…`, …) that ran in the newest
+/// The plugin's GPU spans ([`crate::headless::CAUSTIC_SPANS`]) that ran in the newest
 /// frame whose timestamps have arrived, with the history Bevy keeps of each.
 fn gpu_passes(store: &DiagnosticsStore) -> Vec<GpuPass> {
     let spans: Vec<_> = store
         .iter()
         .filter_map(|d| {
             let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-            span.starts_with("caustic").then_some((span, d.measurement()?.time, d))
+            let ours = crate::headless::CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
+            ours.then_some((span, d.measurement()?.time, d))
         })
         .collect();
     let newest = spans.iter().map(|(_, time, _)| *time).max();
