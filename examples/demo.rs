@@ -113,7 +113,7 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
 /// time, and writes beside `--out` a split image per technique: left the technique,
 /// right the reference.
 fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String> {
-    use bevy_caustics::headless::HeadlessRenderer;
+    use bevy_caustics::headless::{HeadlessRenderer, is_caustic_span};
     use bevy_caustics::reference::{pinhole, scene_from_world, trace_view, view_error};
     let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
@@ -147,8 +147,7 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         }
         let image = renderer.render(6).map_err(|e| e.to_string())?;
         let irradiance = renderer.caustic_irradiance(camera).map_err(|e| e.to_string())?;
-        let ours = |span: &str| bevy_caustics::headless::CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
-        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| ours(span)).map(|(_, ms)| ms).sum();
+        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| is_caustic_span(span)).map(|(_, ms)| ms).sum();
         let drawn: Vec<String> = renderer.pass_report().generators.iter().map(|(_, choice)| choice.to_string()).collect();
         rows.push((name, image, irradiance, gpu_ms, drawn));
     }
@@ -397,13 +396,12 @@ fn spawn_ladder(world: &mut World) {
 /// The ball bobs; each time it dips into the water it starts a ripple.
 fn bob_ball(time: Res<Time>, mut ball: Query<&mut Transform, With<Ball>>, mut touches: MessageWriter<DropPebble>) {
     let (amplitude, period) = BOB;
-    let phase = |t: f32| (t / period * TAU).sin();
+    let height = |t: f32| BALL_HEIGHT + amplitude * (t / period * TAU).sin();
     let (now, before) = (time.elapsed_secs(), time.elapsed_secs() - time.delta_secs());
     for mut transform in &mut ball {
-        transform.translation.y = BALL_HEIGHT + amplitude * phase(now);
+        transform.translation.y = height(now);
         // Its lowest point going into the water.
-        let bottom = |t: f32| BALL_HEIGHT + amplitude * phase(t) - BALL_RADIUS;
-        if bottom(before) > 0.0 && bottom(now) <= 0.0 {
+        if height(before) > BALL_RADIUS && height(now) <= BALL_RADIUS {
             touches.write(DropPebble { position: transform.translation, strength: TOUCH });
         }
     }

@@ -5,6 +5,7 @@
 //! with its reason. Behind the `egui` cargo feature.
 
 use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
+use crate::headless::{is_caustic_span, newest_gpu_spans};
 use crate::technique::CausticTechniqueChoice;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
@@ -109,19 +110,10 @@ struct GpuPass {
 /// The plugin's GPU spans ([`crate::headless::CAUSTIC_SPANS`]) that ran in the newest
 /// frame whose timestamps have arrived, with the history Bevy keeps of each.
 fn gpu_passes(store: &DiagnosticsStore) -> Vec<GpuPass> {
-    let spans: Vec<_> = store
-        .iter()
-        .filter_map(|d| {
-            let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-            let ours = crate::headless::CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
-            ours.then_some((span, d.measurement()?.time, d))
-        })
-        .collect();
-    let newest = spans.iter().map(|(_, time, _)| *time).max();
-    let mut passes: Vec<GpuPass> = spans
+    let mut passes: Vec<GpuPass> = newest_gpu_spans(store)
         .into_iter()
-        .filter(|(_, time, _)| Some(*time) == newest)
-        .map(|(span, _, d)| GpuPass { span: span.to_owned(), history: d.values().copied().collect() })
+        .filter(|(span, _)| is_caustic_span(span))
+        .map(|(span, d)| GpuPass { span: span.to_owned(), history: d.values().copied().collect() })
         .collect();
     passes.sort_by(|a, b| a.span.cmp(&b.span));
     passes

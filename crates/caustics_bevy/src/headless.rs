@@ -56,6 +56,27 @@ const TIMESTAMP_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
 /// projections into the irradiance buffer and the volumetric pass.
 pub const CAUSTIC_SPANS: [&str; 3] = ["caustics/", "caustic_maps/", "illumination_textures/"];
 
+/// Whether a timestamp span (`caustics/volumes`, `main_opaque_pass_3d`…) is one of the
+/// caustics passes' ([`CAUSTIC_SPANS`]).
+pub fn is_caustic_span(span: &str) -> bool {
+    CAUSTIC_SPANS.iter().any(|p| span.starts_with(p))
+}
+
+/// Every pass timed on the GPU in the newest frame whose diagnostics have arrived (a
+/// frame or two behind), by span, with Bevy's diagnostic for it (its history): what
+/// `RenderDiagnosticsPlugin` records as `render/<span>/elapsed_gpu`.
+pub fn newest_gpu_spans(store: &bevy::diagnostic::DiagnosticsStore) -> Vec<(&str, &bevy::diagnostic::Diagnostic)> {
+    let spans: Vec<_> = store
+        .iter()
+        .filter_map(|d| {
+            let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+            Some((span, d.measurement()?.time, d))
+        })
+        .collect();
+    let newest = spans.iter().map(|(_, time, _)| *time).max();
+    spans.into_iter().filter(|(_, time, _)| Some(*time) == newest).map(|(span, _, d)| (span, d)).collect()
+}
+
 /// Checks that wgpu finds an adapter on the backends Bevy would use.
 pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor {
@@ -188,16 +209,7 @@ impl HeadlessRenderer {
         let Some(store) = self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>() else {
             return Vec::new();
         };
-        let spans: Vec<(String, bevy::platform::time::Instant, f64)> = store
-            .iter()
-            .filter_map(|d| {
-                let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-                let last = d.measurement()?;
-                Some((span.to_owned(), last.time, last.value))
-            })
-            .collect();
-        let newest = spans.iter().map(|(_, time, _)| *time).max();
-        spans.into_iter().filter(|(_, time, _)| Some(*time) == newest).map(|(span, _, ms)| (span, ms)).collect()
+        newest_gpu_spans(store).into_iter().filter_map(|(span, d)| Some((span.to_owned(), d.value()?))).collect()
     }
 
     /// The plugin's CPU time (ms) in the main and in the render world, in the last

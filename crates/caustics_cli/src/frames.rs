@@ -19,7 +19,7 @@
 use crate::plot::{Axes, Series, plot_log_log};
 use bevy::camera::{Exposure, RenderTarget};
 use bevy::prelude::*;
-use caustics_bevy::headless::{CAUSTIC_SPANS, HeadlessRenderer};
+use caustics_bevy::headless::{HeadlessRenderer, is_caustic_span};
 use caustics_bevy::prelude::*;
 use caustics_bevy::warped_volumes::CausticVolumes;
 use std::fmt::Write as _;
@@ -177,13 +177,12 @@ fn measure(family: &Family, parameter: u32) -> Result<FrameCost, String> {
         frames.push(Frame { spans, cpu_main, cpu_render, seconds });
     }
     let mean = |f: &dyn Fn(&Frame) -> f64| frames.iter().map(f).sum::<f64>() / frames.len() as f64;
-    let ours = |span: &str| CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
-    let caustics_ms = mean(&|f| f.spans.iter().filter(|(s, _)| ours(s)).map(|(_, ms)| ms).sum());
+    let caustics_ms = mean(&|f| f.spans.iter().filter(|(s, _)| is_caustic_span(s)).map(|(_, ms)| ms).sum());
     let main_pass_ms = mean(&|f| f.spans.iter().filter(|(s, _)| s.starts_with("main_")).map(|(_, ms)| ms).sum());
     if main_pass_ms == 0.0 {
         return Err(failed("no GPU times arrived"));
     }
-    let mut names: Vec<String> = frames.iter().flat_map(|f| f.spans.iter().map(|(s, _)| s.clone())).filter(|s| ours(s)).collect();
+    let mut names: Vec<String> = frames.iter().flat_map(|f| f.spans.iter().map(|(s, _)| s.clone())).filter(|s| is_caustic_span(s)).collect();
     names.sort();
     names.dedup();
     let spans = names

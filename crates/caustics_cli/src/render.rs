@@ -298,8 +298,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
     for _ in 0..48 {
         renderer.app.update();
         let spans = renderer.gpu_pass_times();
-        let ours = |span: &str| caustics_bevy::headless::CAUSTIC_SPANS.iter().any(|p| span.starts_with(p));
-        let technique_ms: f64 = spans.iter().filter(|(span, _)| ours(span)).map(|(_, ms)| ms).sum();
+        let technique_ms: f64 = spans.iter().filter(|(span, _)| caustics_bevy::headless::is_caustic_span(span)).map(|(_, ms)| ms).sum();
         if !spans.is_empty() && times.is_none_or(|t| technique_ms > t.technique_ms) {
             times = Some(GpuTimes { technique_ms, timed_passes_ms: spans.iter().map(|(_, ms)| ms).sum() });
         }
