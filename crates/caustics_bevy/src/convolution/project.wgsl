@@ -5,7 +5,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::convolution::Pool
-#import bevy_caustics::receiver::{exposed, world_at}
+#import bevy_caustics::receiver::{exposed, sample_zero, world_at}
 
 @group(0) @binding(0) var<uniform> view: View;
 #ifdef MULTISAMPLED
@@ -25,11 +25,17 @@ fn floor_at(c: i32, r: i32) -> f32 {
 
 @fragment
 fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let depth = textureLoad(depth_prepass, vec2<i32>(in.position.xy), 0);
+    let pixel = vec2<i32>(in.position.xy);
+    let depth = textureLoad(depth_prepass, pixel, 0);
     if depth <= 0.0 {
         discard;
     }
-    let p = (pool.pool_from_world * vec4(world_at(view, in.position.xy, depth), 1.0)).xyz;
+#ifdef MULTISAMPLED
+    let at = sample_zero(pixel, textureNumSamples(depth_prepass));
+#else
+    let at = in.position.xy;
+#endif
+    let p = (pool.pool_from_world * vec4(world_at(view, at, depth), 1.0)).xyz;
     let size = vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
     if abs(p.y + pool.depth) > pool.floor_tolerance || any(p.xz < vec2(0.0)) || any(p.xz > size) {
         discard;

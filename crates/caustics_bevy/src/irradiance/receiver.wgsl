@@ -22,6 +22,37 @@ fn world_at(view: View, frag: vec2<f32>, depth: f32) -> vec3<f32> {
     return clip.xyz / clip.w;
 }
 
+// Where in `pixel` sample 0 lies, the sample the passes read of a depth prepass with
+// `samples` samples per pixel: the standard sample locations (Vulkan, D3D12 and Metal
+// agree on them), the centre when single-sampled. A receiver point rebuilt at the
+// pixel's centre from sample 0's depth leaves its surface by the depth's slope over
+// that offset: millimetres to centimetres on a surface seen at a slant, enough to put
+// it behind the caustic volumes' hit planes.
+fn sample_zero(pixel: vec2<i32>, samples: u32) -> vec2<f32> {
+    var offset = vec2(0.5);
+    switch samples {
+        case 2u: { offset = vec2(0.75, 0.75); }
+        case 4u: { offset = vec2(0.375, 0.125); }
+        case 8u: { offset = vec2(0.5625, 0.3125); }
+        case 16u: { offset = vec2(0.5625, 0.5625); }
+        default: {}
+    }
+    return vec2<f32>(pixel) + offset;
+}
+
+// Where the eye ray through `frag` meets the plane through `p` with normal `n`: a
+// receiver point seen at another spot of the same pixel, moved onto this pixel's ray
+// (`p` itself where the ray grazes the plane).
+fn on_tangent_plane(view: View, frag: vec2<f32>, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    let eye = world_at(view, frag, 1.0);
+    let dir = normalize(world_at(view, frag, 0.5) - eye);
+    let along = dot(dir, n);
+    if abs(along) < 1.0e-3 {
+        return p;
+    }
+    return eye + dir * (dot(p - eye, n) / along);
+}
+
 // A `ParticipatingMedium` (`caustics_bevy::irradiance::GpuMedium`): the unit cube
 // [-½, ½]³ of `local_from_world`, and (σs, σa, g).
 struct Medium {

@@ -1,6 +1,9 @@
-// The view's depth prepass, single-sampled (sample 0, as the passes read it): what the
-// surface pass tests its prisms' back faces against, so that a prism lying wholly in
-// front of the receiver at a pixel shades nothing there.
+// The view's depth prepass, single-sampled: what the surface pass tests its prisms'
+// back faces against, so that a prism lying wholly in front of the receiver at a pixel
+// shades nothing there. Multisampled, the nearest of the pixel's samples (reversed z:
+// the greatest): the surface pass shades the receiver where the ray through the
+// pixel's centre meets it, which lies among the samples' depths, and a back face just
+// behind that point must pass.
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 
@@ -12,5 +15,14 @@
 
 @fragment
 fn copy_depth(in: FullscreenVertexOutput) -> @builtin(frag_depth) f32 {
-    return textureLoad(depth_prepass, vec2<i32>(in.position.xy), 0);
+    let pixel = vec2<i32>(in.position.xy);
+#ifdef MULTISAMPLED
+    var depth = 0.0;
+    for (var i = 0; i < i32(textureNumSamples(depth_prepass)); i++) {
+        depth = max(depth, textureLoad(depth_prepass, pixel, i));
+    }
+    return depth;
+#else
+    return textureLoad(depth_prepass, pixel, 0);
+#endif
 }
