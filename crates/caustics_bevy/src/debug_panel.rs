@@ -1,10 +1,13 @@
 //! An egui window showing what the caustics plugin does: the entities it sees, the
 //! technique each generator draws with and why, with a switch to any other, the passes
 //! that ran in the last frame with their GPU times (timestamp queries, through Bevy's
-//! `RenderDiagnosticsPlugin`) and a running graph of them, and every invalid entity
-//! with its reason. Behind the `egui` cargo feature.
+//! `RenderDiagnosticsPlugin`) and a running graph of them, a "compare with reference"
+//! button that measures every technique on the frame against the ground-truth tracer
+//! ([`crate::comparison`]: a progress bar, relative L2 and L1 per technique, a split
+//! view), and every invalid entity with its reason. Behind the `egui` cargo feature.
 
-use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
+use crate::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
+use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
 use crate::headless::{is_caustic_span, newest_gpu_spans};
 use crate::technique::CausticTechniqueChoice;
 use bevy::diagnostic::DiagnosticsStore;
@@ -31,6 +34,10 @@ impl Plugin for CausticsDebugPanelPlugin {
     }
 }
 
+/// Photons per light the panel's comparison traces: a few seconds to a minute on a
+/// desktop CPU, noise of a few per cent in the reference.
+pub const COMPARISON_PHOTONS: u64 = 1 << 22;
+
 /// The spans the graph draws, one colour each in this order.
 const COLOURS: [egui::Color32; 6] = [
     egui::Color32::from_rgb(102, 194, 165),
@@ -51,24 +58,28 @@ fn panel(
     media: Query<(), With<ParticipatingMedium>>,
     invalid: Query<(Entity, &InvalidCausticParams)>,
     names: Query<&Name>,
+    (mut comparison, mut requests, cameras): Comparison,
 ) -> Result {
     let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
     let passes = diagnostics.as_deref().map(gpu_passes).unwrap_or_default();
     egui::Window::new("Caustics").default_width(320.0).show(contexts.ctx_mut()?, |ui| {
         ui.label(format!("{} generators, {} receivers, {} media", generators.iter().count(), receivers.iter().count(), media.iter().count()));
         ui.separator();
+        let running = comparison.running();
         for (entity, mut generator, choice) in &mut generators {
             let asked = generator.technique;
             let mut technique = asked;
             ui.horizontal(|ui| {
                 ui.label(label(entity));
-                egui::ComboBox::from_id_salt(entity)
-                    .selected_text(asked.label())
-                    .show_ui(ui, |ui| {
-                        for t in CausticTechnique::ALL {
-                            ui.selectable_value(&mut technique, t, t.label());
-                        }
-                    });
+                ui.add_enabled_ui(!running, |ui| {
+                    egui::ComboBox::from_id_salt(entity)
+                        .selected_text(asked.label())
+                        .show_ui(ui, |ui| {
+                            for t in CausticTechnique::ALL {
+                                ui.selectable_value(&mut technique, t, t.label());
+                            }
+                        });
+                });
             });
             let drawn = choice.map_or_else(|| "no technique (see below)".to_string(), |c| c.0.to_string());
             ui.label(egui::RichText::new(format!("  {drawn}")).small());
@@ -94,11 +105,82 @@ fn panel(
             }
             graph(ui, &passes);
         }
+        ui.separator();
+        let camera = cameras.iter().filter(|(_, c)| c.is_active).min_by_key(|(_, c)| c.order).map(|(e, _)| e);
+        comparison_section(ui, &mut comparison, &mut requests, camera);
         for (entity, InvalidCausticParams(reason)) in &invalid {
             ui.colored_label(egui::Color32::YELLOW, format!("{} skipped: {reason}", label(entity)));
         }
     });
     Ok(())
+}
+
+/// What the panel's comparison reads and writes: its state, its requests, and the
+/// cameras it can measure.
+type Comparison<'w, 's> = (
+    ResMut<'w, ReferenceComparison>,
+    MessageWriter<'w, ReferenceComparisonRequest>,
+    Query<'w, 's, (Entity, &'static Camera), With<CausticsSettings>>,
+);
+
+/// The comparison with the ground-truth tracer: the button, the progress, the rows and
+/// the split view's switch.
+fn comparison_section(
+    ui: &mut egui::Ui,
+    comparison: &mut ReferenceComparison,
+    requests: &mut MessageWriter<ReferenceComparisonRequest>,
+    camera: Option<Entity>,
+) {
+    match comparison.state.clone() {
+        ComparisonState::Idle | ComparisonState::Failed(_) => {
+            if let ComparisonState::Failed(why) = &comparison.state {
+                ui.colored_label(egui::Color32::YELLOW, format!("comparison failed: {why}"));
+            }
+            let button = ui.add_enabled(camera.is_some(), egui::Button::new("Compare with reference"));
+            if let (true, Some(camera)) = (button.clicked(), camera) {
+                requests.write(ReferenceComparisonRequest::Start { camera, photons: COMPARISON_PHOTONS });
+            }
+            ui.label(egui::RichText::new("stops time and traces this frame with the ground-truth tracer").small());
+        }
+        ComparisonState::Measuring(_) | ComparisonState::Tracing => {
+            let doing = match comparison.state {
+                ComparisonState::Measuring(i) => format!("drawing with {} ({} of {})", CausticTechnique::ALL[i].label(), i + 1, CausticTechnique::ALL.len()),
+                _ => "every technique read back".into(),
+            };
+            ui.label(doing);
+            ui.add(egui::ProgressBar::new(comparison.progress()).text(format!("reference: {:.0} %", 100.0 * comparison.progress())));
+            if ui.button("Cancel").clicked() {
+                requests.write(ReferenceComparisonRequest::End);
+            }
+        }
+        ComparisonState::Done => {
+            egui::Grid::new("comparison").striped(true).show(ui, |ui| {
+                for header in ["asked of every generator", "rel. L2", "rel. L1", "GPU ms"] {
+                    ui.label(egui::RichText::new(header).strong());
+                }
+                ui.end_row();
+                for row in &comparison.rows {
+                    ui.label(row.technique.label()).on_hover_text(row.drawn.join("\n"));
+                    match row.error {
+                        Some(e) => {
+                            ui.label(format!("{:.3}", e.l2));
+                            ui.label(format!("{:.3}", e.l1));
+                        }
+                        None => {
+                            ui.label("no receiver");
+                            ui.label("–");
+                        }
+                    }
+                    ui.label(format!("{:.2}", row.gpu_ms));
+                    ui.end_row();
+                }
+            });
+            ui.checkbox(&mut comparison.split, "split view: technique left, reference right");
+            if ui.button("Resume").clicked() {
+                requests.write(ReferenceComparisonRequest::End);
+            }
+        }
+    }
 }
 
 /// A caustics pass's GPU times (ms), oldest first, ending with this frame's.

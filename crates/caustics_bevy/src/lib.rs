@@ -10,6 +10,7 @@
 //! its memory from Bevy's; what it asks of the GPU is bounded by the adapter's limits
 //! and [`CausticsGpuBudget`].
 
+pub mod comparison;
 pub mod components;
 pub mod cpu_time;
 #[cfg(feature = "convolution")]
@@ -93,6 +94,7 @@ impl Plugin for CausticsPlugin {
         technique::build(app);
         report::build(app);
         irradiance::build(app);
+        comparison::build(app);
         #[cfg(feature = "warped-volumes")]
         warped_volumes::build(app);
         #[cfg(feature = "ocean")]

@@ -19,6 +19,7 @@
 //! before tonemapping) and the prepasses the techniques read receiver points from.
 
 mod composite;
+pub mod reference_view;
 
 use crate::cpu_time::timed;
 use crate::components::{CausticReceiver, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
@@ -161,6 +162,12 @@ impl ViewCausticIrradiance {
     /// camera's viewport, as Bevy's main passes do.
     pub fn set_viewport(&self, pass: &mut wgpu::RenderPass) {
         self.set_scaled_viewport(pass, 1);
+    }
+
+    /// The camera's viewport in the buffer, in pixels: its corner and size.
+    pub fn region(&self) -> (UVec2, UVec2) {
+        let size = self.texture.texture.size();
+        self.viewport.as_ref().map_or((UVec2::ZERO, UVec2::new(size.width, size.height)), |v| (v.physical_position, v.physical_size))
     }
 
     /// [`Self::set_viewport`] on a texture `scale` times smaller than the target.
@@ -357,6 +364,7 @@ pub(crate) fn build(app: &mut App) {
         )
         .add_systems(Core3d, timed(&cpu.render, inject_irradiance).after(Core3dSystems::Prepass).before(Core3dSystems::MainPass));
     composite::build(app);
+    reference_view::build(app);
 }
 
 /// A material whose receivers' albedo the composite reads: its `StandardMaterial`
@@ -604,6 +612,33 @@ fn init_inject_pipeline(
     commands.insert_resource(InjectPipeline { layout, pipeline });
 }
 
+impl InjectPipeline {
+    /// Draws `image` (irradiance, resampled to the view) over what `pass` covers of the
+    /// view's buffer, replacing it; false when the pipeline or the image is not ready.
+    pub(crate) fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass,
+        image: Option<&GpuImage>,
+        view_offset: &ViewUniformOffset,
+        (device, cache, view_uniforms): (&RenderDevice, &PipelineCache, &ViewUniforms),
+    ) -> bool {
+        let (Some(pipeline), Some(image), Some(view_binding)) =
+            (cache.get_render_pipeline(self.pipeline), image, view_uniforms.uniforms.binding())
+        else {
+            return false;
+        };
+        let bind_group = device.create_bind_group(
+            "caustic_inject_bind_group",
+            &cache.get_bind_group_layout(&self.layout),
+            &BindGroupEntries::sequential((&image.texture_view, view_binding)),
+        );
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
+        pass.draw(0..3, 0..1);
+        true
+    }
+}
+
 /// Starts the view's buffer for this frame: the injected irradiance times exposure, or zero.
 pub(crate) fn inject_irradiance(
     view: ViewQuery<(&ViewCausticIrradiance, &ViewUniformOffset, Option<&InjectedIrradiance>)>,
@@ -616,15 +651,7 @@ pub(crate) fn inject_irradiance(
 ) {
     let (buffer, view_offset, injected) = view.into_inner();
     let source = injected.and_then(|i| images.get(&i.0));
-    let pipeline = pipeline_cache.get_render_pipeline(inject.pipeline);
-    let bind_group = match (source, view_uniforms.uniforms.binding()) {
-        (Some(image), Some(view_binding)) => Some(ctx.render_device().create_bind_group(
-            "caustic_inject_bind_group",
-            &pipeline_cache.get_bind_group_layout(&inject.layout),
-            &BindGroupEntries::sequential((&image.texture_view, view_binding)),
-        )),
-        _ => None,
-    };
+    let device = ctx.render_device().clone();
     let mut pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
         label: Some("caustic_irradiance_inject"),
         color_attachments: &[Some(RenderPassColorAttachment {
@@ -636,10 +663,7 @@ pub(crate) fn inject_irradiance(
         ..default()
     });
     buffer.set_viewport(&mut pass);
-    if let (Some(pipeline), Some(bind_group)) = (pipeline, bind_group) {
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
-        pass.draw(0..3, 0..1);
+    if inject.draw(&mut pass, source, view_offset, (&device, &pipeline_cache, &view_uniforms)) {
         recorder.record("inject");
     }
 }

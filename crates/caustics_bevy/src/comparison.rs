@@ -1,0 +1,386 @@
+//! The frame a camera shows now, measured against the ground-truth tracer while the
+//! game runs: what the debug panel's "compare with reference" button starts, and what
+//! `demo --compare` reports.
+//!
+//! A [`ReferenceComparisonRequest::Start`] stops virtual time, so the scene holds
+//! still, and traces that scene ([`scene_from_world`], [`trace_view`]) on a thread of
+//! its own, with its progress in [`ReferenceComparison::progress`]. Meanwhile every
+//! generator is asked for each technique in turn ([`CausticTechnique::ALL`]), and the
+//! view's caustic irradiance is read back from the GPU every frame
+//! ([`CaptureCausticIrradiance`] and Bevy's `Readback`) until the frame has settled:
+//! only the chosen techniques' passes ran, and two readbacks agree. The row keeps it,
+//! with the caustic passes' GPU times and what each generator drew with. When the trace is in, each row gets its
+//! relative L2 and L1 over the pixels that see a receiver ([`view_error`]), and the
+//! reference becomes an irradiance image that [`ReferenceComparison::split`] shows in
+//! the right half of the view ([`ReferenceSplit`]). [`ReferenceComparisonRequest::End`]
+//! restores the generators' techniques, takes the split away and lets time run again.
+
+use crate::headless::{decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans};
+use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
+use crate::reference::{ViewError, pinhole, scene_from_world, trace_view, view_error};
+use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
+use caustics_core::metrics::relative_l2;
+use caustics_core::technique::Technique;
+use bevy::camera::Exposure;
+use bevy::diagnostic::DiagnosticsStore;
+use bevy::prelude::*;
+use bevy::render::gpu_readback::{Readback, ReadbackComplete};
+use bevy::render::renderer::RenderDevice;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+/// Frames each technique draws before its irradiance is first read back.
+pub const SETTLE_FRAMES: u32 = 2;
+
+/// The most frames a technique is read back for before it is measured as it stands,
+/// settled or not ([`techniques_drawing`], [`settled`]).
+pub const MAX_WAIT_FRAMES: u32 = 120;
+
+/// Frames a readback may lag behind the frame the main world last saw drawn.
+const READBACK_LATENCY: u32 = 4;
+
+/// Starts or ends the comparison ([`ReferenceComparison`]).
+#[derive(Message, Clone, Copy, Debug)]
+pub enum ReferenceComparisonRequest {
+    /// Measure what `camera` (a perspective camera with [`crate::CausticsSettings`])
+    /// shows now against the tracer, with `photons` per light.
+    Start { camera: Entity, photons: u64 },
+    /// Restore the generators' techniques, take the split view away, let time run.
+    End,
+}
+
+/// Where the comparison stands.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum ComparisonState {
+    #[default]
+    Idle,
+    /// Reading back what this technique (an index into [`CausticTechnique::ALL`]) draws;
+    /// the tracer runs meanwhile.
+    Measuring(usize),
+    /// Every technique is read back; waiting for the tracer.
+    Tracing,
+    /// The rows have their errors; time stays stopped until [`ReferenceComparisonRequest::End`].
+    Done,
+    /// The comparison could not run, and why.
+    Failed(String),
+}
+
+/// One technique asked of every generator, measured.
+#[derive(Clone, Debug)]
+pub struct ComparisonRow {
+    pub technique: CausticTechnique,
+    /// What each generator drew with, and why (a technique that does not apply to a
+    /// generator falls back to `Auto`'s pick).
+    pub drawn: Vec<String>,
+    /// The caustic passes' GPU time in the frame read back (ms; timestamp queries).
+    pub gpu_ms: f64,
+    /// The view's caustic irradiance (lux), row by row, top first.
+    pub irradiance: Vec<Vec3>,
+    /// Against the reference, once it is in; `None` before, or with no receiver in view.
+    pub error: Option<ViewError>,
+}
+
+/// The comparison's state, rows and reference. Set [`Self::split`] to show the split
+/// view once the reference is in.
+#[derive(Resource, Default)]
+pub struct ReferenceComparison {
+    pub state: ComparisonState,
+    /// The camera measured.
+    pub camera: Option<Entity>,
+    /// The view's size in pixels.
+    pub size: UVec2,
+    pub rows: Vec<ComparisonRow>,
+    /// The tracer's irradiance at each pixel that sees a receiver.
+    pub reference: Vec<Option<Vec3>>,
+    /// Whether the camera shows the split view: left the techniques, right the reference.
+    pub split: bool,
+    traced: Arc<AtomicU64>,
+    photons: u64,
+    tracer: Option<JoinHandle<Result<Vec<Option<Vec3>>, String>>>,
+    /// Each generator's own technique, restored at the end.
+    asked: Vec<(Entity, CausticTechnique)>,
+    frames_left: u32,
+    waited: u32,
+    /// Frames in a row whose view passes were those of the chosen techniques.
+    drawing_frames: u32,
+    previous: Option<Vec<Vec3>>,
+    capture: Handle<Image>,
+    reference_image: Option<Handle<Image>>,
+    readback: Option<(Entity, Arc<Mutex<Option<Vec<u8>>>>)>,
+}
+
+impl ReferenceComparison {
+    /// The share of the reference's photons traced so far, 0 to 1.
+    pub fn progress(&self) -> f32 {
+        if self.photons == 0 { 0.0 } else { (self.traced.load(Ordering::Relaxed) as f64 / self.photons as f64).min(1.0) as f32 }
+    }
+
+    /// Whether a comparison is under way (time stopped, techniques switched).
+    pub fn running(&self) -> bool {
+        matches!(self.state, ComparisonState::Measuring(_) | ComparisonState::Tracing)
+    }
+}
+
+pub(crate) fn build(app: &mut App) {
+    app.add_message::<ReferenceComparisonRequest>()
+        .init_resource::<ReferenceComparison>()
+        .add_systems(Update, drive);
+}
+
+/// Runs the requests of this frame, then the comparison's next step.
+fn drive(world: &mut World) {
+    let requests: Vec<_> = world.resource_mut::<Messages<ReferenceComparisonRequest>>().drain().collect();
+    for request in requests {
+        match request {
+            ReferenceComparisonRequest::Start { camera, photons } => {
+                if !world.resource::<ReferenceComparison>().running() {
+                    end(world);
+                    if let Err(why) = start(world, camera, photons) {
+                        warn!("bevy_caustics: no comparison with the reference: {why}");
+                        end(world);
+                        world.resource_mut::<ReferenceComparison>().state = ComparisonState::Failed(why);
+                    }
+                }
+            }
+            ReferenceComparisonRequest::End => end(world),
+        }
+    }
+    step(world);
+    show_split(world);
+}
+
+fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> {
+    let mut cameras = world.query::<(&Camera, &GlobalTransform, &Projection)>();
+    let (view, transform, projection) = cameras.get(world, camera).map_err(|_| format!("{camera} is not a camera"))?;
+    let Projection::Perspective(perspective) = projection else {
+        return Err("the tracer's camera is a pinhole: measure a perspective camera".into());
+    };
+    let size = view.physical_viewport_size().ok_or("the camera has no viewport size yet")?;
+    let pinhole = pinhole(&transform.compute_transform(), perspective.fov, size.x, size.y);
+    world.resource_mut::<Time<Virtual>>().pause();
+    let (scene, shown, skipped) = scene_from_world(world);
+    for s in skipped {
+        warn!("bevy_caustics: left out of the reference: {s}");
+    }
+    let traced = Arc::new(AtomicU64::new(0));
+    let counter = traced.clone();
+    let tracer = std::thread::spawn(move || {
+        let progress = move |done: u64, _: u64| counter.store(done, Ordering::Relaxed);
+        trace_view(&scene, shown, &pinhole, photons, 0.015, &progress)
+    });
+    let capture = world.resource_mut::<Assets<Image>>().add(capture_image(size));
+    world.entity_mut(camera).insert(CaptureCausticIrradiance(capture.clone()));
+    let asked = world.query::<(Entity, &CausticGenerator)>().iter(world).map(|(e, g)| (e, g.technique)).collect();
+    *world.resource_mut::<ReferenceComparison>() = ReferenceComparison {
+        state: ComparisonState::Measuring(0),
+        camera: Some(camera),
+        size,
+        traced,
+        photons,
+        tracer: Some(tracer),
+        asked,
+        capture,
+        ..default()
+    };
+    ask_every_generator(world, CausticTechnique::ALL[0]);
+    Ok(())
+}
+
+fn ask_every_generator(world: &mut World, technique: CausticTechnique) {
+    for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
+        generator.technique = technique;
+    }
+    let mut comparison = world.resource_mut::<ReferenceComparison>();
+    comparison.frames_left = SETTLE_FRAMES;
+    comparison.waited = 0;
+    comparison.drawing_frames = 0;
+    comparison.previous = None;
+    // Readbacks of frames drawn before the switch are dropped with their entity.
+    if let Some((entity, _)) = comparison.readback.take() {
+        world.despawn(entity);
+    }
+}
+
+fn end(world: &mut World) {
+    let mut comparison = std::mem::take(&mut *world.resource_mut::<ReferenceComparison>());
+    if comparison.state == ComparisonState::Idle {
+        return;
+    }
+    restore(world, std::mem::take(&mut comparison.asked));
+    if let Some((entity, _)) = comparison.readback.take() {
+        world.despawn(entity);
+    }
+    if let Some(mut camera) = comparison.camera.and_then(|c| world.get_entity_mut(c).ok()) {
+        camera.remove::<(CaptureCausticIrradiance, ReferenceSplit)>();
+    }
+    // A trace still under way finishes on its thread and is dropped.
+    world.resource_mut::<Time<Virtual>>().unpause();
+}
+
+fn step(world: &mut World) {
+    let state = world.resource::<ReferenceComparison>().state.clone();
+    match state {
+        ComparisonState::Measuring(index) => measure(world, index),
+        ComparisonState::Tracing => {
+            let mut comparison = world.resource_mut::<ReferenceComparison>();
+            if comparison.tracer.as_ref().is_some_and(|t| t.is_finished()) {
+                let reference = comparison.tracer.take().map(|t| t.join().unwrap_or_else(|_| Err("the tracer panicked".into())));
+                match reference {
+                    Some(Ok(reference)) => finish(world, reference),
+                    Some(Err(why)) => {
+                        end(world);
+                        world.resource_mut::<ReferenceComparison>().state = ComparisonState::Failed(why);
+                    }
+                    None => {}
+                }
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Counts down the settling frames, reads the view back every frame after, and takes
+/// the row once the frame has settled ([`settled`]).
+fn measure(world: &mut World, index: usize) {
+    let comparison = world.resource::<ReferenceComparison>();
+    let (frames_left, readback, capture, camera, size) =
+        (comparison.frames_left, comparison.readback.clone(), comparison.capture.clone(), comparison.camera, comparison.size);
+    if frames_left > 0 {
+        world.resource_mut::<ReferenceComparison>().frames_left -= 1;
+        return;
+    }
+    // Bevy reads the capture back every frame while the readback entity lives; the
+    // slot keeps the newest.
+    let Some((_, slot)) = readback else {
+        let slot = Arc::new(Mutex::new(None));
+        let filled = slot.clone();
+        let entity = world
+            .spawn(Readback::texture(capture))
+            .observe(move |event: On<ReadbackComplete>| {
+                if let Ok(mut slot) = filled.lock() {
+                    *slot = Some(event.data.clone());
+                }
+            })
+            .id();
+        world.resource_mut::<ReferenceComparison>().readback = Some((entity, slot));
+        return;
+    };
+    let bytes = slot.lock().ok().and_then(|mut s| s.take());
+    let report = world.resource::<CausticPassReport>();
+    let drawn = report.generators.iter().map(|(_, choice)| choice.to_string()).collect();
+    let drawing = techniques_drawing(report);
+    let exposure = camera.and_then(|c| world.get::<Exposure>(c)).copied().unwrap_or_default().exposure();
+    let gpu_ms = world.get_resource::<DiagnosticsStore>().map_or(0.0, |store| {
+        newest_gpu_spans(store).into_iter().filter(|(span, _)| is_caustic_span(span)).filter_map(|(_, d)| d.value()).fold(0.0, |a, b| a + b)
+    });
+    let mut comparison = world.resource_mut::<ReferenceComparison>();
+    let technique = CausticTechnique::ALL[index];
+    comparison.waited += 1;
+    comparison.drawing_frames = if drawing { comparison.drawing_frames + 1 } else { 0 };
+    let Some(bytes) = bytes else { return };
+    let irradiance: Vec<Vec3> = unpadded_rows(&bytes, size).into_iter().map(|e| e.truncate() / exposure).collect();
+    // A readback shows a frame some frames old: only those drawn after the passes have
+    // matched the choice for a while count, and two in a row must agree.
+    let fresh = comparison.drawing_frames >= READBACK_LATENCY;
+    if !(fresh && comparison.previous.as_deref().is_some_and(|p| settled(p, &irradiance))) {
+        if comparison.waited < MAX_WAIT_FRAMES {
+            comparison.previous = fresh.then_some(irradiance);
+            return;
+        }
+        warn!("bevy_caustics: {technique:?} did not settle in {MAX_WAIT_FRAMES} frames; measured as it stands");
+    }
+    comparison.rows.push(ComparisonRow { technique, drawn, gpu_ms, irradiance, error: None });
+    if let Some(&next) = CausticTechnique::ALL.get(index + 1) {
+        comparison.state = ComparisonState::Measuring(index + 1);
+        ask_every_generator(world, next);
+        return;
+    }
+    comparison.state = ComparisonState::Tracing;
+    let asked = std::mem::take(&mut comparison.asked);
+    if let Some((entity, _)) = comparison.readback.take() {
+        world.despawn(entity);
+    }
+    restore(world, asked);
+    if let Some(mut camera) = camera.and_then(|c| world.get_entity_mut(c).ok()) {
+        camera.remove::<CaptureCausticIrradiance>();
+    }
+}
+
+/// The pass that draws a technique's caustics into a view's buffer, as the pass report
+/// names it.
+fn view_pass(technique: Technique) -> &'static str {
+    match technique {
+        Technique::WarpedVolumes => "volumes",
+        Technique::IlluminationTextures => "illumination textures projection",
+        Technique::Convolution => "pool floor",
+        Technique::HierarchicalMaps => "caustic map projection",
+    }
+}
+
+/// Whether the last frame's view passes are those of the techniques the generators
+/// draw with, and no others: a technique switched away from can still draw what it
+/// built before for some frames (the volumes are built off the frame), and one
+/// switched to can take some to build.
+fn techniques_drawing(report: &CausticPassReport) -> bool {
+    let chosen: Vec<&str> = report.generators.iter().map(|(_, choice)| view_pass(choice.technique)).collect();
+    Technique::ALL.iter().map(|&t| view_pass(t)).all(|pass| chosen.contains(&pass) == (report.views(pass) > 0))
+}
+
+/// Whether two readbacks of the same still frame agree (relative L2 of their mean of
+/// RGB within 10⁻³): the techniques' asynchronous work has caught up.
+fn settled(previous: &[Vec3], newest: &[Vec3]) -> bool {
+    let grey = |v: &[Vec3]| v.iter().map(|e| (e.x + e.y + e.z) / 3.0).collect::<Vec<f32>>();
+    let (a, b) = (grey(previous), grey(newest));
+    a == b || relative_l2(&b, &a) <= 1e-3
+}
+
+/// Gives each generator back the technique it asked for.
+fn restore(world: &mut World, asked: Vec<(Entity, CausticTechnique)>) {
+    for (entity, technique) in asked {
+        if let Some(mut generator) = world.get_mut::<CausticGenerator>(entity) {
+            generator.technique = technique;
+        }
+    }
+}
+
+/// A readback of an `Rgba16Float` texture of `size` pixels, its rows padded to wgpu's
+/// copy alignment, as one value per pixel.
+fn unpadded_rows(bytes: &[u8], size: UVec2) -> Vec<Vec4> {
+    let row = size.x as usize * 8;
+    let padded = RenderDevice::align_copy_bytes_per_row(row);
+    bytes.chunks(padded).take(size.y as usize).flat_map(|r| decode_rgba16f(&r[..row.min(r.len())])).collect()
+}
+
+/// The rows' errors against `reference`, and the reference as an image for the split view.
+fn finish(world: &mut World, reference: Vec<Option<Vec3>>) {
+    let size = world.resource::<ReferenceComparison>().size;
+    let injected: Vec<Vec3> = reference.iter().map(|e| e.unwrap_or(Vec3::ZERO)).collect();
+    let image = world.resource_mut::<Assets<Image>>().add(irradiance_image(size.x, size.y, &injected));
+    let mut comparison = world.resource_mut::<ReferenceComparison>();
+    for row in &mut comparison.rows {
+        row.error = view_error(&row.irradiance, &reference);
+    }
+    comparison.reference = reference;
+    comparison.reference_image = Some(image);
+    comparison.state = ComparisonState::Done;
+}
+
+/// Puts [`ReferenceSplit`] on the measured camera while [`ReferenceComparison::split`]
+/// is set and the reference is in, and takes it away otherwise.
+fn show_split(world: &mut World) {
+    let comparison = world.resource::<ReferenceComparison>();
+    let (Some(camera), split) = (comparison.camera, comparison.split.then(|| comparison.reference_image.clone()).flatten()) else {
+        return;
+    };
+    let Ok(mut camera) = world.get_entity_mut(camera) else { return };
+    match split {
+        Some(image) if camera.get::<ReferenceSplit>().is_none_or(|s| s.0 != image) => {
+            camera.insert(ReferenceSplit(image));
+        }
+        None if camera.contains::<ReferenceSplit>() => {
+            camera.remove::<ReferenceSplit>();
+        }
+        _ => {}
+    }
+}
