@@ -105,94 +105,65 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
     Ok(())
 }
 
-/// `--compare`: renders the demo headless to its last frame, then, with time stopped,
-/// traces that frame's scene with the ground-truth tracer (`photons` per light, on a
-/// background thread) while it renders the same frame with every generator asking for
-/// each technique in turn. Prints a Markdown table of each one's relative L2 and L1
-/// against the tracer over the receivers in view (`reference::view_error`) and its GPU
-/// time, and writes beside `--out` a split image per technique: left the technique,
-/// right the reference.
+/// `--compare`: renders the demo headless to its last frame, then measures it as the
+/// panel's "compare with reference" button does (`bevy_caustics::comparison`): time
+/// stops, the tracer traces the frame (`photons` per light, on its own thread) while
+/// every generator is asked for each technique in turn. Prints a Markdown table of
+/// each one's relative L2 and L1 against the tracer over the receivers in view and its
+/// GPU time, and writes beside `--out` the split view per technique: left the
+/// technique, right the reference.
 fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String> {
-    use bevy_caustics::headless::{HeadlessRenderer, is_caustic_span};
-    use bevy_caustics::reference::{pinhole, scene_from_world, trace_view, view_error};
+    use bevy_caustics::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
+    use bevy_caustics::headless::HeadlessRenderer;
     let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
     spawn_pool(renderer.world_mut(), target, true);
     renderer.render(frames).map_err(|e| e.to_string())?;
     let world = renderer.world_mut();
-    world.resource_mut::<Time<Virtual>>().pause();
-    let (camera, transform, projection) = world.query::<(Entity, &GlobalTransform, &Projection)>().single(world).map_err(|e| e.to_string())?;
-    let Projection::Perspective(perspective) = projection else { return Err("the demo's camera is a perspective one".into()) };
-    let view = pinhole(&transform.compute_transform(), perspective.fov, WIDTH, HEIGHT);
-    let (scene, shown, skipped) = scene_from_world(world);
-    for s in skipped {
-        eprintln!("left out of the reference: {s}");
-    }
-    let tracer = std::thread::spawn(move || {
-        let progress = |done: u64, total: u64| {
-            if done == total || done % (total / 8).max(1) < (1 << 14) {
-                eprintln!("  reference: {:3.0} % of {total} photons", 100.0 * done as f64 / total as f64);
-            }
-        };
-        trace_view(&scene, shown, &view, photons, 0.015, &progress)
-    });
-    let mut rows = Vec::new();
-    // `Auto`, then every technique asked of every generator (one it does not apply to
-    // falls back to `Auto`'s pick, which the row says).
-    for technique in CausticTechnique::ALL {
-        let name = technique.label();
-        let world = renderer.world_mut();
-        for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
-            generator.technique = technique;
+    let camera = world.query_filtered::<Entity, With<Camera3d>>().single(world).map_err(|e| e.to_string())?;
+    world.write_message(ReferenceComparisonRequest::Start { camera, photons });
+    let mut reported = 0;
+    loop {
+        renderer.render(1).map_err(|e| e.to_string())?;
+        let comparison = renderer.world_mut().resource::<ReferenceComparison>();
+        let (state, progress) = (comparison.state.clone(), (comparison.progress() * 8.0) as u32 + comparison.gathering() as u32);
+        if progress > reported {
+            reported = progress;
+            let traced = if progress > 8 { "gathering at every pixel".into() } else { format!("{:3} % of the photons traced", 100 * progress / 8) };
+            eprintln!("  reference: {traced} ({state:?})");
         }
-        let image = renderer.render(6).map_err(|e| e.to_string())?;
-        let irradiance = renderer.caustic_irradiance(camera).map_err(|e| e.to_string())?;
-        let gpu_ms: f64 = renderer.gpu_pass_times().iter().filter(|(span, _)| is_caustic_span(span)).map(|(_, ms)| ms).sum();
-        let drawn: Vec<String> = renderer.pass_report().generators.iter().map(|(_, choice)| choice.to_string()).collect();
-        rows.push((name, image, irradiance, gpu_ms, drawn));
+        match state {
+            ComparisonState::Done => break,
+            ComparisonState::Failed(why) => return Err(why),
+            _ => {}
+        }
     }
-    let reference = tracer.join().map_err(|_| "the reference tracer panicked")??;
-    // The reference's view: the same frame with the tracer's irradiance injected and no
-    // generator drawing.
-    let world = renderer.world_mut();
-    let generators: Vec<Entity> = world.query_filtered::<Entity, With<CausticGenerator>>().iter(world).collect();
-    for entity in generators {
-        world.entity_mut(entity).remove::<CausticGenerator>();
-    }
-    let injected = reference.iter().map(|e| e.unwrap_or(Vec3::ZERO)).collect::<Vec<_>>();
-    let injected = world.resource_mut::<Assets<Image>>().add(bevy_caustics::headless::irradiance_image(WIDTH, HEIGHT, &injected));
-    world.entity_mut(camera).insert(bevy_caustics::InjectedIrradiance(injected));
-    let truth = renderer.render(6).map_err(|e| e.to_string())?;
     let adapter = renderer.adapter.name.clone();
+    let rows = renderer.world_mut().resource::<ReferenceComparison>().rows.clone();
     println!("| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) |");
     println!("|---|---|---:|---:|---:|");
-    for (name, image, irradiance, gpu_ms, drawn) in rows {
-        let error = view_error(&irradiance, &reference).map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
-        println!("| {name} | {} | {error} | {gpu_ms:.1} |", drawn.join("; "));
-        let split = split_view(&image, &truth);
-        let stem = args.out.file_stem().unwrap_or_default().to_string_lossy();
-        let path = args.out.with_file_name(format!("{stem}-{}-vs-reference.png", name.to_lowercase().replace(' ', "-")));
-        split.save_png(&path, 1.0).map_err(|e| e.to_string())?;
+    for row in &rows {
+        let error = row.error.map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
+        println!("| {} | {} | {error} | {:.1} |", row.technique.label(), row.drawn.join("; "), row.gpu_ms);
+    }
+    // The split view of each technique, as the panel shows it.
+    renderer.world_mut().resource_mut::<ReferenceComparison>().split = true;
+    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+    for row in rows {
+        let world = renderer.world_mut();
+        for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
+            generator.technique = row.technique;
+        }
+        // Time stands still: a dozen frames let the volumes' build catch up.
+        let mut image = renderer.render(12).map_err(|e| e.to_string())?;
+        // A white line where the halves meet.
+        let (width, middle) = (image.width as usize, image.width as usize / 2);
+        image.pixels.iter_mut().skip(middle).step_by(width).for_each(|p| *p = Vec4::ONE);
+        let path = args.out.with_file_name(format!("{stem}-{}-vs-reference.png", row.technique.label().to_lowercase().replace(' ', "-")));
+        image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
         eprintln!("wrote {}", path.display());
     }
     Ok(())
-}
-
-/// Left half from `left`, right half from `right`, a white line between.
-fn split_view(left: &bevy_caustics::headless::RenderedImage, right: &bevy_caustics::headless::RenderedImage) -> bevy_caustics::headless::RenderedImage {
-    let w = left.width;
-    let pixels = left
-        .pixels
-        .iter()
-        .zip(&right.pixels)
-        .enumerate()
-        .map(|(i, (l, r))| match (i as u32 % w).cmp(&(w / 2)) {
-            std::cmp::Ordering::Less => *l,
-            std::cmp::Ordering::Equal => Vec4::ONE,
-            std::cmp::Ordering::Greater => *r,
-        })
-        .collect();
-    bevy_caustics::headless::RenderedImage { width: w, height: left.height, pixels }
 }
 
 /// The glass ball, bobbing on the water.

@@ -9,11 +9,12 @@
 //! view's caustic irradiance is read back from the GPU every frame
 //! ([`CaptureCausticIrradiance`] and Bevy's `Readback`) until the frame has settled:
 //! only the chosen techniques' passes ran, and two readbacks agree. The row keeps it,
-//! with the caustic passes' GPU times and what each generator drew with. When the trace is in, each row gets its
-//! relative L2 and L1 over the pixels that see a receiver ([`view_error`]), and the
-//! reference becomes an irradiance image that [`ReferenceComparison::split`] shows in
-//! the right half of the view ([`ReferenceSplit`]). [`ReferenceComparisonRequest::End`]
-//! restores the generators' techniques, takes the split away and lets time run again.
+//! with the caustic passes' GPU times and what each generator drew with. When the
+//! trace is in, each row gets its relative L2 and L1 over the pixels that see a
+//! receiver ([`view_error`]), and the reference becomes an irradiance image that
+//! [`ReferenceComparison::split`] shows in the right half of the view
+//! ([`ReferenceSplit`]). [`ReferenceComparisonRequest::End`] restores the generators'
+//! techniques, takes the split away and lets time run again.
 
 use crate::headless::{decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
@@ -81,6 +82,9 @@ pub struct ComparisonRow {
     pub error: Option<ViewError>,
 }
 
+/// The newest bytes a readback entity's observer has received.
+type ReadbackSlot = Arc<Mutex<Option<Vec<u8>>>>;
+
 /// The comparison's state, rows and reference. Set [`Self::split`] to show the split
 /// view once the reference is in.
 #[derive(Resource, Default)]
@@ -95,8 +99,8 @@ pub struct ReferenceComparison {
     pub reference: Vec<Option<Vec3>>,
     /// Whether the camera shows the split view: left the techniques, right the reference.
     pub split: bool,
-    traced: Arc<AtomicU64>,
-    photons: u64,
+    /// Photons traced so far, and in all (every light's).
+    traced: Arc<[AtomicU64; 2]>,
     tracer: Option<JoinHandle<Result<Vec<Option<Vec3>>, String>>>,
     /// Each generator's own technique, restored at the end.
     asked: Vec<(Entity, CausticTechnique)>,
@@ -107,13 +111,19 @@ pub struct ReferenceComparison {
     previous: Option<Vec<Vec3>>,
     capture: Handle<Image>,
     reference_image: Option<Handle<Image>>,
-    readback: Option<(Entity, Arc<Mutex<Option<Vec<u8>>>>)>,
+    readback: Option<(Entity, ReadbackSlot)>,
 }
 
 impl ReferenceComparison {
     /// The share of the reference's photons traced so far, 0 to 1.
     pub fn progress(&self) -> f32 {
-        if self.photons == 0 { 0.0 } else { (self.traced.load(Ordering::Relaxed) as f64 / self.photons as f64).min(1.0) as f32 }
+        let [done, total] = [0, 1].map(|i| self.traced[i].load(Ordering::Relaxed));
+        if total == 0 { 0.0 } else { (done as f64 / total as f64).min(1.0) as f32 }
+    }
+
+    /// Whether every photon is traced and the tracer now gathers them at each pixel.
+    pub fn gathering(&self) -> bool {
+        self.progress() == 1.0 && self.tracer.as_ref().is_some_and(|t| !t.is_finished())
     }
 
     /// Whether a comparison is under way (time stopped, techniques switched).
@@ -125,7 +135,9 @@ impl ReferenceComparison {
 pub(crate) fn build(app: &mut App) {
     app.add_message::<ReferenceComparisonRequest>()
         .init_resource::<ReferenceComparison>()
-        .add_systems(Update, drive);
+        // In `Last`: the scene it traces is the one this frame draws, after every
+        // system has moved it and its transforms are propagated.
+        .add_systems(Last, drive);
 }
 
 /// Runs the requests of this frame, then the comparison's next step.
@@ -163,10 +175,13 @@ fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> 
     for s in skipped {
         warn!("bevy_caustics: left out of the reference: {s}");
     }
-    let traced = Arc::new(AtomicU64::new(0));
+    let traced = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
     let counter = traced.clone();
     let tracer = std::thread::spawn(move || {
-        let progress = move |done: u64, _: u64| counter.store(done, Ordering::Relaxed);
+        let progress = move |done: u64, total: u64| {
+            counter[1].store(total, Ordering::Relaxed);
+            counter[0].store(done, Ordering::Relaxed);
+        };
         trace_view(&scene, shown, &pinhole, photons, 0.015, &progress)
     });
     let capture = world.resource_mut::<Assets<Image>>().add(capture_image(size));
@@ -177,7 +192,6 @@ fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> 
         camera: Some(camera),
         size,
         traced,
-        photons,
         tracer: Some(tracer),
         asked,
         capture,

@@ -148,7 +148,12 @@ fn comparison_section(
                 _ => "every technique read back".into(),
             };
             ui.label(doing);
-            ui.add(egui::ProgressBar::new(comparison.progress()).text(format!("reference: {:.0} %", 100.0 * comparison.progress())));
+            let text = if comparison.gathering() {
+                "reference: gathering at every pixel".to_string()
+            } else {
+                format!("reference: {:.0} % of the photons", 100.0 * comparison.progress())
+            };
+            ui.add(egui::ProgressBar::new(comparison.progress()).text(text));
             if ui.button("Cancel").clicked() {
                 requests.write(ReferenceComparisonRequest::End);
             }
