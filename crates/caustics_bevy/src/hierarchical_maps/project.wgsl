@@ -6,7 +6,7 @@
 
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::{exposed, sample_zero, world_at}
+#import bevy_caustics::receiver::{exposed, receiver_at}
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, map_texels_per_photon, bilinear_taps,
     bilinear_mix,
@@ -35,13 +35,13 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     if depth <= 0.0 {
         discard;
     }
-#ifdef MULTISAMPLED
-    let at = sample_zero(pixel, textureNumSamples(depth_prepass));
-#else
-    let at = in.position.xy;
-#endif
-    let p = world_at(view, at, depth);
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
+#ifdef MULTISAMPLED
+    let samples = textureNumSamples(depth_prepass);
+#else
+    let samples = 1u;
+#endif
+    let p = receiver_at(view, pixel, samples, depth, n);
     let m = light.map_resolution;
     let uv = map_uv(light, p);
     if uv.z == 0.0 {

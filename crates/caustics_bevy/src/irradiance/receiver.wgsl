@@ -24,10 +24,7 @@ fn world_at(view: View, frag: vec2<f32>, depth: f32) -> vec3<f32> {
 
 // Where in `pixel` sample 0 lies, the sample the passes read of a depth prepass with
 // `samples` samples per pixel: the standard sample locations (Vulkan, D3D12 and Metal
-// agree on them), the centre when single-sampled. A receiver point rebuilt at the
-// pixel's centre from sample 0's depth leaves its surface by the depth's slope over
-// that offset: millimetres to centimetres on a surface seen at a slant, enough to put
-// it behind the caustic volumes' hit planes.
+// agree on them), the centre when single-sampled.
 fn sample_zero(pixel: vec2<i32>, samples: u32) -> vec2<f32> {
     var offset = vec2(0.5);
     switch samples {
@@ -40,9 +37,8 @@ fn sample_zero(pixel: vec2<i32>, samples: u32) -> vec2<f32> {
     return vec2<f32>(pixel) + offset;
 }
 
-// Where the eye ray through `frag` meets the plane through `p` with normal `n`: a
-// receiver point seen at another spot of the same pixel, moved onto this pixel's ray
-// (`p` itself where the ray grazes the plane).
+// Where the eye ray through `frag` meets the plane through `p` with normal `n` (`p`
+// itself where the ray grazes the plane).
 fn on_tangent_plane(view: View, frag: vec2<f32>, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     let eye = world_at(view, frag, 1.0);
     let dir = normalize(world_at(view, frag, 0.5) - eye);
@@ -51,6 +47,21 @@ fn on_tangent_plane(view: View, frag: vec2<f32>, p: vec3<f32>, n: vec3<f32>) -> 
         return p;
     }
     return eye + dir * (dot(p - eye, n) / along);
+}
+
+// The receiver point the centre of `pixel` sees, from the depth prepass's `depth` at
+// sample 0 (of `samples` per pixel) and the surface's normal `n` there. Multisampled,
+// sample 0 lies off the centre: its point, moved along the surface's tangent plane
+// onto the centre's eye ray. Rebuilt at the centre from sample 0's depth instead, a
+// receiver seen at a slant leaves its surface by the depth's slope over the offset
+// (millimetres to centimetres), enough to put it behind the caustic volumes' hit
+// planes; kept at sample 0, the image shifts by a fraction of a pixel.
+fn receiver_at(view: View, pixel: vec2<i32>, samples: u32, depth: f32, n: vec3<f32>) -> vec3<f32> {
+    let centre = vec2<f32>(pixel) + 0.5;
+    if samples <= 1u {
+        return world_at(view, centre, depth);
+    }
+    return on_tangent_plane(view, centre, world_at(view, sample_zero(pixel, samples), depth), n);
 }
 
 // A `ParticipatingMedium` (`caustics_bevy::irradiance::GpuMedium`): the unit cube

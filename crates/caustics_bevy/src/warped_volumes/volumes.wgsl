@@ -5,7 +5,7 @@
 // (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
 
 #import bevy_render::view::View
-#import bevy_caustics::receiver::{Medium, clip_medium, exposed, on_tangent_plane, sample_zero, world_at}
+#import bevy_caustics::receiver::{Medium, clip_medium, exposed, receiver_at, world_at}
 #import bevy_caustics::warped_volumes::CausticVolume
 
 struct VolumeSettings {
@@ -173,15 +173,13 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
+    // On the ray through the pixel's centre, which the prism drew this fragment for.
 #ifdef MULTISAMPLED
-    // The prism drew this fragment for the ray through the pixel's centre, so the
-    // receiver point must lie on that ray: where it meets the surface's tangent plane
-    // at sample 0. Sample 0 itself may lie in a volume whose prism misses the centre.
-    let seen = world_at(view, sample_zero(pixel, textureNumSamples(depth_prepass)), depth);
-    let p = on_tangent_plane(view, in.position.xy, seen, n);
+    let samples = textureNumSamples(depth_prepass);
 #else
-    let p = world_at(view, in.position.xy, depth);
+    let samples = 1u;
 #endif
+    let p = receiver_at(view, pixel, samples, depth, n);
     let v = volumes[in.volume];
     let s = sample_volume(v, p);
     if !s.inside {
