@@ -5,7 +5,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::convolution::Pool
-#import bevy_caustics::receiver::{exposed, receiver_at}
+#import bevy_caustics::receiver::{centre_depth, exposed, world_at}
 
 @group(0) @binding(0) var<uniform> view: View;
 #ifdef MULTISAMPLED
@@ -33,12 +33,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     // The floor's normal in the world: pool_from_world's transpose carries normals.
     let m = pool.pool_from_world;
     let floor_normal = normalize(vec3(m[0].y, m[1].y, m[2].y));
-#ifdef MULTISAMPLED
-    let samples = textureNumSamples(depth_prepass);
-#else
-    let samples = 1u;
-#endif
-    let p = (m * vec4(receiver_at(view, pixel, samples, depth, floor_normal), 1.0)).xyz;
+    let p = (m * vec4(world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, floor_normal)), 1.0)).xyz;
     let size = vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
     if abs(p.y + pool.depth) > pool.floor_tolerance || any(p.xz < vec2(0.0)) || any(p.xz > size) {
         discard;

@@ -6,7 +6,7 @@
 
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::{exposed, receiver_at}
+#import bevy_caustics::receiver::{centre_depth, exposed, world_at}
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, map_texels_per_photon, bilinear_taps,
     bilinear_mix,
@@ -36,12 +36,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-#ifdef MULTISAMPLED
-    let samples = textureNumSamples(depth_prepass);
-#else
-    let samples = 1u;
-#endif
-    let p = receiver_at(view, pixel, samples, depth, n);
+    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
     let m = light.map_resolution;
     let uv = map_uv(light, p);
     if uv.z == 0.0 {

@@ -6,7 +6,7 @@
 
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::{exposed, receiver_at}
+#import bevy_caustics::receiver::{centre_depth, exposed, world_at}
 #import bevy_caustics::illumination_textures::{IlluminationFrame, FAR, plane_depth, texel_size, texel_coords, surface_index}
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -113,12 +113,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-#ifdef MULTISAMPLED
-    let samples = textureNumSamples(depth_prepass);
-#else
-    let samples = 1u;
-#endif
-    let p = receiver_at(view, pixel, samples, depth, n);
+    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
     let q = texel_coords(frame, p);
     let size = f32(frame.size);
     if !(q.x >= 0.0 && q.y >= 0.0 && q.x < size && q.y < size) {

@@ -22,47 +22,42 @@ fn world_at(view: View, frag: vec2<f32>, depth: f32) -> vec3<f32> {
     return clip.xyz / clip.w;
 }
 
-// Where in `pixel` sample 0 lies, the sample the passes read of a depth prepass with
-// `samples` samples per pixel: the standard sample locations (Vulkan, D3D12 and Metal
-// agree on them), the centre when single-sampled.
-fn sample_zero(pixel: vec2<i32>, samples: u32) -> vec2<f32> {
-    var offset = vec2(0.5);
-    switch samples {
-        case 2u: { offset = vec2(0.75, 0.75); }
-        case 4u: { offset = vec2(0.375, 0.125); }
-        case 8u: { offset = vec2(0.5625, 0.3125); }
-        case 16u: { offset = vec2(0.5625, 0.5625); }
-        default: {}
+// The depth prepass's depth at the centre of `pixel`, where the passes rebuild the
+// receiver point (`world_at`), for a surface of normal `n` at sample 0. With Bevy's 4
+// samples per pixel no sample lies at the centre, but their centroid is the centre
+// (the standard sample locations, on which Vulkan, D3D12 and Metal agree) and NDC
+// depth is affine in screen space on a plane: where the samples' points lie on sample
+// 0's tangent plane, the mean of their depths is the centre's. Elsewhere (an edge, a
+// silhouette, another sample count), sample 0's depth. Rebuilt at the centre from
+// sample 0's depth alone, a receiver seen at a slant left its surface by the depth's
+// slope over sample 0's offset (millimetres to centimetres), enough to put it behind
+// the caustic volumes' hit planes.
+#ifdef MULTISAMPLED
+fn centre_depth(view: View, depth: texture_depth_multisampled_2d, pixel: vec2<i32>, n: vec3<f32>) -> f32 {
+    let first = textureLoad(depth, pixel, 0);
+    if textureNumSamples(depth) != 4u {
+        return first;
     }
-    return vec2<f32>(pixel) + offset;
-}
-
-// Where the eye ray through `frag` meets the plane through `p` with normal `n` (`p`
-// itself where the ray grazes the plane).
-fn on_tangent_plane(view: View, frag: vec2<f32>, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
-    let eye = world_at(view, frag, 1.0);
-    let dir = normalize(world_at(view, frag, 0.5) - eye);
-    let along = dot(dir, n);
-    if abs(along) < 1.0e-3 {
-        return p;
+    let at = array(vec2(0.375, 0.125), vec2(0.875, 0.375), vec2(0.125, 0.625), vec2(0.625, 0.875));
+    let corner = vec2<f32>(pixel);
+    let p0 = world_at(view, corner + at[0], first);
+    var sum = first;
+    for (var i = 1; i < 4; i++) {
+        let d = textureLoad(depth, pixel, i);
+        let p = world_at(view, corner + at[i], d);
+        // Off the tangent plane by more than 3° seen from sample 0: another surface.
+        if d <= 0.0 || abs(dot(p - p0, n)) > 0.05 * distance(p, p0) {
+            return first;
+        }
+        sum += d;
     }
-    return eye + dir * (dot(p - eye, n) / along);
+    return 0.25 * sum;
 }
-
-// The receiver point the centre of `pixel` sees, from the depth prepass's `depth` at
-// sample 0 (of `samples` per pixel) and the surface's normal `n` there. Multisampled,
-// sample 0 lies off the centre: its point, moved along the surface's tangent plane
-// onto the centre's eye ray. Rebuilt at the centre from sample 0's depth instead, a
-// receiver seen at a slant leaves its surface by the depth's slope over the offset
-// (millimetres to centimetres), enough to put it behind the caustic volumes' hit
-// planes; kept at sample 0, the image shifts by a fraction of a pixel.
-fn receiver_at(view: View, pixel: vec2<i32>, samples: u32, depth: f32, n: vec3<f32>) -> vec3<f32> {
-    let centre = vec2<f32>(pixel) + 0.5;
-    if samples <= 1u {
-        return world_at(view, centre, depth);
-    }
-    return on_tangent_plane(view, centre, world_at(view, sample_zero(pixel, samples), depth), n);
+#else
+fn centre_depth(view: View, depth: texture_depth_2d, pixel: vec2<i32>, n: vec3<f32>) -> f32 {
+    return textureLoad(depth, pixel, 0);
 }
+#endif
 
 // A `ParticipatingMedium` (`caustics_bevy::irradiance::GpuMedium`): the unit cube
 // [-½, ½]³ of `local_from_world`, and (σs, σa, g).

@@ -5,7 +5,7 @@
 // (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
 
 #import bevy_render::view::View
-#import bevy_caustics::receiver::{Medium, clip_medium, exposed, receiver_at, world_at}
+#import bevy_caustics::receiver::{Medium, centre_depth, clip_medium, exposed, world_at}
 #import bevy_caustics::warped_volumes::CausticVolume
 
 struct VolumeSettings {
@@ -174,12 +174,7 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
     // On the ray through the pixel's centre, which the prism drew this fragment for.
-#ifdef MULTISAMPLED
-    let samples = textureNumSamples(depth_prepass);
-#else
-    let samples = 1u;
-#endif
-    let p = receiver_at(view, pixel, samples, depth, n);
+    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
     let v = volumes[in.volume];
     let s = sample_volume(v, p);
     if !s.inside {
