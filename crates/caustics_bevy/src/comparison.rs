@@ -16,7 +16,7 @@
 //! ([`ReferenceSplit`]). [`ReferenceComparisonRequest::End`] restores the generators'
 //! techniques, takes the split away and lets time run again.
 
-use crate::headless::{decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans};
+use crate::headless::{decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
 use crate::reference::{ViewError, pinhole, scene_from_world, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
@@ -26,7 +26,6 @@ use bevy::camera::Exposure;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
-use bevy::render::renderer::RenderDevice;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -210,23 +209,18 @@ fn ask_every_generator(world: &mut World, technique: CausticTechnique) {
     comparison.waited = 0;
     comparison.drawing_frames = 0;
     comparison.previous = None;
-    // Readbacks of frames drawn before the switch are dropped with their entity.
-    if let Some((entity, _)) = comparison.readback.take() {
-        world.despawn(entity);
-    }
+    // Readbacks of frames drawn before the switch go.
+    drop_readback(world);
 }
 
 fn end(world: &mut World) {
-    let mut comparison = std::mem::take(&mut *world.resource_mut::<ReferenceComparison>());
-    if comparison.state == ComparisonState::Idle {
+    if world.resource::<ReferenceComparison>().state == ComparisonState::Idle {
         return;
     }
-    restore(world, std::mem::take(&mut comparison.asked));
-    if let Some((entity, _)) = comparison.readback.take() {
-        world.despawn(entity);
-    }
+    stop_measuring(world);
+    let comparison = std::mem::take(&mut *world.resource_mut::<ReferenceComparison>());
     if let Some(mut camera) = comparison.camera.and_then(|c| world.get_entity_mut(c).ok()) {
-        camera.remove::<(CaptureCausticIrradiance, ReferenceSplit)>();
+        camera.remove::<ReferenceSplit>();
     }
     // A trace still under way finishes on its thread and is dropped.
     world.resource_mut::<Time<Virtual>>().unpause();
@@ -280,20 +274,19 @@ fn measure(world: &mut World, index: usize) {
         world.resource_mut::<ReferenceComparison>().readback = Some((entity, slot));
         return;
     };
-    let bytes = slot.lock().ok().and_then(|mut s| s.take());
-    let report = world.resource::<CausticPassReport>();
-    let drawn = report.generators.iter().map(|(_, choice)| choice.to_string()).collect();
-    let drawing = techniques_drawing(report);
+    let drawing = techniques_drawing(world.resource::<CausticPassReport>());
+    let mut comparison = world.resource_mut::<ReferenceComparison>();
+    comparison.waited += 1;
+    comparison.drawing_frames = if drawing { comparison.drawing_frames + 1 } else { 0 };
+    let Some(bytes) = slot.lock().ok().and_then(|mut s| s.take()) else { return };
     let exposure = camera.and_then(|c| world.get::<Exposure>(c)).copied().unwrap_or_default().exposure();
+    let irradiance: Vec<Vec3> = decode_rgba16f(&unpad_rows(&bytes, size.x as usize * 8)).into_iter().map(|e| e.truncate() / exposure).collect();
+    let drawn = world.resource::<CausticPassReport>().generators.iter().map(|(_, choice)| choice.to_string()).collect();
     let gpu_ms = world.get_resource::<DiagnosticsStore>().map_or(0.0, |store| {
         newest_gpu_spans(store).into_iter().filter(|(span, _)| is_caustic_span(span)).filter_map(|(_, d)| d.value()).fold(0.0, |a, b| a + b)
     });
     let mut comparison = world.resource_mut::<ReferenceComparison>();
     let technique = CausticTechnique::ALL[index];
-    comparison.waited += 1;
-    comparison.drawing_frames = if drawing { comparison.drawing_frames + 1 } else { 0 };
-    let Some(bytes) = bytes else { return };
-    let irradiance: Vec<Vec3> = unpadded_rows(&bytes, size).into_iter().map(|e| e.truncate() / exposure).collect();
     // A readback shows a frame some frames old: only those drawn after the passes have
     // matched the choice for a while count, and two in a row must agree.
     let fresh = comparison.drawing_frames >= READBACK_LATENCY;
@@ -311,13 +304,31 @@ fn measure(world: &mut World, index: usize) {
         return;
     }
     comparison.state = ComparisonState::Tracing;
-    let asked = std::mem::take(&mut comparison.asked);
-    if let Some((entity, _)) = comparison.readback.take() {
-        world.despawn(entity);
+    stop_measuring(world);
+}
+
+/// Gives each generator back the technique it asked for, and stops reading the view
+/// back.
+fn stop_measuring(world: &mut World) {
+    let (asked, camera) = {
+        let mut comparison = world.resource_mut::<ReferenceComparison>();
+        (std::mem::take(&mut comparison.asked), comparison.camera)
+    };
+    for (entity, technique) in asked {
+        if let Some(mut generator) = world.get_mut::<CausticGenerator>(entity) {
+            generator.technique = technique;
+        }
     }
-    restore(world, asked);
+    drop_readback(world);
     if let Some(mut camera) = camera.and_then(|c| world.get_entity_mut(c).ok()) {
         camera.remove::<CaptureCausticIrradiance>();
+    }
+}
+
+/// Despawns the readback entity; readbacks still on their way are dropped with it.
+fn drop_readback(world: &mut World) {
+    if let Some((entity, _)) = world.resource_mut::<ReferenceComparison>().readback.take() {
+        world.despawn(entity);
     }
 }
 
@@ -347,23 +358,6 @@ fn settled(previous: &[Vec3], newest: &[Vec3]) -> bool {
     let grey = |v: &[Vec3]| v.iter().map(|e| (e.x + e.y + e.z) / 3.0).collect::<Vec<f32>>();
     let (a, b) = (grey(previous), grey(newest));
     a == b || relative_l2(&b, &a) <= 1e-3
-}
-
-/// Gives each generator back the technique it asked for.
-fn restore(world: &mut World, asked: Vec<(Entity, CausticTechnique)>) {
-    for (entity, technique) in asked {
-        if let Some(mut generator) = world.get_mut::<CausticGenerator>(entity) {
-            generator.technique = technique;
-        }
-    }
-}
-
-/// A readback of an `Rgba16Float` texture of `size` pixels, its rows padded to wgpu's
-/// copy alignment, as one value per pixel.
-fn unpadded_rows(bytes: &[u8], size: UVec2) -> Vec<Vec4> {
-    let row = size.x as usize * 8;
-    let padded = RenderDevice::align_copy_bytes_per_row(row);
-    bytes.chunks(padded).take(size.y as usize).flat_map(|r| decode_rgba16f(&r[..row.min(r.len())])).collect()
 }
 
 /// The rows' errors against `reference`, and the reference as an image for the split view.

@@ -56,6 +56,13 @@ const TIMESTAMP_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
 /// projections into the irradiance buffer and the volumetric pass.
 pub const CAUSTIC_SPANS: [&str; 3] = ["caustics/", "caustic_maps/", "illumination_textures/"];
 
+/// Texture bytes copied out with every row padded to wgpu's copy alignment, packed:
+/// `packed` bytes a row.
+pub fn unpad_rows(bytes: &[u8], packed: usize) -> Vec<u8> {
+    let padded = packed.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as usize);
+    bytes.chunks_exact(padded).flat_map(|r| &r[..packed]).copied().collect()
+}
+
 /// Whether a timestamp span (`caustics/volumes`, `main_opaque_pass_3d`…) is one of the
 /// caustics passes' ([`CAUSTIC_SPANS`]).
 pub fn is_caustic_span(span: &str) -> bool {
@@ -328,7 +335,7 @@ impl HeadlessRenderer {
             return Err(HeadlessError::Readback("the texture's readback buffer did not map".into()));
         }
         let bytes = slice.get_mapped_range();
-        Ok(bytes.chunks_exact(row as usize).flat_map(|r| &r[..packed as usize]).copied().collect())
+        Ok(unpad_rows(&bytes, packed as usize))
     }
 
     /// The GPU memory the render device holds now (bytes, by the label its buffer or
