@@ -110,10 +110,11 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
 /// stops, the tracer traces the frame (`photons` per light, on its own thread) while
 /// every generator is asked for each technique in turn. Prints a Markdown table of
 /// each one's relative L2 and L1 against the tracer over the receivers in view and its
-/// GPU time, and writes beside `--out` the split view per technique: left the
-/// technique, right the reference.
+/// GPU time, and writes beside `--out` the frame traced (`<stem>-frame.json`, for
+/// `caustics bench --scene`) and the split view per technique: left the technique,
+/// right the reference.
 fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String> {
-    use bevy_caustics::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
+    use bevy_caustics::comparison::{ReferenceComparison, compare_headless};
     use bevy_caustics::headless::HeadlessRenderer;
     let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
@@ -121,23 +122,7 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
     renderer.render(frames).map_err(|e| e.to_string())?;
     let world = renderer.world_mut();
     let camera = world.query_filtered::<Entity, With<Camera3d>>().single(world).map_err(|e| e.to_string())?;
-    world.write_message(ReferenceComparisonRequest::Start { camera, photons });
-    let mut reported = 0;
-    loop {
-        renderer.render(1).map_err(|e| e.to_string())?;
-        let comparison = renderer.world_mut().resource::<ReferenceComparison>();
-        let (state, progress) = (comparison.state.clone(), (comparison.progress() * 8.0) as u32 + comparison.gathering() as u32);
-        if progress > reported {
-            reported = progress;
-            let traced = if progress > 8 { "gathering at every pixel".into() } else { format!("{:3} % of the photons traced", 100 * progress / 8) };
-            eprintln!("  reference: {traced} ({state:?})");
-        }
-        match state {
-            ComparisonState::Done => break,
-            ComparisonState::Failed(why) => return Err(why),
-            _ => {}
-        }
-    }
+    compare_headless(&mut renderer, camera, (photons, 0))?;
     let adapter = renderer.adapter.name.clone();
     let rows = renderer.world_mut().resource::<ReferenceComparison>().rows.clone();
     println!("| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) |");
@@ -146,9 +131,14 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         let error = row.error.map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
         println!("| {} | {} | {error} | {:.1} |", row.technique.label(), row.drawn.join("; "), row.gpu_ms);
     }
+    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+    let comparison = renderer.world_mut().resource::<ReferenceComparison>();
+    println!("\nThe reference's own noise: relative L2 {:.3}.", comparison.reference_noise.unwrap_or(f32::NAN));
+    let frame = args.out.with_file_name(format!("{stem}-frame.json"));
+    comparison.save_frame(&frame)?;
+    eprintln!("wrote {} (`caustics bench --scenes '' --scene {}` measures it again)", frame.display(), frame.display());
     // The split view of each technique, as the panel shows it.
     renderer.world_mut().resource_mut::<ReferenceComparison>().split = true;
-    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     for row in rows {
         let world = renderer.world_mut();
         for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {

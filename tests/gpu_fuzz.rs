@@ -37,7 +37,7 @@ fn extreme_scenes_give_finite_caustics_with_every_technique() {
         let scenes = (0..).filter_map(|index| valid_scene(11, index).map(|(c, s)| (index, c, s))).filter(|(.., s)| !s.generators.is_empty());
         let mut ran = 0;
         for (index, category, scene) in scenes.take(SCENES_PER_TECHNIQUE) {
-            spawn_scene_content(renderer.world_mut(), &scene, Some(technique));
+            spawn_scene_content(renderer.world_mut(), &scene, scene.receivers.len(), Some(technique));
             render(&mut renderer, 3);
             let irradiance = renderer.caustic_irradiance(camera).unwrap_or_else(|e| panic!("{e}"));
             let bad = irradiance.iter().find(|e| !e.is_finite() || e.min_element() < 0.0);

@@ -53,7 +53,7 @@ fn the_reference_comparison_measures_every_technique_and_splits_the_view() {
         .id();
     support::render_caustics(&mut renderer, 2);
 
-    renderer.world_mut().write_message(ReferenceComparisonRequest::Start { camera, photons: 400_000 });
+    renderer.world_mut().write_message(ReferenceComparisonRequest::Start { camera, photons: 400_000, seed: 0 });
     let mut frames = 0;
     loop {
         support::render(&mut renderer, 1);
@@ -74,6 +74,13 @@ fn the_reference_comparison_measures_every_technique_and_splits_the_view() {
     assert_eq!(techniques, CausticTechnique::ALL.to_vec());
     let reference = comparison.reference.clone();
     let auto = comparison.rows[0].clone();
+    // The frame traced, kept for `caustics bench`: the ball over the floor, from this camera.
+    let frame = comparison.frame.as_ref().expect("the traced frame");
+    assert_eq!((frame.scene.generators.len(), frame.scene.receivers.len(), frame.shown), (1, 1, 1));
+    assert_eq!((frame.camera.width, frame.camera.height, frame.camera.fov_y), (WIDTH, HEIGHT, 0.8));
+    let noise = comparison.reference_noise.expect("the reference's noise");
+    eprintln!("the reference's own noise: {noise:.3}");
+    assert!(noise > 0.0 && noise < 0.5, "noise {noise}");
     for row in &comparison.rows {
         let error = row.error.unwrap_or_else(|| panic!("{:?} has no error", row.technique));
         eprintln!("{:?}: L2 {:.3}, L1 {:.3} over {} pixels, {:.2} GPU ms; {}", row.technique, error.l2, error.l1, error.pixels, row.gpu_ms, row.drawn.join("; "));

@@ -11,17 +11,24 @@
 //! only the chosen techniques' passes ran, and two readbacks agree. The row keeps it,
 //! with the caustic passes' GPU times and what each generator drew with. When the
 //! trace is in, each row gets its relative L2 and L1 over the pixels that see a
-//! receiver ([`view_error`]), and the reference becomes an irradiance image that
-//! [`ReferenceComparison::split`] shows in the right half of the view
-//! ([`ReferenceSplit`]). [`ReferenceComparisonRequest::End`] restores the generators'
-//! techniques, takes the split away and lets time run again.
+//! receiver ([`view_error`]), the reference its own noise ([`TracedView::noise`]), and
+//! the reference becomes an irradiance image that [`ReferenceComparison::split`] shows
+//! in the right half of the view ([`ReferenceSplit`]).
+//! [`ReferenceComparisonRequest::End`] restores the generators' techniques, takes the
+//! split away and lets time run again.
+//!
+//! The frame traced is kept as a [`SceneView`] ([`ReferenceComparison::frame`]):
+//! saved as JSON, `caustics bench --scene frame.json` measures the same view the same
+//! way in a program of its own, with the scene rebuilt from the file, and its numbers
+//! match these within the two traces' noise (`caustics_cli/tests/comparison_frames.rs`).
 
-use crate::headless::{decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans, unpad_rows};
+use crate::headless::{HeadlessRenderer, decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
-use crate::reference::{ViewError, pinhole, scene_from_world, trace_view, view_error};
+use crate::reference::{TracedView, ViewError, pinhole, scene_from_world, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
 use caustics_core::metrics::relative_l2;
 use caustics_core::technique::Technique;
+use caustics_core::view::SceneView;
 use bevy::camera::Exposure;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
@@ -44,8 +51,8 @@ const READBACK_LATENCY: u32 = 4;
 #[derive(Message, Clone, Copy, Debug)]
 pub enum ReferenceComparisonRequest {
     /// Measure what `camera` (a perspective camera with [`crate::CausticsSettings`])
-    /// shows now against the tracer, with `photons` per light.
-    Start { camera: Entity, photons: u64 },
+    /// shows now against the tracer, with `photons` per light from photon stream `seed`.
+    Start { camera: Entity, photons: u64, seed: u64 },
     /// Restore the generators' techniques, take the split view away, let time run.
     End,
 }
@@ -96,11 +103,15 @@ pub struct ReferenceComparison {
     pub rows: Vec<ComparisonRow>,
     /// The tracer's irradiance at each pixel that sees a receiver.
     pub reference: Vec<Option<Vec3>>,
+    /// The reference's own relative noise ([`TracedView::noise`]), once it is in.
+    pub reference_noise: Option<f32>,
+    /// The frame traced: its scene as the tracer sees it and the camera's view.
+    pub frame: Option<SceneView>,
     /// Whether the camera shows the split view: left the techniques, right the reference.
     pub split: bool,
     /// Photons traced so far, and in all (every light's).
     traced: Arc<[AtomicU64; 2]>,
-    tracer: Option<JoinHandle<Result<Vec<Option<Vec3>>, String>>>,
+    tracer: Option<JoinHandle<Result<TracedView, String>>>,
     /// Each generator's own technique, restored at the end.
     asked: Vec<(Entity, CausticTechnique)>,
     frames_left: u32,
@@ -129,6 +140,13 @@ impl ReferenceComparison {
     pub fn running(&self) -> bool {
         matches!(self.state, ComparisonState::Measuring(_) | ComparisonState::Tracing)
     }
+
+    /// Writes [`Self::frame`] as JSON ([`SceneView::to_json`]) to `path`, for
+    /// `caustics bench --scene`.
+    pub fn save_frame(&self, path: &std::path::Path) -> Result<(), String> {
+        let frame = self.frame.as_ref().ok_or("no frame has been traced")?;
+        std::fs::write(path, frame.to_json()).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    }
 }
 
 pub(crate) fn build(app: &mut App) {
@@ -144,10 +162,10 @@ fn drive(world: &mut World) {
     let requests: Vec<_> = world.resource_mut::<Messages<ReferenceComparisonRequest>>().drain().collect();
     for request in requests {
         match request {
-            ReferenceComparisonRequest::Start { camera, photons } => {
+            ReferenceComparisonRequest::Start { camera, photons, seed } => {
                 if !world.resource::<ReferenceComparison>().running() {
                     end(world);
-                    if let Err(why) = start(world, camera, photons) {
+                    if let Err(why) = start(world, camera, (photons, seed)) {
                         warn!("bevy_caustics: no comparison with the reference: {why}");
                         end(world);
                         world.resource_mut::<ReferenceComparison>().state = ComparisonState::Failed(why);
@@ -161,7 +179,7 @@ fn drive(world: &mut World) {
     show_split(world);
 }
 
-fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> {
+fn start(world: &mut World, camera: Entity, photons_and_seed: (u64, u64)) -> Result<(), String> {
     let mut cameras = world.query::<(&Camera, &GlobalTransform, &Projection)>();
     let (view, transform, projection) = cameras.get(world, camera).map_err(|_| format!("{camera} is not a camera"))?;
     let Projection::Perspective(perspective) = projection else {
@@ -174,6 +192,7 @@ fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> 
     for s in skipped {
         warn!("bevy_caustics: left out of the reference: {s}");
     }
+    let frame = SceneView { scene: scene.clone(), shown, camera: pinhole };
     let traced = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
     let counter = traced.clone();
     let tracer = std::thread::spawn(move || {
@@ -181,7 +200,7 @@ fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> 
             counter[1].store(total, Ordering::Relaxed);
             counter[0].store(done, Ordering::Relaxed);
         };
-        trace_view(&scene, shown, &pinhole, photons, 0.015, &progress)
+        trace_view(&scene, shown, &pinhole, photons_and_seed, 0.015, &progress)
     });
     let capture = world.resource_mut::<Assets<Image>>().add(capture_image(size));
     world.entity_mut(camera).insert(CaptureCausticIrradiance(capture.clone()));
@@ -192,6 +211,7 @@ fn start(world: &mut World, camera: Entity, photons: u64) -> Result<(), String> 
         size,
         traced,
         tracer: Some(tracer),
+        frame: Some(frame),
         asked,
         capture,
         ..default()
@@ -360,8 +380,8 @@ fn settled(previous: &[Vec3], newest: &[Vec3]) -> bool {
     a == b || relative_l2(&b, &a) <= 1e-3
 }
 
-/// The rows' errors against `reference`, and the reference as an image for the split view.
-fn finish(world: &mut World, reference: Vec<Option<Vec3>>) {
+/// The rows' errors against `traced`, and the reference as an image for the split view.
+fn finish(world: &mut World, TracedView { irradiance: reference, noise }: TracedView) {
     let size = world.resource::<ReferenceComparison>().size;
     let injected: Vec<Vec3> = reference.iter().map(|e| e.unwrap_or(Vec3::ZERO)).collect();
     let image = world.resource_mut::<Assets<Image>>().add(irradiance_image(size.x, size.y, &injected));
@@ -370,6 +390,7 @@ fn finish(world: &mut World, reference: Vec<Option<Vec3>>) {
         row.error = view_error(&row.irradiance, &reference);
     }
     comparison.reference = reference;
+    comparison.reference_noise = Some(noise);
     comparison.reference_image = Some(image);
     comparison.state = ComparisonState::Done;
 }
@@ -390,5 +411,30 @@ fn show_split(world: &mut World) {
             camera.remove::<ReferenceSplit>();
         }
         _ => {}
+    }
+}
+
+/// Runs a comparison of `camera` in `renderer` to the end, one frame at a time, with
+/// `photons` per light from photon stream `seed`, printing the tracer's progress:
+/// what `demo --compare` and `caustics bench` on a saved frame do. Afterwards
+/// [`ReferenceComparison`] holds the rows; time stays stopped.
+pub fn compare_headless(renderer: &mut HeadlessRenderer, camera: Entity, (photons, seed): (u64, u64)) -> Result<(), String> {
+    renderer.world_mut().write_message(ReferenceComparisonRequest::Start { camera, photons, seed });
+    let mut reported = 0;
+    loop {
+        renderer.render(1).map_err(|e| e.to_string())?;
+        let comparison = renderer.world_mut().resource::<ReferenceComparison>();
+        // Eighths of the photons, then the gather.
+        let step = (comparison.progress() * 8.0) as u32 + comparison.gathering() as u32;
+        if step > reported {
+            reported = step;
+            let traced = if step > 8 { "gathering at every pixel".into() } else { format!("{:3} % of the photons traced", 100 * step / 8) };
+            eprintln!("  reference: {traced} ({:?})", comparison.state);
+        }
+        match &comparison.state {
+            ComparisonState::Done => return Ok(()),
+            ComparisonState::Failed(why) => return Err(why.clone()),
+            _ => {}
+        }
     }
 }

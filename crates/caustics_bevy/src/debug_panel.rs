@@ -35,8 +35,12 @@ impl Plugin for CausticsDebugPanelPlugin {
 }
 
 /// Photons per light the panel's comparison traces: a few seconds to a minute on a
-/// desktop CPU, noise of a few per cent in the reference.
+/// desktop CPU. The panel shows the reference's noise they leave.
 pub const COMPARISON_PHOTONS: u64 = 1 << 22;
+
+/// Where the panel's "save frame" button writes the traced frame: the working
+/// directory, for `caustics bench --scenes '' --scene caustics-frame.json`.
+pub const SAVED_FRAME: &str = "caustics-frame.json";
 
 /// The spans the graph draws, one colour each in this order.
 const COLOURS: [egui::Color32; 6] = [
@@ -58,7 +62,7 @@ fn panel(
     media: Query<(), With<ParticipatingMedium>>,
     invalid: Query<(Entity, &InvalidCausticParams)>,
     names: Query<&Name>,
-    (mut comparison, mut requests, cameras): Comparison,
+    (mut comparison, mut requests, cameras, mut saved): Comparison,
 ) -> Result {
     let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
     let passes = diagnostics.as_deref().map(gpu_passes).unwrap_or_default();
@@ -107,7 +111,7 @@ fn panel(
         }
         ui.separator();
         let camera = cameras.iter().filter(|(_, c)| c.is_active).min_by_key(|(_, c)| c.order).map(|(e, _)| e);
-        comparison_section(ui, &mut comparison, &mut requests, camera);
+        comparison_section(ui, &mut comparison, &mut requests, camera, &mut saved);
         for (entity, InvalidCausticParams(reason)) in &invalid {
             ui.colored_label(egui::Color32::YELLOW, format!("{} skipped: {reason}", label(entity)));
         }
@@ -115,12 +119,13 @@ fn panel(
     Ok(())
 }
 
-/// What the panel's comparison reads and writes: its state, its requests, and the
-/// cameras it can measure.
+/// What the panel's comparison reads and writes: its state, its requests, the
+/// cameras it can measure, and what saving its frame did.
 type Comparison<'w, 's> = (
     ResMut<'w, ReferenceComparison>,
     MessageWriter<'w, ReferenceComparisonRequest>,
     Query<'w, 's, (Entity, &'static Camera), With<CausticsSettings>>,
+    Local<'s, Option<String>>,
 );
 
 /// The comparison with the ground-truth tracer: the button, the progress, the rows and
@@ -130,6 +135,7 @@ fn comparison_section(
     comparison: &mut ReferenceComparison,
     requests: &mut MessageWriter<ReferenceComparisonRequest>,
     camera: Option<Entity>,
+    saved: &mut Option<String>,
 ) {
     match comparison.state.clone() {
         ComparisonState::Idle | ComparisonState::Failed(_) => {
@@ -138,7 +144,7 @@ fn comparison_section(
             }
             let button = ui.add_enabled(camera.is_some(), egui::Button::new("Compare with reference"));
             if let (true, Some(camera)) = (button.clicked(), camera) {
-                requests.write(ReferenceComparisonRequest::Start { camera, photons: COMPARISON_PHOTONS });
+                requests.write(ReferenceComparisonRequest::Start { camera, photons: COMPARISON_PHOTONS, seed: 0 });
             }
             ui.label(egui::RichText::new("stops time and traces this frame with the ground-truth tracer").small());
         }
@@ -180,8 +186,24 @@ fn comparison_section(
                     ui.end_row();
                 }
             });
+            if let Some(noise) = comparison.reference_noise {
+                ui.label(format!("the reference's own noise: {noise:.3} (relative L2)"));
+            }
             ui.checkbox(&mut comparison.split, "split view: technique left, reference right");
+            let button = ui.button("Save frame").on_hover_text(format!(
+                "writes the traced frame to {SAVED_FRAME}; `caustics bench --scenes '' --scene {SAVED_FRAME}` measures it again"
+            ));
+            if button.clicked() {
+                *saved = Some(match comparison.save_frame(std::path::Path::new(SAVED_FRAME)) {
+                    Ok(()) => format!("saved to {SAVED_FRAME}"),
+                    Err(why) => why,
+                });
+            }
+            if let Some(saved) = saved.as_ref() {
+                ui.label(saved);
+            }
             if ui.button("Resume").clicked() {
+                *saved = None;
                 requests.write(ReferenceComparisonRequest::End);
             }
         }

@@ -169,6 +169,17 @@ pub fn view_irradiance(tracer: &PhotonTracer, photons: &PhotonMap, camera: &Pinh
 /// [`view_irradiance`] on the receivers `shown` (by index in the scene) only: `None`
 /// where a pixel sees no receiver, or one that is not shown (an occluder, say).
 pub fn view_irradiance_on(tracer: &PhotonTracer, photons: &PhotonMap, camera: &PinholeCamera, shown: impl Fn(usize) -> bool + Sync) -> Vec<Option<Vec3>> {
+    view_gather(tracer, camera, shown, |p, n| to_bevy(photons.irradiance_at(p, n)))
+}
+
+/// `gather(point, normal)` at the first receiver each pixel's ray meets, passing
+/// straight through generators, where that receiver is `shown`.
+fn view_gather<T: Send>(
+    tracer: &PhotonTracer,
+    camera: &PinholeCamera,
+    shown: impl Fn(usize) -> bool + Sync,
+    gather: impl Fn(glam::Vec3, glam::Vec3) -> T + Sync,
+) -> Vec<Option<T>> {
     (0..camera.width * camera.height)
         .into_par_iter()
         .map(|i| {
@@ -178,7 +189,7 @@ pub fn view_irradiance_on(tracer: &PhotonTracer, photons: &PhotonMap, camera: &P
                 let hit = tracer.bvh().intersect(origin, dir, 0.0, f32::INFINITY)?;
                 let p = origin + dir * hit.t;
                 if let Surface::Receiver(index) = hit.surface {
-                    return shown(index as usize).then(|| to_bevy(photons.irradiance_at(p, hit.geometric_normal)));
+                    return shown(index as usize).then(|| gather(p, hit.geometric_normal));
                 }
                 origin = p + dir * (1e-4 * (1.0 + p.abs().max_element()));
             }
@@ -243,25 +254,52 @@ pub fn scene_from_world(world: &mut World) -> (Scene, usize, Vec<String>) {
     (scene, shown, skipped)
 }
 
-/// The ground truth of a view: `scene` traced with `photons` per light, gathered with
-/// a kernel of `radius` metres at the surface each pixel of `camera` sees, on the first
-/// `shown` receivers only (as [`scene_from_world`] orders them). `progress(done,
-/// total)` is called between batches of photons.
+/// The ground truth of a view ([`trace_view`]).
+#[derive(Clone, Debug, Default)]
+pub struct TracedView {
+    /// The caustic irradiance at the surface each pixel sees, on a shown receiver.
+    pub irradiance: Vec<Option<Vec3>>,
+    /// The relative L2 by which the photons' randomness alone puts `irradiance` off
+    /// the truth (the kernel's blur not counted), of the mean of RGB over the measured
+    /// pixels. `irradiance` is the mean `(a + b)/2` of two independent traces of half
+    /// the photons each; `(a − b)/2` has the same variance and a mean of zero, so
+    /// `‖a − b‖ / ‖a + b‖` estimates it. Two traces of the same view from other photon
+    /// streams differ by about √2 times this.
+    pub noise: f32,
+}
+
+/// The ground truth of a view: `scene` traced with `photons` per light, in two halves
+/// from photon streams `2·seed` and `2·seed + 1` ([`TracedView::noise`]), gathered
+/// with a kernel of `radius` metres at the surface each pixel of `camera` sees, on the
+/// first `shown` receivers only (as [`scene_from_world`] orders them).
+/// `progress(done, total)` is called between batches of photons.
 pub fn trace_view(
     scene: &Scene,
     shown: usize,
     camera: &PinholeCamera,
-    photons: u64,
+    (photons, seed): (u64, u64),
     radius: f32,
     progress: &(dyn Fn(u64, u64) + Sync),
-) -> Result<Vec<Option<Vec3>>, String> {
+) -> Result<TracedView, String> {
     use caustics_core::estimate::PhotonList;
     use caustics_core::tracer::TraceSettings;
     let tracer = PhotonTracer::new(scene).map_err(|e| e.to_string())?;
-    let mut list = PhotonList::default();
-    tracer.trace(&TraceSettings { photons_per_light: photons, ..default() }, &mut list, progress);
-    let map = PhotonMap::new(list.0, radius);
-    Ok(view_irradiance_on(&tracer, &map, camera, |i| i < shown))
+    let half = photons.div_ceil(2);
+    let halves = [0, 1].map(|h| {
+        let mut list = PhotonList::default();
+        let settings = TraceSettings { photons_per_light: half, seed: 2 * seed + h, ..default() };
+        tracer.trace(&settings, &mut list, &|done, total| progress(h * total + done, 2 * total));
+        PhotonMap::new(list.0, radius)
+    });
+    let pairs = view_gather(&tracer, camera, |i| i < shown, |p, n| halves.each_ref().map(|m| to_bevy(m.irradiance_at(p, n))));
+    let grey = |e: Vec3| f64::from(e.element_sum() / 3.0);
+    let (mut apart, mut sum) = (0.0f64, 0.0f64);
+    for [a, b] in pairs.iter().flatten() {
+        apart += grey(*a - *b).powi(2);
+        sum += grey(*a + *b).powi(2);
+    }
+    let noise = if sum > 0.0 { (apart / sum).sqrt() as f32 } else { 0.0 };
+    Ok(TracedView { irradiance: pairs.into_iter().map(|p| p.map(|[a, b]| 0.5 * (a + b))).collect(), noise })
 }
 
 /// A view's caustic irradiance against [`trace_view`]'s, as the bench measures a
@@ -302,12 +340,13 @@ pub fn pinhole(transform: &Transform, fov_y: f32, width: u32, height: u32) -> Pi
 /// Bevy's lumens, ×4π), and an HDR camera at `camera` rendering into `target`. With
 /// `injected` irradiance (one value per pixel, e.g. the tracer's), the camera shows
 /// that and the generators are plain meshes; without, the generators get
-/// [`CausticGenerator`] and the plugin's techniques draw the caustics live. Ambient
+/// [`CausticGenerator`] and the plugin's techniques draw the caustics live. The
+/// receivers from `shown` on only block light ([`spawn_scene_content`]). Ambient
 /// light is switched off, and exposure set so that `typical` lux on a white receiver
 /// comes out at mid grey.
 pub fn spawn_scene(
     world: &mut World,
-    scene: &Scene,
+    (scene, shown): (&Scene, usize),
     camera: &PinholeCamera,
     target: RenderTarget,
     injected: Option<&[Vec3]>,
@@ -317,7 +356,7 @@ pub fn spawn_scene(
         let image = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
         world.resource_mut::<Assets<Image>>().add(image)
     });
-    spawn_scene_content(world, scene, injected.is_none().then_some(CausticTechnique::Auto));
+    spawn_scene_content(world, scene, shown, injected.is_none().then_some(CausticTechnique::Auto));
     let mut camera = world.spawn((
         Camera3d::default(),
         CausticsSettings::default(),
@@ -339,16 +378,22 @@ pub fn exposure_for(typical: f32) -> Exposure {
 }
 
 /// Spawns `scene`'s receivers, generators and lights into `world` (see
-/// [`spawn_scene`]), with ambient light off. With a `technique`, each generator gets a
-/// [`CausticGenerator`] asking for it; without, generators are plain meshes.
-pub fn spawn_scene_content(world: &mut World, scene: &Scene, technique: Option<CausticTechnique>) {
-    for receiver in &scene.receivers {
+/// [`spawn_scene`]), with ambient light off. The first `shown` receivers get
+/// [`CausticReceiver`]; the rest only block light, as meshes that cast shadows do in a
+/// game ([`scene_from_world`] reads them back in that order). With a `technique`, each
+/// generator gets a [`CausticGenerator`] asking for it; without, generators are plain
+/// meshes.
+pub fn spawn_scene_content(world: &mut World, scene: &Scene, shown: usize, technique: Option<CausticTechnique>) {
+    for (index, receiver) in scene.receivers.iter().enumerate() {
         let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&receiver.mesh));
         let a = receiver.albedo;
         let material = world
             .resource_mut::<Assets<StandardMaterial>>()
             .add(StandardMaterial { base_color: Color::linear_rgb(a.x, a.y, a.z), perceptual_roughness: 0.9, ..default() });
-        world.spawn((Mesh3d(mesh), MeshMaterial3d(material), CausticReceiver));
+        let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        if index < shown {
+            entity.insert(CausticReceiver);
+        }
     }
     for generator in &scene.generators {
         let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&generator.mesh));
@@ -443,7 +488,15 @@ mod tests {
 
         // Straight down on the floor: the occluder's pixels are not measured, the floor's are.
         let camera = PinholeCamera { position: glam::Vec3::Y * 4.0, look_at: glam::Vec3::ZERO, up: glam::Vec3::Z, fov_y: 0.9, width: 48, height: 48 };
-        let reference = trace_view(&scene, shown, &camera, 1 << 18, 0.05, &|_, _| {}).expect("a valid scene");
+        let traced = trace_view(&scene, shown, &camera, (1 << 18, 0), 0.05, &|_, _| {}).expect("a valid scene");
+        let reference = traced.irradiance;
+        // The noise it reports is how far a trace of other photons lands from it.
+        let other = trace_view(&scene, shown, &camera, (1 << 18, 1), 0.05, &|_, _| {}).expect("a valid scene");
+        let grey = |v: &[Option<Vec3>]| v.iter().flatten().map(|e| (e.x + e.y + e.z) / 3.0).collect::<Vec<f32>>();
+        let apart = caustics_core::metrics::relative_l2(&grey(&other.irradiance), &grey(&reference));
+        let expected = (traced.noise.powi(2) + other.noise.powi(2)).sqrt();
+        eprintln!("two traces {apart:.4} apart; their own noise {:.4} and {:.4}", traced.noise, other.noise);
+        assert!((apart / expected - 1.0).abs() < 0.15, "two traces {apart} apart, their noise {} and {}", traced.noise, other.noise);
         let measured = reference.iter().filter(|e| e.is_some()).count();
         assert!((48 * 48 / 4..48 * 48 * 3 / 4).contains(&measured), "{measured} of {} pixels on the floor", 48 * 48);
         // The ball's light lands under it, on the floor.

@@ -37,7 +37,9 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_values_t = crate::scenes::BUILT_IN.map(String::from))]
     pub scenes: Vec<String>,
     /// A scene of one's own (.gltf, .glb or .json), run after the built-in ones; repeat
-    /// for more. `--scenes ''` runs only these.
+    /// for more. `--scenes ''` runs only these. A frame saved by the live comparison
+    /// (the debug panel's "save frame", `demo --compare`) is measured from its camera,
+    /// as the panel measures it, into `views.csv` and `views.md`.
     #[arg(long = "scene")]
     pub files: Vec<String>,
     /// Leave out the GPU runs (their columns say "CPU only").
@@ -601,11 +603,23 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         };
         scenes.push((name.clone(), fine.unwrap_or_else(|| own.clone()), own));
     }
+    let mut views = Vec::new();
     for file in &args.files {
         // The file's name, extension included: never a built-in scene's name.
         let name = std::path::Path::new(file).file_name().map_or_else(|| file.clone(), |s| s.to_string_lossy().into_owned());
+        if let Some(view) = crate::scenes::open_scene_view(file)? {
+            let photons = crate::views::VIEW_PHOTONS[usize::from(!args.quick)];
+            views.extend(crate::views::measure(&name, &view, photons).map_err(|e| format!("{file}: {e}"))?);
+            continue;
+        }
         let bench = BenchScene { name: name.clone(), ..crate::scenes::open(file, 128)?.bench };
         scenes.push((name, bench.clone(), bench));
+    }
+    if !views.is_empty() {
+        crate::views::write(&args.out, &views)?;
+    }
+    if scenes.is_empty() {
+        return Ok(());
     }
     for (name, scene, own) in &scenes {
         let label = format!("{name}: reference with {reference_photons} photons");

@@ -11,6 +11,7 @@ mod images;
 mod plot;
 mod render;
 mod scenes;
+mod views;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;

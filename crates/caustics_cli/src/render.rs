@@ -276,7 +276,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
     }
     world.insert_resource(volumes);
     world.insert_resource(maps_settings);
-    spawn_scene_content(world, &bench.scene, Some(technique));
+    spawn_scene_content(world, &bench.scene, bench.scene.receivers.len(), Some(technique));
     let size = region.edge_u.length();
     let centre = region.origin + 0.5 * (region.edge_u + region.edge_v);
     let camera = world
@@ -337,7 +337,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
 }
 
 /// The lights' own irradiance at `at` (normal incidence): what to expose for.
-fn typical_irradiance(scene: &caustics_core::scene::Scene, at: Vec3) -> f32 {
+pub fn typical_irradiance(scene: &caustics_core::scene::Scene, at: Vec3) -> f32 {
     scene
         .lights
         .iter()
@@ -373,7 +373,7 @@ fn render_with_bevy(
             let map = photon_map(tracer, settings, r);
             eprintln!("shading {}×{} (kernel radius {:.4} m)", camera.width, camera.height, map.radius());
             let irradiance = view_irradiance(tracer, &map, camera);
-            spawn_scene(renderer.world_mut(), &bench.scene, camera, target, Some(&irradiance), typical);
+            spawn_scene(renderer.world_mut(), (&bench.scene, bench.scene.receivers.len()), camera, target, Some(&irradiance), typical);
             renderer.render(8)
         }
         Some(technique) => {
@@ -381,7 +381,7 @@ fn render_with_bevy(
             let (volumes, maps) = method.settings();
             world.insert_resource(volumes);
             world.insert_resource(maps);
-            spawn_scene(world, &bench.scene, camera, target, None, typical);
+            spawn_scene(world, (&bench.scene, bench.scene.receivers.len()), camera, target, None, typical);
             let mut generators = world.query::<&mut caustics_bevy::CausticGenerator>();
             generators.iter_mut(world).for_each(|mut g| g.technique = technique);
             renderer.render(24)

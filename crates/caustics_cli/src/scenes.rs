@@ -12,7 +12,7 @@ use caustics_core::scenes::{
     BenchScene, POOL_WAVES, SceneDescription, boxed_pool, glass_sphere, metal_ring, roofed_pool, wave_heightfield,
     wave_pool,
 };
-use caustics_core::view::PinholeCamera;
+use caustics_core::view::{PinholeCamera, SceneView};
 use std::path::Path;
 
 /// Names of the built-in scenes: one generator each (the pool, the sphere, the ring),
@@ -101,6 +101,20 @@ pub fn open(spec: &str, cells: usize) -> Result<LoadedScene, String> {
         "gltf" | "glb" => crate::gltf::load(path, cells),
         _ => Err(format!("{spec}: unknown scene format (expected .gltf, .glb or .json)")),
     }
+}
+
+/// A frame saved by the live comparison ([`SceneView`]) when `spec` is a `.json` file
+/// that holds one; `None` for any other scene.
+pub fn open_scene_view(spec: &str) -> Result<Option<SceneView>, String> {
+    let path = Path::new(spec);
+    if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")) || !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{spec}: {e}"))?;
+    if !SceneView::is_scene_view(&text) {
+        return Ok(None);
+    }
+    SceneView::from_json(&text).map(Some).map_err(|e| format!("{spec}: {e}"))
 }
 
 /// A camera looking at the generators from above and to the side.

@@ -72,17 +72,35 @@ fn weld_positions(positions: &[Vec3], weld: f32) -> Vec<u32> {
 
 /// A triangle mesh in one coordinate frame, with unit vertex normals that are
 /// interpolated across each triangle as Bevy's PBR shading does (barycentric
-/// interpolation, then renormalisation).
-#[derive(Clone, Debug, PartialEq)]
+/// interpolation, then renormalisation). Read from JSON through [`TriMesh::new`], so
+/// a file cannot make a mesh that code could not.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "MeshFields")]
 pub struct TriMesh {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
     triangles: Vec<[u32; 3]>,
 }
 
+/// A [`TriMesh`]'s fields as JSON has them, before they are checked.
+#[derive(serde::Deserialize)]
+struct MeshFields {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+}
+
+impl TryFrom<MeshFields> for TriMesh {
+    type Error = MeshError;
+
+    fn try_from(m: MeshFields) -> Result<Self, MeshError> {
+        TriMesh::new(m.positions, m.normals, m.triangles)
+    }
+}
+
 impl TriMesh {
     /// Builds a mesh, checking every index, position and normal. Normals are
-    /// normalised; zero, NaN or infinite normals are an error, and so are positions
+    /// normalised (unit ones kept as they are); zero, NaN or infinite normals are an error, and so are positions
     /// past [`MAX_COORDINATE`].
     pub fn new(
         positions: Vec<Vec3>,
@@ -104,7 +122,11 @@ impl TriMesh {
         let normals = normals
             .iter()
             .enumerate()
-            .map(|(i, n)| n.try_normalize().ok_or(MeshError::BadNormal(i)))
+            // A unit normal is kept bit for bit (a mesh read back is the mesh written).
+            .map(|(i, n)| {
+                let unit = (n.length_squared() - 1.0).abs() <= 4.0 * f32::EPSILON;
+                if unit { Some(*n) } else { n.try_normalize() }.ok_or(MeshError::BadNormal(i))
+            })
             .collect::<Result<Vec<_>, _>>()?;
         for (t, tri) in triangles.iter().enumerate() {
             if let Some(&index) = tri.iter().find(|&&i| i as usize >= positions.len()) {

@@ -5,11 +5,12 @@
 use crate::mesh::TriMesh;
 use crate::params::{ParamError, SpecularInteraction, check_finite};
 use glam::Vec3;
+use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// The emitting part of a light. Flux units follow the light's own: with Bevy's lux
 /// and lumens, irradiance comes out in lux.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum LightKind {
     /// Parallel light travelling along `direction`, with irradiance `irradiance` on a
     /// plane perpendicular to the beam.
@@ -29,12 +30,14 @@ pub enum LightKind {
 pub const MAX_LIGHT_POWER: f32 = 1e20;
 
 /// A light with a linear RGB colour that scales its flux per channel.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Light {
     pub kind: LightKind,
     pub color: Vec3,
     /// A point or spot light's range (m), as Bevy's `PointLight::range`: its light
-    /// fades out towards it ([`Self::range_attenuation`]). Infinite: no end.
+    /// fades out towards it ([`Self::range_attenuation`]). Infinite: no end (`null`
+    /// in JSON, which has no infinity).
+    #[serde(with = "range_or_null")]
     pub range: f32,
 }
 
@@ -173,7 +176,7 @@ fn nonzero(v: Vec3) -> Result<(), ParamError> {
 }
 
 /// A specular surface that reflects or refracts light into caustics.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Generator {
     pub mesh: TriMesh,
     pub interaction: SpecularInteraction,
@@ -234,11 +237,24 @@ impl Sides {
 }
 
 /// A diffuse surface on which caustics land (and which blocks light).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Receiver {
     pub mesh: TriMesh,
     /// Linear RGB albedo, used when a view is shaded.
     pub albedo: Vec3,
+}
+
+/// A light's range in JSON: a number, or `null` for an infinite one.
+mod range_or_null {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub fn serialize<S: Serializer>(range: &f32, s: S) -> Result<S::Ok, S::Error> {
+        range.is_finite().then_some(*range).serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
+        Ok(Option::<f32>::deserialize(d)?.unwrap_or(f32::INFINITY))
+    }
 }
 
 /// Why a scene was refused.
@@ -252,8 +268,9 @@ pub enum SceneError {
     NoLights,
 }
 
-/// Lights, generators and receivers in world space.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// Lights, generators and receivers in world space. Its JSON form is what
+/// [`crate::view::SceneView`] saves.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Scene {
     pub lights: Vec<Light>,
     pub generators: Vec<Generator>,

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use std::f32::consts::PI;
 
 /// A pinhole camera.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PinholeCamera {
     pub position: Vec3,
     pub look_at: Vec3,
@@ -35,6 +35,68 @@ impl PinholeCamera {
         let sx = (2.0 * (x as f32 + 0.5) / self.width as f32 - 1.0) * half_w;
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * half_h;
         (self.position, (forward + right * sx + up * sy).normalize())
+    }
+}
+
+/// The most pixels a side of a [`SceneView`]'s camera may have.
+pub const MAX_VIEW_SIDE: u32 = 16384;
+
+impl PinholeCamera {
+    /// Checks that the camera can make rays: finite placement, a direction to look in
+    /// that `up` is not parallel to, a field of view strictly between 0 and π, and 1 to
+    /// [`MAX_VIEW_SIDE`] pixels a side.
+    pub fn validate(&self) -> Result<(), String> {
+        let forward = self.look_at - self.position;
+        if ![self.position, self.look_at, self.up].iter().all(|v| v.is_finite()) {
+            return Err("the camera's position, target and up are not all finite".into());
+        }
+        if forward.length_squared() == 0.0 || forward.cross(self.up).length_squared() <= 1e-12 * forward.length_squared() * self.up.length_squared() {
+            return Err("the camera looks at its own position, or along its up".into());
+        }
+        if !(self.fov_y > 0.0 && self.fov_y < PI) {
+            return Err(format!("the camera's field of view {} is not between 0 and π", self.fov_y));
+        }
+        if !(1..=MAX_VIEW_SIDE).contains(&self.width) || !(1..=MAX_VIEW_SIDE).contains(&self.height) {
+            return Err(format!("the camera's {}×{} pixels are not 1 to {MAX_VIEW_SIDE} a side", self.width, self.height));
+        }
+        Ok(())
+    }
+}
+
+/// A scene and the camera that looked at it: a game's frame as the ground-truth
+/// comparison traced it, saved so that another program (`caustics bench`) can measure
+/// the same view again. The receivers from `shown` on block light but are not
+/// measured (in a game, meshes that cast shadows but are no `CausticReceiver`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SceneView {
+    pub scene: Scene,
+    /// How many of the scene's receivers, from the first, are measured.
+    pub shown: usize,
+    pub camera: PinholeCamera,
+}
+
+impl SceneView {
+    /// The view as JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("a scene view is plain data")
+    }
+
+    /// Reads a view written by [`Self::to_json`], checking the scene (every mesh,
+    /// light and generator), the camera and `shown`.
+    pub fn from_json(text: &str) -> Result<Self, String> {
+        let view: Self = serde_json::from_str(text).map_err(|e| format!("scene view does not parse: {e}"))?;
+        view.scene.validate().map_err(|e| e.to_string())?;
+        view.camera.validate()?;
+        if view.shown > view.scene.receivers.len() {
+            return Err(format!("{} receivers are shown, but the scene has {}", view.shown, view.scene.receivers.len()));
+        }
+        Ok(view)
+    }
+
+    /// Whether `text` is a scene view rather than another JSON scene format: it has a
+    /// camera and a scene.
+    pub fn is_scene_view(text: &str) -> bool {
+        serde_json::from_str::<serde_json::Value>(text).is_ok_and(|v| v.get("camera").is_some() && v.get("scene").is_some())
     }
 }
 
@@ -134,4 +196,44 @@ fn direct_irradiance(tracer: &PhotonTracer, scene: &Scene, p: Vec3, n: Vec3) -> 
             }
         })
         .sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Light;
+    use crate::scenes::glass_sphere;
+
+    fn sphere_view() -> SceneView {
+        let mut scene = glass_sphere(16).scene;
+        scene.lights.push(Light { range: 7.5, ..Light::white(LightKind::Point { position: Vec3::new(1.0, 3.0, 0.0), intensity: 40.0 }) });
+        let camera = PinholeCamera { position: Vec3::new(0.0, 2.0, 2.0), look_at: Vec3::ZERO, up: Vec3::Y, fov_y: 0.8, width: 64, height: 48 };
+        SceneView { scene, shown: 1, camera }
+    }
+
+    #[test]
+    fn a_scene_view_survives_json() {
+        let view = sphere_view();
+        assert!(view.scene.lights[0].range.is_infinite());
+        let json = view.to_json();
+        assert!(SceneView::is_scene_view(&json));
+        assert!(SceneView::from_json(&json).unwrap() == view, "the view read back differs from the one written");
+    }
+
+    #[test]
+    fn a_scene_view_that_code_could_not_make_is_refused_with_the_reason() {
+        let json = sphere_view().to_json();
+        let with = |from: &str, to: &str| {
+            assert!(json.contains(from), "{from}");
+            SceneView::from_json(&json.replacen(from, to, 1)).unwrap_err()
+        };
+        assert!(with("\"shown\":1", "\"shown\":2").contains("2 receivers are shown"));
+        assert!(with("\"fov_y\":0.8", "\"fov_y\":4.0").contains("field of view"));
+        assert!(with("\"width\":64", "\"width\":0").contains("pixels"));
+        assert!(with("\"intensity\":40.0", "\"intensity\":-40.0").contains("light 1"));
+        assert!(with("\"triangles\":[[", "\"triangles\":[[9999,0,0],[").contains("vertex 9999"));
+        assert!(with("\"ior\":1.5", "\"ior\":0.5").contains("generator 0"));
+        assert!(SceneView::from_json("{\"scene\": 3}").unwrap_err().contains("does not parse"));
+        assert!(!SceneView::is_scene_view("{\"name\": \"pool\", \"light\": {}}"));
+    }
 }
