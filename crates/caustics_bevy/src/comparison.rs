@@ -3,7 +3,7 @@
 //! `demo --compare` reports.
 //!
 //! A [`ReferenceComparisonRequest::Start`] stops virtual time, so the scene holds
-//! still, and traces that scene ([`scene_from_world`], [`trace_view`]) on a thread of
+//! still, and traces that scene ([`frame_of_world`], [`trace_view`]) on a thread of
 //! its own, with its progress in [`ReferenceComparison::progress`]. Meanwhile every
 //! generator is asked for each technique in turn ([`CausticTechnique::ALL`]), and the
 //! view's caustic irradiance is read back from the GPU every frame
@@ -24,7 +24,7 @@
 
 use crate::headless::{HeadlessRenderer, decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
-use crate::reference::{TracedView, ViewError, pinhole, scene_from_world, trace_view, view_error};
+use crate::reference::{TracedView, ViewError, frame_of_world, pinhole, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
 use caustics_core::metrics::relative_l2;
 use caustics_core::technique::Technique;
@@ -188,11 +188,11 @@ fn start(world: &mut World, camera: Entity, photons_and_seed: (u64, u64)) -> Res
     let size = view.physical_viewport_size().ok_or("the camera has no viewport size yet")?;
     let pinhole = pinhole(&transform.compute_transform(), perspective.fov, size.x, size.y);
     world.resource_mut::<Time<Virtual>>().pause();
-    let (scene, shown, skipped) = scene_from_world(world);
+    let (frame, skipped) = frame_of_world(world, pinhole);
     for s in skipped {
         warn!("bevy_caustics: left out of the reference: {s}");
     }
-    let frame = SceneView { scene: scene.clone(), shown, camera: pinhole };
+    let (scene, shown) = (frame.scene.clone(), frame.shown);
     let traced = Arc::new([AtomicU64::new(0), AtomicU64::new(0)]);
     let counter = traced.clone();
     let tracer = std::thread::spawn(move || {

@@ -46,7 +46,7 @@ pub use gltf_tagging::TagCausticsFromMaterials;
 pub use gpu_budget::CausticsGpuBudget;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, InjectedIrradiance};
 #[cfg(feature = "convolution")]
-pub use convolution::{DropPebble, PoolRipples};
+pub use convolution::{DropPebble, PoolImpulses, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
 pub use cpu_time::CausticsCpuTime;

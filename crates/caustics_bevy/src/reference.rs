@@ -16,7 +16,7 @@ use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Light, LightKind, Scene};
 use caustics_core::tracer::PhotonTracer;
-use caustics_core::view::PinholeCamera;
+use caustics_core::view::{PinholeCamera, PoolView, SceneView};
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
@@ -198,14 +198,24 @@ fn view_gather<T: Send>(
         .collect()
 }
 
+/// The scene the caustics plugin sees in a world ([`scene_from_world`]).
+pub struct WorldScene {
+    pub scene: Scene,
+    /// How many of its receivers are [`CausticReceiver`]s: they come first.
+    pub shown: usize,
+    /// The entity each of its generators comes from.
+    pub generators: Vec<Entity>,
+    /// What was left out, and why.
+    pub skipped: Vec<String>,
+}
+
 /// The scene the caustics plugin sees in `world` now, as the core crate's: every
 /// valid, visible [`CausticGenerator`] (whatever its technique), the visible
 /// [`CausticReceiver`]s with their `StandardMaterial` base colour as albedo, then every
 /// other mesh that blocks caustic light ([`blocks_caustic_light`]) as a receiver too,
-/// and every visible light. Returns it with the number of its receivers that are
-/// `CausticReceiver`s (they come first). A mesh that is not loaded or that the core
-/// refuses is left out and named in the error list.
-pub fn scene_from_world(world: &mut World) -> (Scene, usize, Vec<String>) {
+/// and every visible light. A mesh that is not loaded or that the core refuses is left
+/// out and named in [`WorldScene::skipped`].
+pub fn scene_from_world(world: &mut World) -> WorldScene {
     use caustics_core::scene::{Generator, Receiver};
     let mut scene = Scene::default();
     let mut skipped = Vec::new();
@@ -225,9 +235,11 @@ pub fn scene_from_world(world: &mut World) -> (Scene, usize, Vec<String>) {
             None
         }
     };
+    let mut generator_entities = Vec::new();
     for (entity, generator, (mesh, transform, visible, _)) in generators.iter(world) {
         if let Some(mesh) = visible.get().then(|| core(entity, mesh, transform)).flatten() {
             scene.generators.push(Generator { mesh, interaction: generator.specular_interaction(), double_sided: generator.double_sided });
+            generator_entities.push(entity);
         }
     }
     let mut occluders = Vec::new();
@@ -251,7 +263,29 @@ pub fn scene_from_world(world: &mut World) -> (Scene, usize, Vec<String>) {
             scene.lights.push(light);
         }
     }
-    (scene, shown, skipped)
+    WorldScene { scene, shown, generators: generator_entities, skipped }
+}
+
+/// What `camera` shows of `world` now, as a saved frame keeps it: [`scene_from_world`]'s
+/// scene, with its pools' water and impulses ([`PoolView`]), and what was left out.
+pub fn frame_of_world(world: &mut World, camera: PinholeCamera) -> (SceneView, Vec<String>) {
+    let WorldScene { scene, shown, generators, skipped } = scene_from_world(world);
+    let pools = generators.iter().enumerate().filter_map(|(index, &entity)| pool_view(world, entity, index)).collect();
+    (SceneView { scene, shown, camera, pools }, skipped)
+}
+
+/// The pool on `entity` with water, as the frame's generator `index`.
+#[cfg(feature = "convolution")]
+fn pool_view(world: &World, entity: Entity, index: usize) -> Option<PoolView> {
+    let pool = world.get::<crate::PoolRipples>(entity)?;
+    let surface = world.get::<crate::convolution::PoolSurface>(entity)?;
+    let transform = world.get::<GlobalTransform>(entity)?;
+    Some(pool.to_view(index, transform, surface, world.resource::<Time>().elapsed_secs()))
+}
+
+#[cfg(not(feature = "convolution"))]
+fn pool_view(_: &World, _: Entity, _: usize) -> Option<PoolView> {
+    None
 }
 
 /// The ground truth of a view ([`trace_view`]).
@@ -370,6 +404,52 @@ pub fn spawn_scene(
     }
 }
 
+/// A core generator as Bevy draws it (glass or a mirror, one- or double-sided) and
+/// as the plugin's [`CausticGenerator`] asking for `Auto`.
+fn generator_of(generator: &caustics_core::scene::Generator) -> (StandardMaterial, CausticGenerator) {
+    let (material, component) = match generator.interaction {
+        SpecularInteraction::Reflect => (StandardMaterial { metallic: 1.0, perceptual_roughness: 0.02, ..default() }, CausticGenerator::mirror()),
+        SpecularInteraction::Refract { ior, dispersion } => (
+            StandardMaterial {
+                base_color: Color::srgba(0.9, 0.95, 1.0, 0.2),
+                alpha_mode: AlphaMode::Blend,
+                perceptual_roughness: 0.02,
+                ior,
+                ..default()
+            },
+            CausticGenerator {
+                interaction: GeneratorInteraction::Refract { ior, dispersion: dispersion.map(|d| Vec2::new(d.a, d.b)) },
+                ..CausticGenerator::refractive(ior)
+            },
+        ),
+    };
+    let double_sided = generator.double_sided;
+    let material = StandardMaterial { double_sided, cull_mode: (!double_sided).then_some(bevy::render::render_resource::Face::Back), ..material };
+    (material, CausticGenerator { technique: CausticTechnique::Auto, double_sided, ..component })
+}
+
+/// Spawns a saved frame as [`spawn_scene`] does, with its camera, every generator
+/// asking `Auto`, and its pools as pools ([`crate::PoolRipples`] started with
+/// [`crate::PoolImpulses`]) where the plugin has them, else as their meshes.
+pub fn spawn_scene_view(world: &mut World, view: &SceneView, target: RenderTarget, typical: f32) {
+    let pools: &[PoolView] = if cfg!(feature = "convolution") { &view.pools } else { &[] };
+    let is_pool = |index: usize| pools.iter().any(|p| p.generator == index);
+    let generators = view.scene.generators.iter().enumerate().filter(|(i, _)| !is_pool(*i)).map(|(_, g)| g.clone()).collect();
+    let scene = Scene { generators, ..view.scene.clone() };
+    spawn_scene(world, (&scene, view.shown), &view.camera, target, None, typical);
+    #[cfg(feature = "convolution")]
+    for pool in pools {
+        let (_, generator) = generator_of(&view.scene.generators[pool.generator]);
+        let t = &pool.transform;
+        world.spawn((
+            crate::PoolRipples::from_view(pool),
+            crate::PoolImpulses { impulses: pool.impulses.clone(), time: pool.time },
+            generator,
+            Transform::from_matrix(Mat4::from_cols_array(&caustics_core::glam::Mat4::from(*t).to_cols_array())),
+        ));
+    }
+}
+
 /// The exposure at which `typical` lux on a white receiver comes out at mid grey:
 /// exposure = 1 / (1.2 · 2^ev100), and white at `typical` lux has radiance typical/π.
 pub fn exposure_for(typical: f32) -> Exposure {
@@ -396,32 +476,17 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, shown: usize, techn
         }
     }
     for generator in &scene.generators {
-        let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&generator.mesh));
-        let (material, component) = match generator.interaction {
-            SpecularInteraction::Reflect => (
-                StandardMaterial { metallic: 1.0, perceptual_roughness: 0.02, ..default() },
-                CausticGenerator::mirror(),
-            ),
-            SpecularInteraction::Refract { ior, dispersion } => (
-                StandardMaterial {
-                    base_color: Color::srgba(0.9, 0.95, 1.0, 0.2),
-                    alpha_mode: AlphaMode::Blend,
-                    perceptual_roughness: 0.02,
-                    ior,
-                    ..default()
-                },
-                CausticGenerator {
-                    interaction: GeneratorInteraction::Refract { ior, dispersion: dispersion.map(|d| Vec2::new(d.a, d.b)) },
-                    ..CausticGenerator::refractive(ior)
-                },
-            ),
-        };
-        let double_sided = generator.double_sided;
-        let material = StandardMaterial { double_sided, cull_mode: (!double_sided).then_some(bevy::render::render_resource::Face::Back), ..material };
+        // Centred on its own origin, as a game's object is: the illumination textures
+        // keep their tables in the object's frame.
+        let (lo, hi) = generator.mesh.bounds();
+        let centre = 0.5 * (lo + hi);
+        let local = generator.mesh.transformed(&glam::Affine3A::from_translation(-centre));
+        let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&local));
+        let (material, component) = generator_of(generator);
         let material = world.resource_mut::<Assets<StandardMaterial>>().add(material);
-        let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
+        let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material), Transform::from_translation(to_bevy(centre))));
         if let Some(technique) = technique {
-            entity.insert(CausticGenerator { technique, double_sided, ..component });
+            entity.insert(CausticGenerator { technique, ..component });
         }
     }
     for light in &scene.lights {
@@ -480,7 +545,7 @@ mod tests {
         place(&mut world, Sphere::new(0.3).mesh().ico(3).expect("an icosphere"), Vec3::new(1.0, 0.8, 0.0), true).insert(CausticGenerator::refractive(1.5));
         world.spawn((DirectionalLight { illuminance: 1000.0, ..default() }, GlobalTransform::from(Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)), InheritedVisibility::VISIBLE));
 
-        let (scene, shown, skipped) = scene_from_world(&mut world);
+        let WorldScene { scene, shown, skipped, .. } = scene_from_world(&mut world);
         assert!(skipped.is_empty(), "{skipped:?}");
         assert_eq!((scene.generators.len(), scene.receivers.len(), shown, scene.lights.len()), (1, 2, 1, 1));
         assert_eq!(scene.receivers[0].albedo, glam::Vec3::splat(0.5));

@@ -609,7 +609,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         let name = std::path::Path::new(file).file_name().map_or_else(|| file.clone(), |s| s.to_string_lossy().into_owned());
         if let Some(view) = crate::scenes::open_scene_view(file)? {
             let photons = crate::views::VIEW_PHOTONS[usize::from(!args.quick)];
-            views.extend(crate::views::measure(&name, &view, photons).map_err(|e| format!("{file}: {e}"))?);
+            views.extend(crate::views::measure(&name, &view, photons, &args.out).map_err(|e| format!("{file}: {e}"))?);
             continue;
         }
         let bench = BenchScene { name: name.clone(), ..crate::scenes::open(file, 128)?.bench };

@@ -7,13 +7,15 @@
 //! noise. The panel's numbers and these agree within the two traces' noise
 //! (`tests/comparison_frames.rs`). Writes `views.csv` and `views.md`.
 
+use crate::images::{percentile_white, write_exr, write_png};
 use crate::prepare_output;
+use caustics_core::glam::Vec3 as Rgb;
 use crate::render::typical_irradiance;
 use caustics_bevy::comparison::{ReferenceComparison, compare_headless};
 use caustics_bevy::headless::HeadlessRenderer;
-use caustics_bevy::reference::{ViewError, spawn_scene};
+use caustics_bevy::reference::{ViewError, spawn_scene_view};
 use caustics_core::view::SceneView;
-use bevy::prelude::{Camera3d, Entity, With};
+use bevy::prelude::{Camera3d, Entity, Time, Virtual, With};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -39,14 +41,21 @@ pub struct ViewRow {
     pub gpu_ms: f64,
 }
 
-/// Measures the saved frame `view` (named `name`) with `photons` per light.
-pub fn measure(name: &str, view: &SceneView, photons: u64) -> Result<Vec<ViewRow>, String> {
+/// Measures the saved frame `view` (named `name`) with `photons` per light, and writes
+/// into `dir/views/` each technique's caustic irradiance and the reference's, as
+/// `<file stem>-<technique>.exr` (linear lux; the reference zero where no receiver is
+/// measured) and `.png` (one exposure for all, from the reference).
+pub fn measure(name: &str, view: &SceneView, photons: u64, dir: &Path) -> Result<Vec<ViewRow>, String> {
     let camera = &view.camera;
     let mut renderer = HeadlessRenderer::timed(camera.width, camera.height).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
     let typical = typical_irradiance(&view.scene, camera.look_at);
-    spawn_scene(renderer.world_mut(), (&view.scene, view.shown), camera, target, None, typical);
-    // The meshes reach the GPU and every technique has a frame to start in.
+    let world = renderer.world_mut();
+    // The frame's pools are made again as they were at its moment: their clock stands still.
+    world.resource_mut::<Time<Virtual>>().pause();
+    spawn_scene_view(world, view, target, typical);
+    // The meshes reach the GPU, the pools' water is made, and every technique has a
+    // frame to start in.
     renderer.render(2).map_err(|e| e.to_string())?;
     let world = renderer.world_mut();
     let entity = world.query_filtered::<Entity, With<Camera3d>>().single(world).map_err(|e| e.to_string())?;
@@ -55,6 +64,18 @@ pub fn measure(name: &str, view: &SceneView, photons: u64) -> Result<Vec<ViewRow
     let adapter = renderer.adapter.name.clone();
     let comparison = renderer.world_mut().resource::<ReferenceComparison>();
     let noise = comparison.reference_noise.unwrap_or(f32::NAN);
+    let to_core = |e: &bevy::math::Vec3| Rgb::from_array(e.to_array());
+    let reference: Vec<Rgb> = comparison.reference.iter().map(|e| e.as_ref().map_or(Rgb::ZERO, to_core)).collect();
+    let white = 2.5 * percentile_white(&reference, 0.5);
+    let images = std::iter::once(("reference", reference))
+        .chain(comparison.rows.iter().map(|row| (row.technique.label(), row.irradiance.iter().map(to_core).collect())));
+    let stem = Path::new(name).file_stem().map_or_else(|| name.into(), |s| s.to_string_lossy());
+    for (label, pixels) in images {
+        let file = |extension: &str| dir.join("views").join(format!("{stem}-{}.{extension}", label.replace(' ', "-")));
+        write_exr(&prepare_output(&file("exr"))?, camera.width, camera.height, &pixels)?;
+        write_png(&file("png"), camera.width, camera.height, &pixels, white)?;
+    }
+    eprintln!("wrote {}", dir.join("views").join(format!("{stem}-*.exr and .png")).display());
     Ok(comparison
         .rows
         .iter()

@@ -4,6 +4,7 @@
 //! technique's frame is compared with, pixel by pixel.
 
 use crate::bvh::Surface;
+use crate::convolution::ripples::{Impulse, RippleSettings};
 use crate::estimate::PhotonMap;
 use crate::optics::{Refraction, fresnel_reflectance, reflect, refract};
 use crate::scene::{LightKind, Scene};
@@ -73,6 +74,33 @@ pub struct SceneView {
     /// How many of the scene's receivers, from the first, are measured.
     pub shown: usize,
     pub camera: PinholeCamera,
+    /// The generators that are a rippling pool's water: the mesh alone would lose what
+    /// convolution caustics draw from.
+    #[serde(default)]
+    pub pools: Vec<PoolView>,
+}
+
+/// A generator of a [`SceneView`] that is a rippling pool's water (Trendall & Stewart
+/// 2000 §4.3): the pool's settings (as the Bevy crate's `PoolRipples` has them) and
+/// its live impulses, from which its water is made again as the frame saw it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PoolView {
+    /// The generator (its index in the scene) that is this pool's water.
+    pub generator: usize,
+    /// World from pool space: the water's rest level at y = 0, centred on the origin.
+    pub transform: glam::Affine3A,
+    pub columns: u32,
+    pub rows: u32,
+    pub cell_size: f32,
+    pub waves: RippleSettings,
+    pub depth: f32,
+    pub exponent: f32,
+    pub extinction: f32,
+    pub kernel_radius: u32,
+    /// The impulses live in the frame (pool coordinates, times on the pool's clock).
+    pub impulses: Vec<Impulse>,
+    /// The pool's clock in the frame (s).
+    pub time: f32,
 }
 
 impl SceneView {
@@ -89,6 +117,14 @@ impl SceneView {
         view.camera.validate()?;
         if view.shown > view.scene.receivers.len() {
             return Err(format!("{} receivers are shown, but the scene has {}", view.shown, view.scene.receivers.len()));
+        }
+        for (i, pool) in view.pools.iter().enumerate() {
+            if pool.generator >= view.scene.generators.len() || view.pools[..i].iter().any(|p| p.generator == pool.generator) {
+                return Err(format!("pool {i} is generator {}, which the scene lacks or another pool is", pool.generator));
+            }
+            if !pool.transform.is_finite() || !pool.time.is_finite() {
+                return Err(format!("pool {i}'s placement or clock is not finite"));
+            }
         }
         Ok(view)
     }
@@ -208,7 +244,21 @@ mod tests {
         let mut scene = glass_sphere(16).scene;
         scene.lights.push(Light { range: 7.5, ..Light::white(LightKind::Point { position: Vec3::new(1.0, 3.0, 0.0), intensity: 40.0 }) });
         let camera = PinholeCamera { position: Vec3::new(0.0, 2.0, 2.0), look_at: Vec3::ZERO, up: Vec3::Y, fov_y: 0.8, width: 64, height: 48 };
-        SceneView { scene, shown: 1, camera }
+        let pool = PoolView {
+            generator: 0,
+            transform: glam::Affine3A::from_translation(Vec3::Y),
+            columns: 8,
+            rows: 8,
+            cell_size: 0.1,
+            waves: RippleSettings::default(),
+            depth: 1.0,
+            exponent: 100.0,
+            extinction: 0.0,
+            kernel_radius: 4,
+            impulses: vec![Impulse { position: glam::Vec2::new(0.2, 0.3), strength: 0.01, time: 1.5 }],
+            time: 2.0,
+        };
+        SceneView { scene, shown: 1, camera, pools: vec![pool] }
     }
 
     #[test]
@@ -233,6 +283,7 @@ mod tests {
         assert!(with("\"intensity\":40.0", "\"intensity\":-40.0").contains("light 1"));
         assert!(with("\"triangles\":[[", "\"triangles\":[[9999,0,0],[").contains("vertex 9999"));
         assert!(with("\"ior\":1.5", "\"ior\":0.5").contains("generator 0"));
+        assert!(with("\"generator\":0", "\"generator\":1").contains("pool 0 is generator 1"));
         assert!(SceneView::from_json("{\"scene\": 3}").unwrap_err().contains("does not parse"));
         assert!(!SceneView::is_scene_view("{\"name\": \"pool\", \"light\": {}}"));
     }

@@ -12,11 +12,12 @@ mod render;
 mod ripples;
 
 pub use render::PoolGpu;
-pub use ripples::{PoolKernels, PoolSurface};
+pub use ripples::{PoolImpulses, PoolKernels, PoolSurface};
 
 use bevy::prelude::*;
 use caustics_core::convolution::ConvolutionSettings;
 use caustics_core::convolution::ripples::RippleSettings;
+use caustics_core::view::PoolView;
 
 /// A rectangular pool of rippling water, centred on its entity in its xz plane: the
 /// surface's rest level is the entity's `y = 0`, and it spans `columns × rows` texels
@@ -95,6 +96,45 @@ impl PoolRipples {
             extinction: self.extinction,
             kernel_radius: self.kernel_radius as usize,
             ..ConvolutionSettings::default()
+        }
+    }
+
+    /// The pool as a saved frame keeps it, `generator` its water's index in the
+    /// frame's scene: these settings, placed by `transform`, with `surface`'s live
+    /// impulses as of `time` on the pool's clock.
+    pub fn to_view(&self, generator: usize, transform: &GlobalTransform, surface: &PoolSurface, time: f32) -> PoolView {
+        PoolView {
+            generator,
+            transform: caustics_core::glam::Affine3A::from_cols_array(&transform.affine().to_cols_array()),
+            columns: self.columns,
+            rows: self.rows,
+            cell_size: self.cell_size,
+            waves: self.waves(),
+            depth: self.depth,
+            exponent: self.exponent,
+            extinction: self.extinction,
+            kernel_radius: self.kernel_radius,
+            impulses: surface.ripples().impulses().to_vec(),
+            time,
+        }
+    }
+
+    /// The settings of a saved frame's pool.
+    pub fn from_view(view: &PoolView) -> Self {
+        let w = &view.waves;
+        Self {
+            columns: view.columns,
+            rows: view.rows,
+            cell_size: view.cell_size,
+            wave_number: w.wave_number,
+            angular_frequency: w.angular_frequency,
+            time_damping: w.time_damping,
+            front_damping: w.front_damping,
+            expiry_height: w.expiry_height,
+            depth: view.depth,
+            exponent: view.exponent,
+            extinction: view.extinction,
+            kernel_radius: view.kernel_radius,
         }
     }
 

@@ -7,7 +7,7 @@ use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
-use caustics_core::convolution::ripples::PoolRipples as Ripples;
+use caustics_core::convolution::ripples::{Impulse, PoolRipples as Ripples};
 use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
 use std::sync::Arc;
 
@@ -99,9 +99,37 @@ impl PoolSurface {
     }
 }
 
+/// Starts a pool's water with impulses dropped before now: `impulses` as the pool's
+/// clock read `time` (a saved frame's `caustics_core::view::PoolView`), each dropped
+/// as long before this frame as it was before `time`, so that the water is what it
+/// was then. Taken off once the pool's water has them; an impulse the pool refuses
+/// (outside it) is reported and left out.
+#[derive(Component, Clone, Debug, Default)]
+pub struct PoolImpulses {
+    pub impulses: Vec<Impulse>,
+    pub time: f32,
+}
+
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticsCpuTime::of(app).main;
-    app.add_systems(Update, (timed(&cpu, configure_pools), timed(&cpu, drop_pebbles), timed(&cpu, animate_pools)).chain());
+    app.add_systems(
+        Update,
+        (timed(&cpu, configure_pools), timed(&cpu, replay_impulses), timed(&cpu, drop_pebbles), timed(&cpu, animate_pools)).chain(),
+    );
+}
+
+/// Gives each pool with [`PoolImpulses`] and water its impulses.
+fn replay_impulses(mut commands: Commands, mut pools: Query<(Entity, &PoolImpulses, &mut PoolSurface)>, time: Res<Time>) {
+    let now = time.elapsed_secs();
+    for (entity, replay, mut surface) in &mut pools {
+        for impulse in &replay.impulses {
+            let at = now - (replay.time - impulse.time);
+            if let Err(e) = surface.ripples.drop_pebble(impulse.position, impulse.strength, at) {
+                warn!("bevy_caustics: an impulse of the pool {entity} is left out: {e}");
+            }
+        }
+        commands.entity(entity).remove::<PoolImpulses>();
+    }
 }
 
 /// Starts the water of pools that are new or whose grid or waves changed (a still

@@ -25,7 +25,7 @@ use glam::{DVec2, Vec2};
 use rayon::prelude::*;
 
 /// The wave of one impulse.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RippleSettings {
     /// `K`: wave number (rad/m); the wavelength is `2π/K`.
     pub wave_number: f32,
@@ -96,7 +96,7 @@ impl RippleSettings {
 }
 
 /// A pebble's impulse.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Impulse {
     /// Where it fell, in pool coordinates (m).
     pub position: Vec2,
