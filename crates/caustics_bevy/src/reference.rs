@@ -3,7 +3,7 @@
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
-use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance};
+use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance, ParticipatingMedium};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Aabb;
 use bevy::camera::{Exposure, RenderTarget};
@@ -16,7 +16,7 @@ use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Light, LightKind, Scene};
 use caustics_core::tracer::PhotonTracer;
-use caustics_core::view::{PinholeCamera, PoolView, SceneView};
+use caustics_core::view::{MediumView, PinholeCamera, PoolView, SceneView};
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
@@ -267,11 +267,28 @@ pub fn scene_from_world(world: &mut World) -> WorldScene {
 }
 
 /// What `camera` shows of `world` now, as a saved frame keeps it: [`scene_from_world`]'s
-/// scene, with its pools' water and impulses ([`PoolView`]), and what was left out.
+/// scene, with its pools' water and impulses ([`PoolView`]) and its visible, valid
+/// media ([`MediumView`]), and what was left out.
 pub fn frame_of_world(world: &mut World, camera: PinholeCamera) -> (SceneView, Vec<String>) {
     let WorldScene { scene, shown, generators, skipped } = scene_from_world(world);
     let pools = generators.iter().enumerate().filter_map(|(index, &entity)| pool_view(world, entity, index)).collect();
-    (SceneView { scene, shown, camera, pools }, skipped)
+    let mut media = world.query_filtered::<(&ParticipatingMedium, &GlobalTransform, &InheritedVisibility), Without<crate::InvalidCausticParams>>();
+    let media = media
+        .iter(world)
+        .filter(|(_, _, visible)| visible.get())
+        .map(|(medium, transform, _)| MediumView { transform: to_core_affine(&transform.affine()), coefficients: medium.coefficients() })
+        .collect();
+    (SceneView { scene, shown, camera, pools, media }, skipped)
+}
+
+/// A Bevy affine transform as the core crate's.
+pub fn to_core_affine(a: &bevy::math::Affine3A) -> glam::Affine3A {
+    glam::Affine3A::from_cols_array(&a.to_cols_array())
+}
+
+/// A core affine transform as a Bevy `Transform`.
+fn transform_of(a: &glam::Affine3A) -> Transform {
+    Transform::from_matrix(Mat4::from_cols_array(&glam::Mat4::from(*a).to_cols_array()))
 }
 
 /// The pool on `entity` with water, as the frame's generator `index`.
@@ -429,8 +446,8 @@ fn generator_of(generator: &caustics_core::scene::Generator) -> (StandardMateria
 }
 
 /// Spawns a saved frame as [`spawn_scene`] does, with its camera, every generator
-/// asking `Auto`, and its pools as pools ([`crate::PoolRipples`] started with
-/// [`crate::PoolImpulses`]) where the plugin has them, else as their meshes.
+/// asking `Auto`, its media, and its pools as pools ([`crate::PoolRipples`] started
+/// with [`crate::PoolImpulses`]) where the plugin has them, else as their meshes.
 pub fn spawn_scene_view(world: &mut World, view: &SceneView, target: RenderTarget, typical: f32) {
     let pools: &[PoolView] = if cfg!(feature = "convolution") { &view.pools } else { &[] };
     let is_pool = |index: usize| pools.iter().any(|p| p.generator == index);
@@ -440,12 +457,18 @@ pub fn spawn_scene_view(world: &mut World, view: &SceneView, target: RenderTarge
     #[cfg(feature = "convolution")]
     for pool in pools {
         let (_, generator) = generator_of(&view.scene.generators[pool.generator]);
-        let t = &pool.transform;
         world.spawn((
             crate::PoolRipples::from_view(pool),
             crate::PoolImpulses { impulses: pool.impulses.clone(), time: pool.time },
             generator,
-            Transform::from_matrix(Mat4::from_cols_array(&caustics_core::glam::Mat4::from(*t).to_cols_array())),
+            transform_of(&pool.transform),
+        ));
+    }
+    for medium in &view.media {
+        let c = medium.coefficients;
+        world.spawn((
+            ParticipatingMedium { scattering: c.scattering, absorption: c.absorption, asymmetry: c.asymmetry },
+            transform_of(&medium.transform),
         ));
     }
 }

@@ -6,7 +6,7 @@
 
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use caustics_bevy::convolution::{DropPebble, PoolRipples, PoolRipplesPlugin, PoolSurface};
+use caustics_bevy::convolution::{DropPebble, PoolImpulses, PoolRipples, PoolRipplesPlugin, PoolSurface};
 use std::time::Duration;
 
 fn app() -> App {
@@ -124,4 +124,41 @@ fn invalid_settings_leave_the_pool_dry_until_fixed() {
     app.world_mut().get_mut::<PoolRipples>(pool).unwrap().columns = 8;
     app.update();
     assert_eq!(positions(&app, pool).len(), 8 * 16);
+}
+
+#[test]
+fn a_saved_pool_starts_with_the_water_it_was_saved_with() {
+    // Two pebbles a few frames apart, then the waves run on.
+    let mut first = app();
+    let pool = spawn_pool(&mut first);
+    first.update();
+    drop_pebble(&mut first, Vec3::new(9.6, 1.0, 0.2));
+    first.update();
+    first.update();
+    drop_pebble(&mut first, Vec3::new(10.5, 1.0, -0.1));
+    for _ in 0..5 {
+        first.update();
+    }
+    let world = first.world();
+    let time = world.resource::<Time>().elapsed_secs();
+    let saved = world.get::<PoolRipples>(pool).unwrap().to_view(0, world.get::<GlobalTransform>(pool).unwrap(), world.get::<PoolSurface>(pool).unwrap(), time);
+    assert_eq!(saved.impulses.len(), 2);
+    let waves = positions(&first, pool);
+    assert!(waves.iter().any(|p| p[1].abs() > 1e-4), "the water moves");
+
+    // Made again in another app whose clock reads otherwise: the same water.
+    let mut again = app();
+    again.update();
+    again.update();
+    let transform = Transform::from_matrix(Mat4::from_cols_array(&caustics_core::glam::Mat4::from(saved.transform).to_cols_array()));
+    let copy = again.world_mut().spawn((PoolRipples::from_view(&saved), PoolImpulses { impulses: saved.impulses.clone(), time: saved.time }, transform)).id();
+    again.world_mut().resource_mut::<Time<Virtual>>().pause();
+    again.update();
+    again.update();
+    assert!(again.world().get::<PoolImpulses>(copy).is_none(), "the impulses are in its water");
+    assert_eq!(again.world().get::<PoolRipples>(copy), first.world().get::<PoolRipples>(pool));
+    let copied = positions(&again, copy);
+    let off = waves.iter().zip(&copied).map(|(a, b)| (a[1] - b[1]).abs()).fold(0.0, f32::max);
+    assert!(off < 1e-6, "the heights differ by up to {off} m");
+    assert_eq!(again.world().get::<GlobalTransform>(copy).unwrap().translation(), Vec3::new(10.0, 1.0, 0.0));
 }

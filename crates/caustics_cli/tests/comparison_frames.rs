@@ -2,7 +2,8 @@
 //! bench` on the frame it saved give the same numbers, within their traces' noise.
 //!
 //! A game's scene, made of Bevy's own meshes (a floor and a wall that receive, a box
-//! that only casts shadows, a rippling pool with two pebbles' impulses in it, a glass
+//! that only casts shadows, a rippling pool with two pebbles' impulses in it and a
+//! participating medium in its water, a glass
 //! ball and a tilted mirror under the sun, seen at a slant with Bevy's default MSAA),
 //! is measured live on lavapipe; its frame is saved;
 //! the `caustics` program rebuilds the scene from the file in a renderer of its own and
@@ -16,7 +17,7 @@ use bevy::prelude::*;
 use caustics_bevy::comparison::{ReferenceComparison, compare_headless};
 use caustics_bevy::headless::HeadlessRenderer;
 use bevy::time::TimeUpdateStrategy;
-use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, DropPebble, PoolRipples};
+use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, DropPebble, ParticipatingMedium, PoolRipples};
 use std::time::Duration;
 use caustics_core::metrics::relative_l2;
 use std::process::Command;
@@ -81,6 +82,11 @@ fn spawn_game_scene(renderer: &mut HeadlessRenderer) -> Entity {
         CausticGenerator::refractive(1.333),
         Transform::from_xyz(-1.0, 0.5, 0.0),
     ));
+    // Its water scatters the focused light into shafts.
+    world.spawn((
+        ParticipatingMedium { scattering: 0.3, absorption: 0.05, asymmetry: 0.5 },
+        Transform::from_xyz(-1.0, 0.25, 0.0).with_scale(Vec3::new(1.6, 0.5, 1.6)),
+    ));
     world.spawn((Mesh3d(ball), CausticGenerator::refractive(1.5), Transform::from_xyz(0.6, 0.6, 0.1)));
     // Tilted towards the wall, so that its reflection lands there.
     world.spawn((
@@ -124,6 +130,7 @@ fn the_live_comparison_and_the_bench_on_its_saved_frame_agree_within_the_noise()
     assert_eq!((saved.scene.generators.len(), saved.scene.receivers.len(), saved.shown), (3, 3, 2), "pool, ball and mirror; floor, wall, then the box");
     assert_eq!(saved.pools.len(), 1);
     assert_eq!(saved.pools[0].impulses.len(), 2, "the pool's live impulses");
+    assert_eq!(saved.media.len(), 1);
     let live_noise = live.reference_noise.unwrap();
 
     let out = Command::new(env!("CARGO_BIN_EXE_caustics"))

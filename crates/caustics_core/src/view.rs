@@ -7,6 +7,7 @@ use crate::bvh::Surface;
 use crate::convolution::ripples::{Impulse, RippleSettings};
 use crate::estimate::PhotonMap;
 use crate::optics::{Refraction, fresnel_reflectance, reflect, refract};
+use crate::params::MediumCoefficients;
 use crate::scene::{LightKind, Scene};
 use crate::tracer::PhotonTracer;
 use glam::Vec3;
@@ -78,6 +79,17 @@ pub struct SceneView {
     /// convolution caustics draw from.
     #[serde(default)]
     pub pools: Vec<PoolView>,
+    /// The participating media (the light shafts; a generator's technique follows them).
+    #[serde(default)]
+    pub media: Vec<MediumView>,
+}
+
+/// A homogeneous participating medium of a [`SceneView`] (Ernst et al. 2005 §3.5): its
+/// coefficients, filling the unit cube `[-½, ½]³` that `transform` places.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MediumView {
+    pub transform: glam::Affine3A,
+    pub coefficients: MediumCoefficients,
 }
 
 /// A generator of a [`SceneView`] that is a rippling pool's water (Trendall & Stewart
@@ -124,6 +136,12 @@ impl SceneView {
             }
             if !pool.transform.is_finite() || !pool.time.is_finite() {
                 return Err(format!("pool {i}'s placement or clock is not finite"));
+            }
+        }
+        for (i, medium) in view.media.iter().enumerate() {
+            medium.coefficients.validate().map_err(|e| format!("medium {i}: {e}"))?;
+            if !medium.transform.is_finite() {
+                return Err(format!("medium {i}'s placement is not finite"));
             }
         }
         Ok(view)
@@ -258,7 +276,11 @@ mod tests {
             impulses: vec![Impulse { position: glam::Vec2::new(0.2, 0.3), strength: 0.01, time: 1.5 }],
             time: 2.0,
         };
-        SceneView { scene, shown: 1, camera, pools: vec![pool] }
+        let medium = MediumView {
+            transform: glam::Affine3A::from_scale(Vec3::new(4.0, 1.0, 4.0)),
+            coefficients: MediumCoefficients { scattering: 0.25, absorption: 0.05, asymmetry: 0.6 },
+        };
+        SceneView { scene, shown: 1, camera, pools: vec![pool], media: vec![medium] }
     }
 
     #[test]
@@ -284,6 +306,7 @@ mod tests {
         assert!(with("\"triangles\":[[", "\"triangles\":[[9999,0,0],[").contains("vertex 9999"));
         assert!(with("\"ior\":1.5", "\"ior\":0.5").contains("generator 0"));
         assert!(with("\"generator\":0", "\"generator\":1").contains("pool 0 is generator 1"));
+        assert!(with("\"scattering\":0.25", "\"scattering\":-0.25").contains("medium 0"));
         assert!(SceneView::from_json("{\"scene\": 3}").unwrap_err().contains("does not parse"));
         assert!(!SceneView::is_scene_view("{\"name\": \"pool\", \"light\": {}}"));
     }

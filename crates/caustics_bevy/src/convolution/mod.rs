@@ -105,7 +105,7 @@ impl PoolRipples {
     pub fn to_view(&self, generator: usize, transform: &GlobalTransform, surface: &PoolSurface, time: f32) -> PoolView {
         PoolView {
             generator,
-            transform: caustics_core::glam::Affine3A::from_cols_array(&transform.affine().to_cols_array()),
+            transform: crate::reference::to_core_affine(&transform.affine()),
             columns: self.columns,
             rows: self.rows,
             cell_size: self.cell_size,
