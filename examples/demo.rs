@@ -11,8 +11,13 @@
 //! the water to make ripples, arrow keys move the sun, and the "Caustics" panel
 //! switches each generator's technique and graphs every pass's GPU time. Without a
 //! display, or with `--headless`, it runs 1.2 seconds of the pool offscreen (the ball
-//! bobbing, the first raindrops spreading) and writes the last frame as a PNG (`--out`,
-//! default `target/demo.png`); `--frames N` sets how many 50 ms frames.
+//! bobbing, a shower of rain setting the water rippling) and writes the last frame as
+//! a PNG (`--out`, default `target/demo.png`); `--frames N` sets how many 50 ms frames.
+//!
+//! In a corner, a second camera looks from under the water towards the sun. Water
+//! scatters light forwards, so the shafts under the ripples show best from there,
+//! against the surface; from above they stand in front of their own bright floor.
+//! (`--compare` measures the main view alone.)
 //!
 //! `--compare` (headless) measures that last frame against the ground-truth tracer: see
 //! [`compare`]; `--photons N` sets the tracer's photons per light. `--sequence N` writes
@@ -21,7 +26,7 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::{Exposure, MsaaWriteback, RenderTarget, Viewport};
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
@@ -50,16 +55,11 @@ const BALL_HEIGHT: f32 = BALL_RADIUS + 0.06;
 const BOB: (f32, f32) = (0.08, 1.2);
 /// A touch on the water: the ripple's height at its start (m).
 const TOUCH: f32 = 0.02;
-/// Touches on the water in the first frames (frame, x, z): a handful of raindrops to
-/// start the ripples with.
-const RAIN: [(u32, Vec2); 6] = [
-    (0, Vec2::new(-0.9, 0.9)),
-    (0, Vec2::new(-0.4, -1.0)),
-    (2, Vec2::new(1.2, -0.9)),
-    (4, Vec2::new(-1.3, -0.2)),
-    (6, Vec2::new(0.1, 1.3)),
-    (9, Vec2::new(0.9, 1.2)),
-];
+/// Rain: a shower of so many drops a second for the first so many seconds sets the
+/// whole pool rippling (the caustic web on floor and walls, the shafts under it); then
+/// a drizzle of `DRIZZLE` drops a second keeps it alive.
+const SHOWER: (f32, f32) = (60.0, 0.8);
+const DRIZZLE: f32 = 2.0;
 /// Headless: frames rendered 50 ms apart.
 const FRAMES: u32 = 24;
 /// The sun: Bevy's daylight illuminance, from `SUN_AZIMUTH` (radians about +y from +x)
@@ -67,6 +67,9 @@ const FRAMES: u32 = 24;
 const SUN_LUX: f32 = light_consts::lux::AMBIENT_DAYLIGHT;
 const SUN_AZIMUTH: f32 = 2.8;
 const SUN_ELEVATION: f32 = 0.95;
+/// The sky's luminance (cd/m²) and the cameras' exposure.
+const SKY: f32 = 1500.0;
+const EV100: f32 = 11.5;
 
 fn main() -> ExitCode {
     support::exit_code("demo", run)
@@ -83,7 +86,10 @@ fn run() -> Result<(), String> {
     if sequence > 0 {
         return write_sequence(&args, frames, sequence);
     }
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_pool(world, target, headless);
+    let spawn = move |world: &mut World, target: RenderTarget| {
+        spawn_pool(world, target.clone(), headless);
+        spawn_underwater_view(world, target);
+    };
     support::show(&args, "pool", (WIDTH, HEIGHT), frames, spawn, (touch_water, move_sun))
 }
 
@@ -93,7 +99,8 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
     use bevy_caustics::headless::HeadlessRenderer;
     let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
-    spawn_pool(renderer.world_mut(), target, true);
+    spawn_pool(renderer.world_mut(), target.clone(), true);
+    spawn_underwater_view(renderer.world_mut(), target);
     renderer.render(frames).map_err(|e| e.to_string())?;
     let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     for i in 0..count {
@@ -121,7 +128,7 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
     spawn_pool(renderer.world_mut(), target, true);
     renderer.render(frames).map_err(|e| e.to_string())?;
     let world = renderer.world_mut();
-    let camera = world.query_filtered::<Entity, With<Camera3d>>().single(world).map_err(|e| e.to_string())?;
+    let camera = world.query_filtered::<Entity, (With<Camera3d>, Without<UnderwaterView>)>().single(world).map_err(|e| e.to_string())?;
     compare_headless(&mut renderer, camera, (photons, 0))?;
     let adapter = renderer.adapter.name.clone();
     let rows = renderer.world_mut().resource::<ReferenceComparison>().rows.clone();
@@ -159,6 +166,13 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
 /// The glass ball, bobbing on the water.
 #[derive(Component)]
 struct Ball;
+
+/// The camera under the water, drawn in the image's bottom right corner.
+#[derive(Component)]
+struct UnderwaterView;
+
+/// The underwater view's share of the image's width, and its margin (pixels).
+const INSET: (f32, u32) = (0.4, 8);
 
 /// The sun, moved by the arrow keys.
 #[derive(Component)]
@@ -204,6 +218,9 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
         ior: 1.333,
         perceptual_roughness: 0.04,
         reflectance: 0.5,
+        // Seen from under the water too.
+        double_sided: true,
+        cull_mode: None,
         ..default()
     });
     world.spawn((
@@ -215,7 +232,7 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
     // The water body scatters the focused light into shafts.
     world.spawn((
         Name::new("pool water (medium)"),
-        ParticipatingMedium { scattering: 0.25, absorption: 0.05, asymmetry: 0.6 },
+        ParticipatingMedium { scattering: 0.4, absorption: 0.05, asymmetry: 0.6 },
         Transform::from_xyz(0.0, -DEPTH / 2.0, 0.0).with_scale(Vec3::new(SIZE, DEPTH, SIZE)),
     ));
 
@@ -248,22 +265,64 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
         sun.transform(),
         sun,
     ));
-    let sky = support::sky(world, 1500.0);
+    let sky = support::sky(world, SKY);
     world.spawn((
         Camera3d::default(),
         CausticsSettings::default(),
         sky,
         target,
-        Exposure { ev100: 11.5 },
+        Exposure { ev100: EV100 },
         Projection::from(PerspectiveProjection { fov: 0.9, ..default() }),
         Transform::from_xyz(-1.3, 1.8, 3.5).looking_at(Vec3::new(0.3, -0.9, -0.7), Vec3::Y),
     ));
     world.schedule_scope(Update, |_, schedule| {
-        schedule.add_systems(bob_ball);
-        schedule.add_systems(rain);
+        schedule.add_systems((bob_ball, rain, place_underwater_view));
     });
     if headless {
         world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
+    }
+}
+
+/// A second camera, in the pool's corner half a metre under the water, looking across
+/// it towards the sun and up at the surface; [`place_underwater_view`] gives it its
+/// corner of the image.
+fn spawn_underwater_view(world: &mut World, target: RenderTarget) {
+    let sky = support::sky(world, SKY);
+    world.spawn((
+        Name::new("underwater camera"),
+        UnderwaterView,
+        Camera3d::default(),
+        // Its own sky behind it, not the main view's image.
+        Camera { order: 1, is_active: false, msaa_writeback: MsaaWriteback::Off, ..default() },
+        CausticsSettings::default(),
+        sky,
+        target,
+        Exposure { ev100: EV100 },
+        // Bevy's own light does not know the `ParticipatingMedium`: under the water a
+        // fog stands in for the water's extinction of it, and for the sky light the
+        // water scatters. (The fog dims the caustics too, which the medium already
+        // dims: the view is drawn for the look, not measured.)
+        DistanceFog { color: Color::srgb(0.03, 0.15, 0.22), falloff: FogFalloff::Exponential { density: 0.45 }, ..default() },
+        Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),
+        Transform::from_xyz(1.6, -0.9, -1.6).looking_at(Vec3::new(-1.0, 0.15, 0.4), Vec3::Y),
+    ));
+}
+
+/// Keeps the underwater view in the bottom right corner of its image, whatever the
+/// window's size; it draws once its image's size is known.
+fn place_underwater_view(mut views: Query<&mut Camera, With<UnderwaterView>>) {
+    for mut camera in &mut views {
+        let Some(size) = camera.physical_target_size() else { continue };
+        let (share, margin) = INSET;
+        let width = (size.x as f32 * share) as u32;
+        let inset = UVec2::new(width, width * 9 / 16);
+        let fits = inset.x > 0 && inset.y > 0 && inset.x + margin < size.x && inset.y + margin < size.y;
+        let position = size - inset - UVec2::splat(margin);
+        let placed = camera.viewport.as_ref().map(|v| (v.physical_position, v.physical_size));
+        if placed != fits.then_some((position, inset)) || camera.is_active != fits {
+            camera.is_active = fits;
+            camera.viewport = fits.then(|| Viewport { physical_position: position, physical_size: inset, ..default() });
+        }
     }
 }
 
@@ -368,12 +427,21 @@ fn bob_ball(time: Res<Time>, mut ball: Query<&mut Transform, With<Ball>>, mut to
     }
 }
 
-/// The first frames' raindrops, each at its frame.
-fn rain(mut frame: Local<u32>, mut touches: MessageWriter<DropPebble>) {
-    for (_, at) in RAIN.iter().filter(|(when, _)| *when == *frame) {
-        touches.write(DropPebble { position: Vec3::new(at.x, 0.0, at.y), strength: TOUCH });
+/// Raindrops at `SHOWER` and then `DRIZZLE` drops a second, anywhere on the water: at
+/// random, from a fixed seed, so that every run shows the same water.
+fn rain(time: Res<Time>, mut due: Local<f32>, mut seed: Local<u32>, mut touches: MessageWriter<DropPebble>) {
+    let (shower, lasting) = SHOWER;
+    *due += if time.elapsed_secs() < lasting { shower } else { DRIZZLE } * time.delta_secs();
+    let mut random = || {
+        // Numerical Recipes' linear congruential generator, its top 24 bits in [0, 1).
+        *seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (*seed >> 8) as f32 / (1u32 << 24) as f32
+    };
+    while *due >= 1.0 {
+        *due -= 1.0;
+        let (x, z) = ((random() - 0.5) * 0.95 * SIZE, (random() - 0.5) * 0.95 * SIZE);
+        touches.write(DropPebble { position: Vec3::new(x, 0.0, z), strength: TOUCH });
     }
-    *frame += 1;
 }
 
 /// Dragging on the water with the left button makes ripples along the path, one every
@@ -381,7 +449,7 @@ fn rain(mut frame: Local<u32>, mut touches: MessageWriter<DropPebble>) {
 fn touch_water(
     buttons: Res<ButtonInput<MouseButton>>,
     window: Single<&Window, With<PrimaryWindow>>,
-    camera: Single<(&Camera, &GlobalTransform)>,
+    camera: Single<(&Camera, &GlobalTransform), Without<UnderwaterView>>,
     mut last: Local<Option<Vec3>>,
     mut touches: MessageWriter<DropPebble>,
 ) {
