@@ -27,7 +27,7 @@
 mod support;
 
 use bevy::camera::{Exposure, MsaaWriteback, RenderTarget, Viewport};
-use bevy::light::GlobalAmbientLight;
+use bevy::light::{EnvironmentMapLight, GlobalAmbientLight};
 use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
@@ -87,8 +87,8 @@ fn run() -> Result<(), String> {
         return write_sequence(&args, frames, sequence);
     }
     let spawn = move |world: &mut World, target: RenderTarget| {
-        spawn_pool(world, target.clone(), headless);
-        spawn_underwater_view(world, target);
+        let sky = spawn_pool(world, target.clone(), headless);
+        spawn_underwater_view(world, target, sky);
     };
     support::show(&args, "pool", (WIDTH, HEIGHT), frames, spawn, (touch_water, move_sun))
 }
@@ -99,8 +99,8 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
     use bevy_caustics::headless::HeadlessRenderer;
     let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
-    spawn_pool(renderer.world_mut(), target.clone(), true);
-    spawn_underwater_view(renderer.world_mut(), target);
+    let sky = spawn_pool(renderer.world_mut(), target.clone(), true);
+    spawn_underwater_view(renderer.world_mut(), target, sky);
     renderer.render(frames).map_err(|e| e.to_string())?;
     let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     for i in 0..count {
@@ -189,7 +189,8 @@ impl Sun {
     }
 }
 
-fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
+/// The pool, its lights and its main camera; returns the sky, for other cameras.
+fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) -> EnvironmentMapLight {
     world.insert_resource(GlobalAmbientLight { brightness: 800.0, color: Color::srgb(0.75, 0.85, 1.0), ..default() });
     world.insert_resource(ClearColor(Color::srgb(0.45, 0.65, 0.95)));
     let tiles = world.resource_mut::<Assets<Image>>().add(support::tiles());
@@ -269,25 +270,25 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) {
     world.spawn((
         Camera3d::default(),
         CausticsSettings::default(),
-        sky,
+        sky.clone(),
         target,
         Exposure { ev100: EV100 },
         Projection::from(PerspectiveProjection { fov: 0.9, ..default() }),
         Transform::from_xyz(-1.3, 1.8, 3.5).looking_at(Vec3::new(0.3, -0.9, -0.7), Vec3::Y),
     ));
     world.schedule_scope(Update, |_, schedule| {
-        schedule.add_systems((bob_ball, rain, place_underwater_view));
+        schedule.add_systems((bob_ball, rain));
     });
     if headless {
         world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
     }
+    sky
 }
 
 /// A second camera, in the pool's corner half a metre under the water, looking across
 /// it towards the sun and up at the surface; [`place_underwater_view`] gives it its
 /// corner of the image.
-fn spawn_underwater_view(world: &mut World, target: RenderTarget) {
-    let sky = support::sky(world, SKY);
+fn spawn_underwater_view(world: &mut World, target: RenderTarget, sky: EnvironmentMapLight) {
     world.spawn((
         Name::new("underwater camera"),
         UnderwaterView,
@@ -306,6 +307,9 @@ fn spawn_underwater_view(world: &mut World, target: RenderTarget) {
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),
         Transform::from_xyz(1.6, -0.9, -1.6).looking_at(Vec3::new(-1.0, 0.15, 0.4), Vec3::Y),
     ));
+    world.schedule_scope(Update, |_, schedule| {
+        schedule.add_systems(place_underwater_view);
+    });
 }
 
 /// Keeps the underwater view in the bottom right corner of its image, whatever the
