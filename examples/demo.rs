@@ -132,11 +132,22 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
     compare_headless(&mut renderer, camera, (photons, 0))?;
     let adapter = renderer.adapter.name.clone();
     let rows = renderer.world_mut().resource::<ReferenceComparison>().rows.clone();
-    println!("| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) |");
-    println!("|---|---|---:|---:|---:|");
+    println!(
+        "| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) | caustics invocations (M) | caustics fragments (M) | main pass fragments (M) |"
+    );
+    println!("|---|---|---:|---:|---:|---:|---:|---:|");
     for row in &rows {
         let error = row.error.map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
-        println!("| {} | {} | {error} | {:.1} |", row.technique.label(), row.drawn.join("; "), row.gpu_ms);
+        let w = &row.work;
+        println!(
+            "| {} | {} | {error} | {:.1} | {:.2} | {:.2} | {:.2} |",
+            row.technique.label(),
+            row.drawn.join("; "),
+            w.caustics_ms(),
+            w.caustics_invocations() / 1e6,
+            w.caustics_fragments() / 1e6,
+            w.main_pass.fragments.unwrap_or(0.0) / 1e6
+        );
     }
     let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     let comparison = renderer.world_mut().resource::<ReferenceComparison>();

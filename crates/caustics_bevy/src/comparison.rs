@@ -22,7 +22,8 @@
 //! way in a program of its own, with the scene rebuilt from the file, and its numbers
 //! match these within the two traces' noise (`caustics_cli/tests/comparison_frames.rs`).
 
-use crate::headless::{HeadlessRenderer, decode_rgba16f, irradiance_image, is_caustic_span, newest_gpu_spans, unpad_rows};
+use crate::gpu_work::{FrameWork, newest_pass_work};
+use crate::headless::{HeadlessRenderer, decode_rgba16f, irradiance_image, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
 use crate::reference::{TracedView, ViewError, frame_of_world, pinhole, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
@@ -80,8 +81,9 @@ pub struct ComparisonRow {
     /// What each generator drew with, and why (a technique that does not apply to a
     /// generator falls back to `Auto`'s pick).
     pub drawn: Vec<String>,
-    /// The caustic passes' GPU time in the frame read back (ms; timestamp queries).
-    pub gpu_ms: f64,
+    /// The caustic passes' GPU time and shader invocations in the frame read back, and
+    /// Bevy's main opaque pass beside them (timestamp and pipeline-statistics queries).
+    pub work: FrameWork,
     /// The view's caustic irradiance (lux), row by row, top first.
     pub irradiance: Vec<Vec3>,
     /// Against the reference, once it is in; `None` before, or with no receiver in view.
@@ -302,9 +304,7 @@ fn measure(world: &mut World, index: usize) {
     let exposure = camera.and_then(|c| world.get::<Exposure>(c)).copied().unwrap_or_default().exposure();
     let irradiance: Vec<Vec3> = decode_rgba16f(&unpad_rows(&bytes, size.x as usize * 8)).into_iter().map(|e| e.truncate() / exposure).collect();
     let drawn = world.resource::<CausticPassReport>().generators.iter().map(|(_, choice)| choice.to_string()).collect();
-    let gpu_ms = world.get_resource::<DiagnosticsStore>().map_or(0.0, |store| {
-        newest_gpu_spans(store).into_iter().filter(|(span, _)| is_caustic_span(span)).filter_map(|(_, d)| d.value()).fold(0.0, |a, b| a + b)
-    });
+    let work = FrameWork::of(world.get_resource::<DiagnosticsStore>().map_or_else(Vec::new, newest_pass_work));
     let mut comparison = world.resource_mut::<ReferenceComparison>();
     let technique = CausticTechnique::ALL[index];
     // A readback shows a frame some frames old: only those drawn after the passes have
@@ -317,7 +317,7 @@ fn measure(world: &mut World, index: usize) {
         }
         warn!("bevy_caustics: {technique:?} did not settle in {MAX_WAIT_FRAMES} frames; measured as it stands");
     }
-    comparison.rows.push(ComparisonRow { technique, drawn, gpu_ms, irradiance, error: None });
+    comparison.rows.push(ComparisonRow { technique, drawn, work, irradiance, error: None });
     if let Some(&next) = CausticTechnique::ALL.get(index + 1) {
         comparison.state = ComparisonState::Measuring(index + 1);
         ask_every_generator(world, next);

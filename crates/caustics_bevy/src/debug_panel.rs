@@ -1,14 +1,15 @@
 //! An egui window showing what the caustics plugin does: the entities it sees, the
 //! technique each generator draws with and why, with a switch to any other, the passes
-//! that ran in the last frame with their GPU times (timestamp queries, through Bevy's
-//! `RenderDiagnosticsPlugin`) and a running graph of them, a "compare with reference"
+//! that ran in the last frame with their GPU times and shader invocations (timestamp
+//! and pipeline-statistics queries, through Bevy's `RenderDiagnosticsPlugin`) beside
+//! Bevy's main opaque pass, and a running graph of the times, a "compare with reference"
 //! button that measures every technique on the frame against the ground-truth tracer
 //! ([`crate::comparison`]: a progress bar, relative L2 and L1 per technique, a split
 //! view), and every invalid entity with its reason. Behind the `egui` cargo feature.
 
 use crate::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
 use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
-use crate::headless::{is_caustic_span, newest_gpu_spans};
+use crate::gpu_work::{FrameWork, PassWork, newest_pass_work, pass_time_history};
 use crate::technique::CausticTechniqueChoice;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
@@ -18,8 +19,9 @@ pub use bevy_egui;
 use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 
 /// Adds the "Caustics" window, and `EguiPlugin` and `RenderDiagnosticsPlugin` if the
-/// app has none. The GPU times need the adapter's `TIMESTAMP_QUERY` feature, which
-/// Bevy requests by default where the adapter has it.
+/// app has none. The GPU times need the adapter's `TIMESTAMP_QUERY` feature and the
+/// invocation counts its `PIPELINE_STATISTICS_QUERY`, both of which Bevy requests by
+/// default where the adapter has them.
 pub struct CausticsDebugPanelPlugin;
 
 impl Plugin for CausticsDebugPanelPlugin {
@@ -65,7 +67,8 @@ fn panel(
     (mut comparison, mut requests, cameras, mut saved): Comparison,
 ) -> Result {
     let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
-    let passes = diagnostics.as_deref().map(gpu_passes).unwrap_or_default();
+    let work = FrameWork::of(diagnostics.as_deref().map(newest_pass_work).unwrap_or_default());
+    let passes = diagnostics.as_deref().map(|store| gpu_passes(store, &work)).unwrap_or_default();
     egui::Window::new("Caustics").default_width(320.0).show(contexts.ctx_mut()?, |ui| {
         ui.label(format!("{} generators, {} receivers, {} media", generators.iter().count(), receivers.iter().count(), media.iter().count()));
         ui.separator();
@@ -100,13 +103,14 @@ fn panel(
             ui.label(format!("  {pass}: {views} view(s)"));
         }
         ui.separator();
-        if passes.is_empty() {
-            ui.label("GPU times: none (the adapter has no timestamp queries, or no pass ran)");
+        if work.caustics.is_empty() {
+            ui.label("GPU work: none (the adapter has no timestamp or statistics queries, or no pass ran)");
         } else {
-            ui.label("GPU time this frame (ms):");
-            for (i, pass) in passes.iter().enumerate() {
-                ui.colored_label(COLOURS[i % COLOURS.len()], format!("  {}: {:.3}", pass.span, pass.history.last().copied().unwrap_or(0.0)));
+            ui.label("GPU work this frame: time (ms), shader invocations (M)");
+            for (i, pass) in work.caustics.iter().enumerate() {
+                ui.colored_label(COLOURS[i % COLOURS.len()], format!("  {}", work_line(pass)));
             }
+            ui.label(format!("  Bevy's {}", work_line(&work.main_pass)));
             graph(ui, &passes);
         }
         ui.separator();
@@ -182,7 +186,8 @@ fn comparison_section(
                             ui.label("–");
                         }
                     }
-                    ui.label(format!("{:.2}", row.gpu_ms));
+                    ui.label(format!("{:.2}", row.work.caustics_ms()))
+                        .on_hover_text(format!("{:.2} M fragments; Bevy's main pass {:.2} M", row.work.caustics_fragments() / 1e6, row.work.main_pass.fragments.unwrap_or(0.0) / 1e6));
                     ui.end_row();
                 }
             });
@@ -210,22 +215,30 @@ fn comparison_section(
     }
 }
 
+/// A pass's time and invocations on one line: `caustics/volumes: 1.204 ms, 3.10 M
+/// fragments`.
+fn work_line(pass: &PassWork) -> String {
+    let mut line = format!("{}:", pass.span);
+    if let Some(ms) = pass.ms {
+        line += &format!(" {ms:.3} ms");
+    }
+    for (count, what) in [(pass.vertices, "vertices"), (pass.fragments, "fragments"), (pass.compute, "compute")] {
+        if let Some(count) = count.filter(|&c| c > 0.0) {
+            line += &format!(", {:.2} M {what}", count / 1e6);
+        }
+    }
+    line
+}
+
 /// A caustics pass's GPU times (ms), oldest first, ending with this frame's.
 struct GpuPass {
-    span: String,
     history: Vec<f64>,
 }
 
-/// The plugin's GPU spans ([`crate::headless::CAUSTIC_SPANS`]) that ran in the newest
-/// frame whose timestamps have arrived, with the history Bevy keeps of each.
-fn gpu_passes(store: &DiagnosticsStore) -> Vec<GpuPass> {
-    let mut passes: Vec<GpuPass> = newest_gpu_spans(store)
-        .into_iter()
-        .filter(|(span, _)| is_caustic_span(span))
-        .map(|(span, d)| GpuPass { span: span.to_owned(), history: d.values().copied().collect() })
-        .collect();
-    passes.sort_by(|a, b| a.span.cmp(&b.span));
-    passes
+/// The caustics passes of the newest frame whose timestamps have arrived, in the
+/// order of `work`, with the history Bevy keeps of each.
+fn gpu_passes(store: &DiagnosticsStore, work: &FrameWork) -> Vec<GpuPass> {
+    work.caustics.iter().map(|w| GpuPass { history: pass_time_history(store, &w.span) }).collect()
 }
 
 /// Each pass's GPU time over the frames Bevy keeps, one line each, on a shared scale.

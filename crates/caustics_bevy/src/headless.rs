@@ -42,46 +42,35 @@ pub enum HeadlessError {
 pub struct Adapter {
     /// Its name and backend, e.g. `llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)`.
     pub name: String,
-    /// The timestamp-query features it has, of those GPU pass times need.
-    pub timestamps: wgpu::Features,
+    /// The queries it has of those that measure passes: timestamps (GPU times) and
+    /// pipeline statistics (shader invocations).
+    pub queries: wgpu::Features,
 }
 
-/// Timestamps at encoder and pass boundaries: what `RenderDiagnosticsPlugin` needs to
-/// time passes on the GPU.
-const TIMESTAMP_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
-    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
-    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES);
+impl Adapter {
+    /// Whether it times passes (`TIMESTAMP_QUERY`).
+    pub fn has_timestamps(&self) -> bool {
+        self.queries.contains(wgpu::Features::TIMESTAMP_QUERY)
+    }
 
-/// The prefixes of the caustics passes' timestamp spans: every technique's passes, the
-/// projections into the irradiance buffer and the volumetric pass.
-pub const CAUSTIC_SPANS: [&str; 3] = ["caustics/", "caustic_maps/", "illumination_textures/"];
+    /// Whether it counts passes' shader invocations (`PIPELINE_STATISTICS_QUERY`).
+    pub fn has_pipeline_statistics(&self) -> bool {
+        self.queries.contains(wgpu::Features::PIPELINE_STATISTICS_QUERY)
+    }
+}
+
+/// Timestamps at encoder and pass boundaries and pipeline statistics: what
+/// `RenderDiagnosticsPlugin` needs to time passes and count their work on the GPU.
+const MEASURING_FEATURES: wgpu::Features = wgpu::Features::TIMESTAMP_QUERY
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS)
+    .union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES)
+    .union(wgpu::Features::PIPELINE_STATISTICS_QUERY);
 
 /// Texture bytes copied out with every row padded to wgpu's copy alignment, packed:
 /// `packed` bytes a row.
 pub fn unpad_rows(bytes: &[u8], packed: usize) -> Vec<u8> {
     let padded = packed.next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as usize);
     bytes.chunks_exact(padded).flat_map(|r| &r[..packed]).copied().collect()
-}
-
-/// Whether a timestamp span (`caustics/volumes`, `main_opaque_pass_3d`…) is one of the
-/// caustics passes' ([`CAUSTIC_SPANS`]).
-pub fn is_caustic_span(span: &str) -> bool {
-    CAUSTIC_SPANS.iter().any(|p| span.starts_with(p))
-}
-
-/// Every pass timed on the GPU in the newest frame whose diagnostics have arrived (a
-/// frame or two behind), by span, with Bevy's diagnostic for it (its history): what
-/// `RenderDiagnosticsPlugin` records as `render/<span>/elapsed_gpu`.
-pub fn newest_gpu_spans(store: &bevy::diagnostic::DiagnosticsStore) -> Vec<(&str, &bevy::diagnostic::Diagnostic)> {
-    let spans: Vec<_> = store
-        .iter()
-        .filter_map(|d| {
-            let span = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
-            Some((span, d.measurement()?.time, d))
-        })
-        .collect();
-    let newest = spans.iter().map(|(_, time, _)| *time).max();
-    spans.into_iter().filter(|(_, time, _)| Some(*time) == newest).map(|(span, _, d)| (span, d)).collect()
 }
 
 /// Checks that wgpu finds an adapter on the backends Bevy would use.
@@ -93,7 +82,7 @@ pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
     let adapter = bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
         .map_err(|e| HeadlessError::NoAdapter(e.to_string()))?;
     let info = adapter.get_info();
-    Ok(Adapter { name: format!("{} ({:?})", info.name, info.backend), timestamps: adapter.features() & TIMESTAMP_FEATURES })
+    Ok(Adapter { name: format!("{} ({:?})", info.name, info.backend), queries: adapter.features() & MEASURING_FEATURES })
 }
 
 /// Linear RGBA pixels of a rendered frame, row-major from the top-left.
@@ -167,9 +156,9 @@ impl HeadlessRenderer {
         })
     }
 
-    /// Builds the app with Bevy's `RenderDiagnosticsPlugin` and whichever timestamp
-    /// queries the adapter has, so that [`Self::gpu_pass_times`] reads every timed
-    /// pass's GPU time.
+    /// Builds the app with Bevy's `RenderDiagnosticsPlugin` and whichever timestamp and
+    /// pipeline-statistics queries the adapter has, so that [`Self::gpu_pass_work`]
+    /// reads every pass's GPU time and shader invocations.
     pub fn timed(width: u32, height: u32) -> Result<Self, HeadlessError> {
         Self::build(width, height, true, None, |_| {})
     }
@@ -177,7 +166,7 @@ impl HeadlessRenderer {
     fn build(width: u32, height: u32, timed: bool, assets: Option<&Path>, more: impl FnOnce(&mut App)) -> Result<Self, HeadlessError> {
         use bevy::render::settings::{RenderCreation, WgpuSettings};
         let adapter = probe_adapter()?;
-        let features = if timed { adapter.timestamps } else { wgpu::Features::empty() };
+        let features = if timed { adapter.queries } else { wgpu::Features::empty() };
         let render_creation = RenderCreation::Automatic(Box::new(WgpuSettings { features, ..default() }));
         let mut app = App::new();
         let plugins = DefaultPlugins
@@ -208,15 +197,12 @@ impl HeadlessRenderer {
         Ok(Self { app, adapter, target, width, height })
     }
 
-    /// The GPU time (ms) of every pass timed in the newest frame whose diagnostics have
-    /// arrived (a frame or two behind), by span (`caustics/volumes`,
-    /// `caustic_maps/gather`, Bevy's own `main_opaque_pass_3d`…), from timestamp
-    /// queries. Empty unless built [`Self::timed`] on an adapter with timestamp queries.
-    pub fn gpu_pass_times(&self) -> Vec<(String, f64)> {
-        let Some(store) = self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>() else {
-            return Vec::new();
-        };
-        newest_gpu_spans(store).into_iter().filter_map(|(span, d)| Some((span.to_owned(), d.value()?))).collect()
+    /// Every pass's GPU time and shader invocations in the newest frame whose
+    /// diagnostics have arrived (a frame or two behind), by span (`caustics/volumes`,
+    /// `caustic_maps/gather`, Bevy's own `main_opaque_pass_3d`…). Empty unless built
+    /// [`Self::timed`] on an adapter with timestamp or pipeline-statistics queries.
+    pub fn gpu_pass_work(&self) -> Vec<crate::gpu_work::PassWork> {
+        self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>().map_or_else(Vec::new, crate::gpu_work::newest_pass_work)
     }
 
     /// The plugin's CPU time (ms) in the main and in the render world, in the last

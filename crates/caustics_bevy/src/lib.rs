@@ -19,6 +19,7 @@ pub mod convolution;
 pub mod debug_panel;
 pub mod gltf_tagging;
 pub mod gpu_budget;
+pub mod gpu_work;
 #[cfg(any(feature = "ocean", feature = "convolution"))]
 mod grid_mesh;
 pub mod headless;

@@ -297,10 +297,10 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
     let mut left = None;
     for _ in 0..48 {
         renderer.app.update();
-        let spans = renderer.gpu_pass_times();
-        let technique_ms: f64 = spans.iter().filter(|(span, _)| caustics_bevy::headless::is_caustic_span(span)).map(|(_, ms)| ms).sum();
-        if !spans.is_empty() && times.is_none_or(|t| technique_ms > t.technique_ms) {
-            times = Some(GpuTimes { technique_ms, timed_passes_ms: spans.iter().map(|(_, ms)| ms).sum() });
+        let passes = renderer.gpu_pass_work();
+        let technique_ms: f64 = passes.iter().filter(|w| w.is_caustic()).filter_map(|w| w.ms).sum();
+        if passes.iter().any(|w| w.ms.is_some()) && times.is_none_or(|t| technique_ms > t.technique_ms) {
+            times = Some(GpuTimes { technique_ms, timed_passes_ms: passes.iter().filter_map(|w| w.ms).sum() });
         }
         let report = renderer.pass_report();
         if left.is_none() && ["volumes", "caustic map projection", "pool floor", "illumination textures projection"].iter().any(|pass| report.views(pass) > 0) {

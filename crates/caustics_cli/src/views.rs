@@ -86,7 +86,7 @@ pub fn measure(name: &str, view: &SceneView, photons: u64, dir: &Path) -> Result
             error: row.error,
             noise,
             adapter: adapter.clone(),
-            gpu_ms: row.gpu_ms,
+            gpu_ms: row.work.caustics_ms(),
         })
         .collect())
 }

@@ -92,20 +92,19 @@ pub(super) fn make_caustic_maps(
     let diagnostics = diagnostics.as_deref();
     for (k, view) in gpu.views.iter().enumerate() {
         let encoder = ctx.command_encoder();
-        let span = diagnostics.time_span(encoder, "caustic_maps/light_maps");
-        {
-            let mut pass = light_map_pass(encoder, "caustic_front_map", &scratch.front.1, &scratch.photon_depth, 1.0);
-            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 0, &view.generator_bind_group, &cache, &meshes, &allocator);
+        // The generator's front and back faces, then the receivers and occluders, seen
+        // from the light: three passes, each a span of `caustic_maps/light_maps`.
+        let light_maps = [
+            ("caustic_front_map", &scratch.front.1, &scratch.photon_depth, 1.0, &gpu.generator_draws, 0, &view.generator_bind_group),
+            ("caustic_back_map", &scratch.back.1, &scratch.photon_depth, 0.0, &gpu.generator_draws, 1, &view.generator_bind_group),
+            ("caustic_receiver_map", &view.receivers.1, &scratch.map_depth, 1.0, &gpu.occluder_draws, 0, &view.occluder_bind_group),
+        ];
+        for (label, target, depth, depth_clear, draws, variant, bind_group) in light_maps {
+            let mut pass = light_map_pass(encoder, label, target, depth, depth_clear);
+            let span = diagnostics.pass_span(&mut pass, "caustic_maps/light_maps");
+            complete &= draw_meshes(&mut pass, draws, variant, bind_group, &cache, &meshes, &allocator);
+            span.end(&mut pass);
         }
-        {
-            let mut pass = light_map_pass(encoder, "caustic_back_map", &scratch.back.1, &scratch.photon_depth, 0.0);
-            complete &= draw_meshes(&mut pass, &gpu.generator_draws, 1, &view.generator_bind_group, &cache, &meshes, &allocator);
-        }
-        {
-            let mut pass = light_map_pass(encoder, "caustic_receiver_map", &view.receivers.1, &scratch.map_depth, 1.0);
-            complete &= draw_meshes(&mut pass, &gpu.occluder_draws, 0, &view.occluder_bind_group, &cache, &meshes, &allocator);
-        }
-        span.end(encoder);
         encoder.clear_buffer(&scratch.counters, k as u64 * counters_size, Some(counters_size));
         encoder.clear_buffer(&scratch.levels, 0, None);
         // One compute pass per stage, each timed.

@@ -31,7 +31,6 @@ pub(super) fn draw_illumination_textures(
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
-    let span = diagnostics.time_span(encoder, "illumination_textures/draw");
     for frame in &gpu.frames {
         for (plane, layer) in frame.layers.iter().enumerate() {
             let mut pass = encoder.begin_render_pass(&RenderPassDescriptor {
@@ -44,12 +43,14 @@ pub(super) fn draw_illumination_textures(
                 })],
                 ..default()
             });
+            // A pass span, so that every plane's shader invocations are counted too.
+            let span = diagnostics.pass_span(&mut pass, "illumination_textures/draw");
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &frame.draw_bind_group, &[]);
             pass.draw(0..6 * frame.volume_count, plane as u32..plane as u32 + 1);
+            span.end(&mut pass);
         }
     }
-    span.end(encoder);
     recorder.record("illumination textures");
     gpu.dirty = false;
 }
