@@ -69,6 +69,8 @@ const GRAZING: u32 = 7u;
 const DEGENERATE: u32 = 8u;
 const FLUX: u32 = 9u;
 const DROPPED_FLUX: u32 = 12u;
+const SURFACE_SLABS: u32 = 15u;
+const ESCAPING: u32 = 16u;
 
 fn is_finite3(v: vec3<f32>) -> bool {
     return all(abs(v) <= vec3(INFINITY));
@@ -232,7 +234,11 @@ fn local_dir(f: Frame, d: vec3<f32>) -> vec3<f32> {
 }
 
 fn world(f: Frame, p: vec3<f32>) -> vec3<f32> {
-    return f.origin + f.x * p.x + f.y * p.y + f.z * p.z;
+    return f.origin + world_dir(f, p);
+}
+
+fn world_dir(f: Frame, d: vec3<f32>) -> vec3<f32> {
+    return f.x * d.x + f.y * d.y + f.z * d.z;
 }
 
 // `flattened`: the vertex moved along its ray into y = 0 and the ray scaled to r_y = 1;
@@ -281,10 +287,163 @@ fn hit_plane(f: Frame, point: vec3<f32>, normal: vec3<f32>, r: vec3<f32>, depth:
     return vec4(0.0, 0.0, 0.0, 1.0);
 }
 
+// `occluded_beyond`: the depth past which every point is behind hit planes weighing
+// more than one half (x), found when y is 1.
+fn occluded_beyond(v: array<vec3<f32>, 3>, r: array<vec3<f32>, 3>, planes: array<vec4<f32>, 3>) -> vec2<f32> {
+    var end = 0.0;
+    for (var i = 0u; i < 3u; i++) {
+        let plane = planes[i];
+        if all(plane == vec4(0.0, 0.0, 0.0, 1.0)) {
+            return vec2(0.0);
+        }
+        for (var j = 0u; j < 3u; j++) {
+            var at = v[i];
+            var ray = r[i];
+            if j != i {
+                at = 0.25 * v[i] + 0.75 * v[j];
+                ray = 0.25 * r[i] + 0.75 * r[j];
+            }
+            let start = dot(plane.xyz, at) + plane.w;
+            let slope = dot(plane.xyz, ray);
+            if !(slope < 0.0) {
+                return vec2(0.0);
+            }
+            end = max(end, -start / slope);
+        }
+    }
+    end *= 1.0 + 1.0e-3;
+    if !(end <= INFINITY) {
+        return vec2(0.0);
+    }
+    return vec2(end, 1.0);
+}
+
+// `build::ONE_SURFACE`, `build::ONE_SURFACE_COS`, `build::SLAB_MARGIN`.
+const ONE_SURFACE: f32 = 0.02;
+const ONE_SURFACE_COS: f32 = 0.99;
+const SLAB_MARGIN: f32 = 1.0e-3;
+
+// `SurfaceSlab` in the local frame (found when the rays land on one surface), and
+// the depths between which the volume crosses it.
+struct Slab {
+    normal: vec3<f32>,
+    near: f32,
+    far: f32,
+    first: f32,
+    last: f32,
+    found: bool,
+}
+
+// Where a ray (vertex v, scaled ray r) crosses the plane n·p = offset going deeper (x);
+// y 0 where it does not.
+fn crossing(n: vec3<f32>, offset: f32, v: vec3<f32>, r: vec3<f32>) -> vec2<f32> {
+    let towards = dot(n, r);
+    let at = (offset - dot(n, v)) / select(1.0, towards, towards != 0.0);
+    if !(towards > 0.0) || !(at > 0.0 && at <= INFINITY) {
+        return vec2(0.0);
+    }
+    return vec2(at, 1.0);
+}
+
+// `local_slab`: the slab around the one surface the three rays land on (hits at
+// `points` with `normals`, local).
+fn local_slab(v: array<vec3<f32>, 3>, r: array<vec3<f32>, 3>, points: array<vec3<f32>, 3>, hit_normals: array<vec3<f32>, 3>) -> Slab {
+    var slab = Slab(vec3(0.0), 0.0, 0.0, 0.0, 0.0, false);
+    let sum = r[0] + r[1] + r[2];
+    var normals = hit_normals;
+    for (var i = 0u; i < 3u; i++) {
+        if dot(normals[i], sum) < 0.0 {
+            normals[i] = -normals[i];
+        }
+    }
+    let normal = try_normalize(normals[0] + normals[1] + normals[2]);
+    if all(normal == vec3(0.0)) {
+        return slab;
+    }
+    for (var i = 0u; i < 3u; i++) {
+        if !(dot(normals[i], normal) >= ONE_SURFACE_COS) {
+            return slab;
+        }
+    }
+    var deepest = 0.0;
+    for (var j = 0u; j < 3u; j++) {
+        let own = crossing(normals[j], dot(normals[j], points[j]), v[j], r[j]);
+        if own.y == 0.0 {
+            return slab;
+        }
+        for (var i = 0u; i < 3u; i++) {
+            let at = crossing(normals[i], dot(normals[i], points[i]), v[j], r[j]);
+            if at.y == 0.0 || !(abs(at.x - own.x) <= ONE_SURFACE * own.x) {
+                return slab;
+            }
+            deepest = max(deepest, at.x);
+        }
+    }
+    let offsets = vec3(dot(normal, points[0]), dot(normal, points[1]), dot(normal, points[2]));
+    let margin = SLAB_MARGIN * deepest;
+    slab.normal = normal;
+    slab.near = min(min(offsets.x, offsets.y), offsets.z) - margin;
+    slab.far = max(max(offsets.x, offsets.y), offsets.z) + margin;
+    var first = INFINITY;
+    var last = 0.0;
+    for (var j = 0u; j < 3u; j++) {
+        let near = crossing(normal, slab.near, v[j], r[j]);
+        let far = crossing(normal, slab.far, v[j], r[j]);
+        if near.y == 0.0 || far.y == 0.0 {
+            return slab;
+        }
+        first = min(first, near.x);
+        last = max(last, far.x);
+    }
+    slab.first = (1.0 - SLAB_MARGIN) * first;
+    slab.last = (1.0 + SLAB_MARGIN) * last;
+    slab.found = true;
+    return slab;
+}
+
 fn signed_area_xz(a: vec3<f32>, b: vec3<f32>, c: vec3<f32>) -> f32 {
     let e1 = b - a;
     let e2 = c - a;
     return e1.z * e2.x - e1.x * e2.z;
+}
+
+// `cut_to_slab`: each side line of a local shape from where it crosses the slab's near
+// plane to where it crosses the far one; the shape as it is where one does not.
+fn cut_to_slab(shape: array<vec3<f32>, 8>, slab: Slab) -> array<vec3<f32>, 8> {
+    var cut = shape;
+    for (var k = 0u; k < 4u; k++) {
+        let top = shape[k];
+        let bottom = shape[k + 4u];
+        let a = dot(slab.normal, top);
+        let b = dot(slab.normal, bottom);
+        if !(a < slab.near && slab.far < b) {
+            return shape;
+        }
+        cut[k] = mix(top, bottom, (slab.near - a) / (b - a));
+        cut[k + 4u] = mix(top, bottom, (slab.far - a) / (b - a));
+    }
+    return cut;
+}
+
+// `BoundingShape::to_world`: local corners in the world, ordered to face outwards
+// (`orient_outwards`).
+fn to_world_outwards(f: Frame, local_corners: array<vec3<f32>, 8>) -> array<vec3<f32>, 8> {
+    var corners = local_corners;
+    var centre = vec3(0.0);
+    for (var c = 0u; c < 8u; c++) {
+        corners[c] = world(f, corners[c]);
+        centre += corners[c];
+    }
+    centre /= 8.0;
+    if dot(cross(corners[1] - corners[0], corners[2] - corners[0]), corners[0] - centre) < 0.0 {
+        let c1 = corners[1];
+        let c5 = corners[5];
+        corners[1] = corners[3];
+        corners[3] = c1;
+        corners[5] = corners[7];
+        corners[7] = c5;
+    }
+    return corners;
 }
 
 // `BoundingShape::new`, in the local frame: the tight prism of §4.3 when it exists and
@@ -297,9 +456,11 @@ fn bounding_shape(top: array<vec3<f32>, 3>, rays: array<vec3<f32>, 3>, depth: f3
     var hi = max(max(v[0], v[1]), v[2]);
     lo = min(lo, min(min(b[0], b[1]), b[2]));
     hi = max(hi, max(max(b[0], b[1]), b[2]));
+    // From the top's y (0 for the whole beam, deeper for a slice of it) down by `depth`.
+    let y = v[0].y;
     let box = array(
-        vec3(lo.x, 0.0, lo.z), vec3(hi.x, 0.0, lo.z), vec3(hi.x, 0.0, hi.z), vec3(lo.x, 0.0, hi.z),
-        vec3(lo.x, depth, lo.z), vec3(hi.x, depth, lo.z), vec3(hi.x, depth, hi.z), vec3(lo.x, depth, hi.z),
+        vec3(lo.x, y, lo.z), vec3(hi.x, y, lo.z), vec3(hi.x, y, hi.z), vec3(lo.x, y, hi.z),
+        vec3(lo.x, y + depth, lo.z), vec3(hi.x, y + depth, lo.z), vec3(hi.x, y + depth, hi.z), vec3(lo.x, y + depth, hi.z),
     );
     // `tight_prism`: per edge, the plane through it and one bottom vertex that keeps
     // all three bottom vertices inside.
@@ -533,26 +694,56 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
         }
     }
     out.light_distance = vec4(light_distance, job.light_power.z);
-    var corners = bounding_shape(v, r, depth);
-    for (var c = 0u; c < 8u; c++) {
-        corners[c] = world(frame, corners[c]);
+    // The volume ends where its rays have met the surfaces they hit; where they land
+    // on one surface, the surface pass draws only the slab around it.
+    var points: array<vec3<f32>, 3>;
+    var normals: array<vec3<f32>, 3>;
+    var hit = true;
+    for (var i = 0u; i < 3u; i++) {
+        let ray = rays[tri[i]];
+        hit = hit && ray.hit.w > 0.0;
+        points[i] = local(frame, ray.hit.xyz);
+        normals[i] = local_dir(frame, ray.hit_normal.xyz);
     }
-    // `orient_outwards`.
-    var centre = vec3(0.0);
-    for (var c = 0u; c < 8u; c++) {
-        centre += corners[c];
+    var slab = Slab(vec3(0.0), 0.0, 0.0, 0.0, 0.0, false);
+    if hit {
+        slab = local_slab(v, r, points, normals);
     }
-    centre /= 8.0;
-    if dot(cross(corners[1] - corners[0], corners[2] - corners[0]), corners[0] - centre) < 0.0 {
-        let c1 = corners[1];
-        let c5 = corners[5];
-        corners[1] = corners[3];
-        corners[3] = c1;
-        corners[5] = corners[7];
-        corners[7] = c5;
+    var corners: array<vec3<f32>, 8>;
+    var surface: array<vec3<f32>, 8>;
+    out.slab = vec4(0.0);
+    out.slab_far = vec4(0.0);
+    let on_slab = slab.found && slab.last <= depth;
+    if on_slab {
+        out.origin.w = slab.last;
+        let normal = world_dir(frame, slab.normal);
+        out.slab = vec4(normal, slab.near + dot(normal, frame.origin));
+        out.slab_far = vec4(slab.far + dot(normal, frame.origin), 0.0, 0.0, 0.0);
+        corners = bounding_shape(v, r, slab.last);
+        // The slice of the beam that crosses the slab, bounded on its own and cut to
+        // the slab where its sides cross it.
+        let top = array(v[0] + slab.first * r[0], v[1] + slab.first * r[1], v[2] + slab.first * r[2]);
+        surface = to_world_outwards(frame, cut_to_slab(bounding_shape(top, r, slab.last - slab.first), slab));
+    } else {
+        let end = occluded_beyond(v, r, out.hit_planes);
+        if end.y > 0.0 {
+            out.origin.w = clamp(end.x, 1.0e-3 * depth, depth);
+        }
+        corners = bounding_shape(v, r, out.origin.w);
+    }
+    corners = to_world_outwards(frame, corners);
+    if !on_slab {
+        surface = corners;
+        // `SurfaceSlab::EMPTY`, `BoundingShape::EMPTY`: rays that all meet nothing
+        // light no surface.
+        if job.counts.z != 0u && !any(vec3(rays[tri.x].hit.w, rays[tri.y].hit.w, rays[tri.z].hit.w) > vec3(0.0)) {
+            out.slab = vec4(0.0, 1.0, 0.0, 1.0);
+            surface = array<vec3<f32>, 8>();
+        }
     }
     for (var c = 0u; c < 8u; c++) {
         out.corners[c] = vec4(corners[c], 1.0);
+        out.surface_corners[c] = vec4(surface[c], 1.0);
     }
     let flux = colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * abc.x);
     // Past the volumes the adapter can bind (`prepare_build` warns), the slot is given
@@ -564,5 +755,10 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     add_flux(FLUX, flux);
+    if on_slab {
+        atomicAdd(&counters[SURFACE_SLABS], 1u);
+    } else if out.slab.y == 1.0 {
+        atomicAdd(&counters[ESCAPING], 1u);
+    }
     volumes[slot] = out;
 }

@@ -53,11 +53,16 @@ struct GpuBuildJob {
 const VERTEX_RAY_BYTES: u64 = 6 * 16;
 
 /// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
-/// instances, two zeros), five counts, the kept and the dropped flux (f32 bits).
-const COUNTER_WORDS: usize = 15;
+/// instances, two zeros), five counts, the kept and the dropped flux (f32 bits), the
+/// surface slabs and the escaping volumes.
+const COUNTER_WORDS: usize = 17;
 
 /// The counters before a build: an indirect draw of no instance.
-const EMPTY_COUNTERS: [u32; COUNTER_WORDS] = [36, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+const EMPTY_COUNTERS: [u32; COUNTER_WORDS] = {
+    let mut words = [0; COUNTER_WORDS];
+    words[0] = 36;
+    words
+};
 
 fn v4(v: glam::Vec3, w: f32) -> Vec4 {
     Vec4::new(v.x, v.y, v.z, w)
@@ -477,6 +482,8 @@ fn stats_of(words: &[u32]) -> BuildStats {
         degenerate: words[8] as usize,
         flux: flux(9),
         dropped_flux: flux(12),
+        surface_slabs: words[15] as usize,
+        escaping: words[16] as usize,
     }
 }
 

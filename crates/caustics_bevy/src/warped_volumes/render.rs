@@ -48,8 +48,16 @@ pub(super) struct GpuCausticVolume {
     color: Vec4,
     /// xyz: the light's path to each vertex, w: 1/range² (0: no range).
     light_distance: Vec4,
+    /// The slab `near ≤ n·p ≤ far` around the surface the rays land on (world): xyz n
+    /// (zero: none), w near; then x far.
+    slab: Vec4,
+    slab_far: Vec4,
     hit_planes: [Vec4; 3],
+    /// The bounding shape the in-scattering pass draws.
     corners: [Vec4; 8],
+    /// The one the surface pass draws: the slice of the beam crossing the slab, none
+    /// for a volume that lights no surface, else `corners`.
+    surface_corners: [Vec4; 8],
 }
 
 /// `VolumeSettings` in `volumes.wgsl`.
@@ -333,6 +341,10 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         }
         if key.shaft_scale > 1 {
             shader_defs.push(ShaderDefVal::UInt("SHAFT_SCALE".into(), key.shaft_scale));
+        }
+        if !key.volumetric {
+            // Surfaces: each volume cut to the slab around where its rays land.
+            shader_defs.push("SURFACE".into());
         }
         let (label, entry) =
             if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };

@@ -20,6 +20,9 @@ struct CausticVolume {
     flux: vec4<f32>,            // per-vertex irradiance on the slicing plane
     color: vec4<f32>,
     light_distance: vec4<f32>,  // the light's path to each vertex (in y = 0), w: 1/range² or 0
+    slab: vec4<f32>,           // the slab near ≤ n·p ≤ far around the surface the rays land on (world): xyz n (zero: none), w near
+    slab_far: vec4<f32>,       // x: far
     hit_planes: array<vec4<f32>, 3>, // per vertex ray: the first surface it meets, n·p + w < 0 behind
-    corners: array<vec4<f32>, 8>,
+    corners: array<vec4<f32>, 8>,  // the bounding shape (§4.3) the in-scattering pass draws
+    surface_corners: array<vec4<f32>, 8>, // the one the surface pass draws: the slice crossing the slab, or none, or `corners`
 }

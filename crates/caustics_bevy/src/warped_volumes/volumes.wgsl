@@ -42,7 +42,14 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         0u, 1u, 2u, 0u, 2u, 3u, 4u, 6u, 5u, 4u, 7u, 6u, 0u, 4u, 5u, 0u, 5u, 1u,
         1u, 5u, 6u, 1u, 6u, 2u, 2u, 6u, 7u, 2u, 7u, 3u, 3u, 7u, 4u, 3u, 4u, 0u,
     );
-    let corner = volumes[instance].corners[triangles[vertex_index]];
+    let k = triangles[vertex_index];
+#ifdef SURFACE
+    // Where the rays land on one surface, the slice of the beam crossing the slab
+    // around it; nothing for a volume whose rays meet no surface.
+    let corner = volumes[instance].surface_corners[k];
+#else
+    let corner = volumes[instance].corners[k];
+#endif
     var out: VertexOutput;
     out.position = view.clip_from_world * vec4(corner.xyz, 1.0);
     // A hair farther (reversed z), so that the surface pass's depth test keeps the
@@ -176,6 +183,11 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     // On the ray through the pixel's centre, which the prism drew this fragment for.
     let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
     let v = volumes[in.volume];
+    // `CausticVolume::irradiance`: surfaces in the volume's slab, where it has one.
+    let d = dot(v.slab.xyz, p);
+    if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
+        discard;
+    }
     let s = sample_volume(v, p);
     if !s.inside {
         discard;

@@ -1,6 +1,6 @@
 //! Building caustic volumes from generator meshes and lights (§3, §3.4).
 
-use super::{BoundingShape, CausticVolume, NO_HIT_PLANE, OCCLUSION_SLACK, VolumeSettings};
+use super::{BoundingShape, CausticVolume, NO_HIT_PLANE, OCCLUSION_SLACK, SurfaceSlab, VolumeSettings};
 use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
 use crate::optics::{RGB_WAVELENGTHS_UM, fresnel_reflectance, reflect, refract};
@@ -86,6 +86,11 @@ pub struct BuildStats {
     pub grazing: usize,
     /// Zero-area triangles, or volumes with no receiver ahead of them.
     pub degenerate: usize,
+    /// Kept volumes whose rays land on one surface: the surface pass draws their slab
+    /// alone ([`super::SurfaceSlab`]).
+    pub surface_slabs: usize,
+    /// Kept volumes whose rays all meet nothing: they light no surface, only a medium.
+    pub escaping: usize,
     /// Flux of the kept volumes.
     pub flux: DVec3,
     /// Flux of lit triangles that were dropped (TIR, grazing, degenerate).
@@ -103,6 +108,8 @@ impl std::ops::Add for BuildStats {
         self.total_internal_reflection += o.total_internal_reflection;
         self.grazing += o.grazing;
         self.degenerate += o.degenerate;
+        self.surface_slabs += o.surface_slabs;
+        self.escaping += o.escaping;
         self.flux += o.flux;
         self.dropped_flux += o.dropped_flux;
         self
@@ -181,7 +188,11 @@ impl Frame {
     }
 
     fn world(&self, p: Vec3) -> Vec3 {
-        self.origin + self.axes[0] * p.x + self.axes[1] * p.y + self.axes[2] * p.z
+        self.origin + self.world_dir(p)
+    }
+
+    fn world_dir(&self, d: Vec3) -> Vec3 {
+        self.axes[0] * d.x + self.axes[1] * d.y + self.axes[2] * d.z
     }
 
     /// The plane tangent to a surface at a vertex ray's first hit (point, normal), in
@@ -197,6 +208,117 @@ impl Frame {
         let plane = n.extend(slack - n.dot(q));
         if plane.is_finite() { plane } else { NO_HIT_PLANE }
     }
+}
+
+/// The depth α past which every point of the volume is occluded by its hit planes
+/// ([`CausticVolume::occluded`]: behind the planes of vertices weighing more than one
+/// half), with a margin of 10⁻³ for rounding; `None` where there is none (a ray that
+/// meets no surface, or a plane that the caustic triangle does not cross going deeper).
+///
+/// For each vertex `i`, past the depth where the corners of the part of the caustic
+/// triangle with `λᵢ ≥ 1/4` have crossed plane `i`, that whole part lies behind it
+/// (the plane is linear, the part convex). A point then lies behind the plane of every
+/// vertex weighing at least 1/4, and those weigh more than 1/2: the others, at most two,
+/// weigh less than 1/4 each. So the volume can end there and light exactly what it lit
+/// when it reached the far side of the receivers, while the bounding prism (§4.3) ends
+/// at the surfaces the rays land on rather than crossing the whole scene.
+fn occluded_beyond(v: [Vec3; 3], r: [Vec3; 3], planes: [Vec4; 3]) -> Option<f32> {
+    let mut end = 0.0f32;
+    for (i, plane) in planes.iter().enumerate() {
+        if *plane == NO_HIT_PLANE {
+            return None;
+        }
+        let n = plane.truncate();
+        // The part's corners: vertex i, and a quarter of the way from each other vertex.
+        for j in 0..3 {
+            let (at, ray) = if j == i { (v[i], r[i]) } else { (0.25 * v[i] + 0.75 * v[j], 0.25 * r[i] + 0.75 * r[j]) };
+            // The plane's value n·q + w along the corner's ray q(α) = at + α ray.
+            let (start, slope) = (n.dot(at) + plane.w, n.dot(ray));
+            if !(slope < 0.0) {
+                return None;
+            }
+            end = end.max(-start / slope);
+        }
+    }
+    let end = end * (1.0 + 1e-3);
+    end.is_finite().then_some(end)
+}
+
+/// How far each vertex ray's crossings of the three tangent planes may lie apart, as a
+/// fraction of its own hit's depth, for the rays to land on one surface.
+const ONE_SURFACE: f32 = 0.02;
+/// The smallest cosine between the three hits' normals on one surface (8°).
+const ONE_SURFACE_COS: f32 = 0.99;
+/// How far the slab reaches either side of the tangent planes, as a fraction of the
+/// hits' depth: room for receiver points rebuilt from a depth buffer.
+const SLAB_MARGIN: f32 = 1e-3;
+
+/// The slab around the one surface a volume's three rays land on, in its local frame,
+/// and the depths α between which the volume crosses it; `None` where the rays do not
+/// land on one surface (a ray that meets nothing; rays landing on a step's edge, a
+/// corner). `hits` are the rays' first hits (point, normal), local. On one surface each
+/// ray crosses the three tangent planes within [`ONE_SURFACE`] of its own hit, and the
+/// normals agree within [`ONE_SURFACE_COS`]; the slab holds the three planes with
+/// [`SLAB_MARGIN`] either side. Over a plane the crossing depth is a
+/// linear-fractional function of the barycentric coordinates, so the volume crosses
+/// each of the slab's planes between its vertex rays' crossings.
+fn local_slab(v: [Vec3; 3], r: [Vec3; 3], hits: [Option<(Vec3, Vec3)>; 3]) -> Option<(SurfaceSlab, f32, f32)> {
+    let hits = [hits[0]?, hits[1]?, hits[2]?];
+    // The normals, pointing the way the rays travel.
+    let along = |n: Vec3| if n.dot(r[0] + r[1] + r[2]) < 0.0 { -n } else { n };
+    let normals = hits.map(|(_, n)| along(n));
+    let normal = (normals[0] + normals[1] + normals[2]).try_normalize()?;
+    if !normals.iter().all(|n| n.dot(normal) >= ONE_SURFACE_COS) {
+        return None;
+    }
+    // Where ray j crosses the plane n·p = offset.
+    let crossing = |n: Vec3, offset: f32, j: usize| {
+        let towards = n.dot(r[j]);
+        Some((offset - n.dot(v[j])) / towards).filter(|at| towards > 0.0 && at.is_finite() && *at > 0.0)
+    };
+    let mut deepest = 0.0f32;
+    for j in 0..3 {
+        let own = crossing(normals[j], normals[j].dot(hits[j].0), j)?;
+        for (n, (point, _)) in normals.iter().zip(hits) {
+            let at = crossing(*n, n.dot(point), j)?;
+            if !((at - own).abs() <= ONE_SURFACE * own) {
+                return None;
+            }
+            deepest = deepest.max(at);
+        }
+    }
+    let offsets = hits.map(|(point, _)| normal.dot(point));
+    let margin = SLAB_MARGIN * deepest;
+    let slab = SurfaceSlab {
+        normal,
+        near: offsets.iter().copied().fold(f32::INFINITY, f32::min) - margin,
+        far: offsets.iter().copied().fold(f32::NEG_INFINITY, f32::max) + margin,
+    };
+    let (mut first, mut last) = (f32::INFINITY, 0.0f32);
+    for j in 0..3 {
+        first = first.min(crossing(normal, slab.near, j)?);
+        last = last.max(crossing(normal, slab.far, j)?);
+    }
+    Some((slab, (1.0 - SLAB_MARGIN) * first, (1.0 + SLAB_MARGIN) * last))
+}
+
+/// A bounding shape (local) cut to the slab: each side line, from a top corner to the
+/// one below, from where it crosses the near plane to where it crosses the far one; the
+/// shape as it is where a side line does not cross both. The cut shape is the shape's
+/// part inside the slab, and still convex: the surface pass rasterises a thin plate
+/// around the surface instead of the slice, which a view at a grazing angle sees edge on.
+fn cut_to_slab(shape: BoundingShape, slab: &SurfaceSlab) -> BoundingShape {
+    let mut cut = shape;
+    for k in 0..4 {
+        let (top, bottom) = (shape.corners[k], shape.corners[k + 4]);
+        let (a, b) = (slab.normal.dot(top), slab.normal.dot(bottom));
+        if !(a < slab.near && slab.far < b) {
+            return shape;
+        }
+        cut.corners[k] = top.lerp(bottom, (slab.near - a) / (b - a));
+        cut.corners[k + 4] = top.lerp(bottom, (slab.far - a) / (b - a));
+    }
+    cut
 }
 
 /// Area coefficients (a, b, c) of `A(α) = a + bα + cα²` for vertices `v` (y = 0) and
@@ -464,6 +586,34 @@ impl TriangleContext<'_> {
             to_vertex - frame.local(p[i]).y * r[i].length()
         }));
         let owned_edges = fans.owned_edges(mesh, t);
+        let hit_planes: [Vec4; 3] =
+            std::array::from_fn(|i| hits.get(tri[i] as usize).copied().flatten().map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth)));
+        // The volume ends where its rays have met the surfaces they hit, not at the far
+        // side of every receiver: the points past there are occluded. Where the rays
+        // land on one surface, the surface pass draws only the slab around it.
+        let local_hits = std::array::from_fn(|i| hits.get(tri[i] as usize).copied().flatten().map(|(p, n)| (frame.local(p), frame.local_dir(n))));
+        let whole = |depth: f32| occluded_beyond(v, r, hit_planes).map_or(depth, |end| end.clamp(1e-3 * depth, depth));
+        // Rays that all meet nothing land on no surface: the volume lights none, though
+        // its beam still scatters in a medium.
+        let escapes = !hits.is_empty() && local_hits.iter().all(Option::is_none);
+        let (slab, depth, bounds, surface_bounds) = match local_slab(v, r, local_hits).filter(|&(_, _, last)| last <= depth) {
+            Some((slab, first, last)) => {
+                let normal = frame.world_dir(slab.normal);
+                let offset = normal.dot(frame.origin);
+                let world = SurfaceSlab { normal, near: slab.near + offset, far: slab.far + offset };
+                // The slice of the beam that crosses the slab, bounded on its own and cut
+                // to the slab where its sides cross it.
+                let top = std::array::from_fn(|i| v[i] + first * r[i]);
+                let slice = BoundingShape::local(top, r, last - first);
+                (Some(world), last, BoundingShape::local(v, r, last), cut_to_slab(slice, &slab))
+            }
+            None => {
+                let end = whole(depth);
+                let bounds = BoundingShape::local(v, r, end);
+                let surface = if escapes { BoundingShape::EMPTY } else { bounds };
+                (escapes.then_some(SurfaceSlab::EMPTY), end, bounds, surface)
+            }
+        };
         let volume = CausticVolume {
             origin: frame.origin,
             axes: frame.axes,
@@ -482,12 +632,14 @@ impl TriangleContext<'_> {
             light_distance,
             inverse_range_squared: light.inverse_range_squared(),
             depth,
-            hit_planes: std::array::from_fn(|i| {
-                hits.get(tri[i] as usize).copied().flatten().map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth))
-            }),
-            bounds: BoundingShape::new(v, r, depth, |q| frame.world(q)),
+            slab,
+            hit_planes,
+            bounds: bounds.to_world(|q| frame.world(q)),
+            surface_bounds: if surface_bounds == BoundingShape::EMPTY { surface_bounds } else { surface_bounds.to_world(|q| frame.world(q)) },
         };
         stats.volumes = 1;
+        stats.surface_slabs = usize::from(volume.slab.is_some_and(|s| s.near <= s.far));
+        stats.escaping = usize::from(volume.slab == Some(SurfaceSlab::EMPTY));
         stats.flux = volume.flux().as_dvec3();
         (Some(volume), stats)
     }
@@ -566,5 +718,98 @@ pub fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f
         }
         SpecularInteraction::Refract { ior, dispersion: None } => vec![(Some(*ior), color)],
         SpecularInteraction::Reflect => vec![(None, color)],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::Pcg32;
+
+    /// Past the depth `occluded_beyond` gives, every point of the caustic triangle is
+    /// behind hit planes weighing more than one half, for rays that fan out or focus
+    /// onto tilted surfaces: ending the volume there loses no lit point.
+    #[test]
+    fn every_point_past_the_tightened_depth_is_occluded() {
+        let mut random = Pcg32::for_photon(3, 0, 0);
+        let mut uniform = |lo: f32, hi: f32| lo + (hi - lo) * random.next_f32();
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let v: [Vec3; 3] = std::array::from_fn(|_| Vec3::new(uniform(-1.0, 1.0), 0.0, uniform(-1.0, 1.0)));
+            let r: [Vec3; 3] = std::array::from_fn(|_| Vec3::new(uniform(-1.5, 1.5), 1.0, uniform(-1.5, 1.5)));
+            let frame = Frame { origin: Vec3::ZERO, axes: [Vec3::X, Vec3::Y, Vec3::Z] };
+            let planes: [Vec4; 3] = std::array::from_fn(|i| {
+                let hit = v[i] + uniform(0.5, 4.0) * r[i];
+                let normal = Vec3::new(uniform(-0.6, 0.6), 1.0, uniform(-0.6, 0.6)).normalize();
+                frame.hit_plane((hit, normal), r[i], 10.0)
+            });
+            let Some(end) = occluded_beyond(v, r, planes) else { continue };
+            // `CausticVolume::occluded`.
+            let occluded = |p: Vec3, lambda: Vec3| (0..3).filter(|&i| planes[i].truncate().dot(p) + planes[i].w < 0.0).map(|i| lambda[i]).sum::<f32>() > 0.5;
+            for _ in 0..50 {
+                let (a, b) = (uniform(0.0, 1.0), uniform(0.0, 1.0));
+                let lambda = if a + b > 1.0 { Vec3::new(1.0 - a, 1.0 - b, a + b - 1.0) } else { Vec3::new(a, b, 1.0 - a - b) };
+                let alpha = end * uniform(1.0, 4.0);
+                let point = (0..3).map(|k| lambda[k] * (v[k] + alpha * r[k])).sum::<Vec3>();
+                assert!(occluded(point, lambda), "lit at α = {alpha} past {end}: λ {lambda}, planes {planes:?}");
+            }
+            checked += 1;
+        }
+        assert!(checked > 500, "only {checked} of the random volumes had a tightened depth");
+    }
+
+    /// Rays landing on one tilted plane: the slab holds the plane, and the slice of the
+    /// beam between the depths it gives holds the slab's part inside the volume; rays
+    /// landing on two surfaces a step apart, or on one and nothing, keep the whole beam.
+    #[test]
+    fn the_slab_holds_the_surface_the_rays_land_on() {
+        let mut random = Pcg32::for_photon(5, 0, 0);
+        let mut uniform = |lo: f32, hi: f32| lo + (hi - lo) * random.next_f32();
+        let mut slabs = 0;
+        for _ in 0..2000 {
+            let v: [Vec3; 3] = std::array::from_fn(|_| Vec3::new(uniform(-0.1, 0.1), 0.0, uniform(-0.1, 0.1)));
+            let r: [Vec3; 3] = std::array::from_fn(|_| Vec3::new(uniform(-0.3, 0.3), 1.0, uniform(-0.3, 0.3)));
+            let normal = Vec3::new(uniform(-0.5, 0.5), 1.0, uniform(-0.5, 0.5)).normalize();
+            let on_surface = Vec3::new(0.0, uniform(0.5, 3.0), 0.0);
+            // Where ray i meets the plane through `on_surface`; its normal either way.
+            let hit = |i: usize| v[i] + (normal.dot(on_surface - v[i]) / normal.dot(r[i])) * r[i];
+            let sign = if uniform(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
+            let Some((slab, first, last)) = local_slab(v, r, std::array::from_fn(|i| Some((hit(i), sign * normal)))) else { continue };
+            slabs += 1;
+            let offset = slab.normal.dot(on_surface);
+            assert!(slab.near < offset && offset < slab.far && slab.far - slab.near < 0.01, "{slab:?} against the plane at {offset}");
+            for _ in 0..50 {
+                let (a, b) = (uniform(0.0, 1.0), uniform(0.0, 1.0));
+                let lambda = if a + b > 1.0 { Vec3::new(1.0 - a, 1.0 - b, a + b - 1.0) } else { Vec3::new(a, b, 1.0 - a - b) };
+                // Where the caustic triangle's point with weights λ crosses either side of the slab.
+                let (at, ray) = (0..3).fold((Vec3::ZERO, Vec3::ZERO), |(p, d), k| (p + lambda[k] * v[k], d + lambda[k] * r[k]));
+                for plane in [slab.near, slab.far] {
+                    let alpha = (plane - slab.normal.dot(at)) / slab.normal.dot(ray);
+                    assert!(alpha > first && alpha < last, "the slab's plane at α = {alpha} lies outside the slice {first} – {last}");
+                }
+            }
+        }
+        assert!(slabs > 1500, "only {slabs} of 2000 volumes on one plane have a slab");
+        let (v, r) = ([Vec3::ZERO, Vec3::X, Vec3::Z], [Vec3::Y; 3]);
+        let (floor, tread) = (Some((Vec3::new(0.0, 2.0, 0.0), Vec3::Y)), Some((Vec3::new(0.0, 1.5, 0.0), Vec3::Y)));
+        assert_eq!(local_slab(v, r, [floor, floor, tread]), None);
+        assert_eq!(local_slab(v, r, [floor, floor, None]), None);
+        let (slab, first, last) = local_slab(v, r, [floor; 3]).expect("one floor");
+        assert!(slab.near > 1.99 && slab.near < 2.0 && slab.far > 2.0 && slab.far < 2.01, "{slab:?}");
+        assert!(first > 1.98 && first < slab.near && last > slab.far && last < 2.02, "{first} – {last}");
+    }
+
+    /// A ray that meets nothing, or a plane the triangle leaves behind, keeps the
+    /// volume at the far side of the receivers.
+    #[test]
+    fn a_ray_that_meets_nothing_keeps_the_whole_depth() {
+        let v = [Vec3::ZERO, Vec3::X, Vec3::Z];
+        let r = [Vec3::Y; 3];
+        let floor = Vec4::new(0.0, -1.0, 0.0, 2.0);
+        assert_eq!(occluded_beyond(v, r, [floor, floor, NO_HIT_PLANE]), None);
+        let wall_behind = Vec4::new(-1.0, 0.0, 0.0, -5.0);
+        assert_eq!(occluded_beyond(v, r, [floor, floor, wall_behind]), None);
+        let end = occluded_beyond(v, r, [floor; 3]).expect("a floor two below");
+        assert!((end - 2.0).abs() < 1e-2, "{end}");
     }
 }

@@ -141,15 +141,54 @@ pub struct CausticVolume {
     /// to receiver ([`crate::scene::Light::range_attenuation`]).
     pub light_distance: Vec3,
     pub inverse_range_squared: f32,
-    /// Local depth α at which the volume ends (the far side of the receivers).
+    /// Local depth α at which the volume ends: where its rays have met the surfaces
+    /// they hit (every point past is occluded), else the far side of the receivers.
     pub depth: f32,
+    /// Where the three rays land on one surface, the thin slab around it: the surface
+    /// pass draws the bounding shape cut to it and lights only the points inside
+    /// ([`CausticVolume::irradiance`]); the in-scattering of a medium integrates the
+    /// whole beam. `None` elsewhere.
+    pub slab: Option<SurfaceSlab>,
     /// Per vertex, the plane tangent to the first surface its ray meets, in the local
     /// frame and facing the ray: `n·p + w < 0` behind that surface (`w` holds a slack
     /// of [`OCCLUSION_SLACK`] of the hit's depth). [`NO_HIT_PLANE`] for a ray that meets
     /// nothing.
     pub hit_planes: [Vec4; 3],
-    /// The convex bounding shape rasterised on the GPU.
+    /// The convex bounding shape rasterised on the GPU for the medium's in-scattering.
     pub bounds: BoundingShape,
+    /// The convex shape the surface pass rasterises: the slice of the beam crossing
+    /// the slab where there is one ([`Self::slab`]), nothing for a volume that lights
+    /// no surface ([`BoundingShape::EMPTY`]), else `bounds`.
+    pub surface_bounds: BoundingShape,
+}
+
+/// The slab `near ≤ normal·p ≤ far` (world space) around the one surface a caustic
+/// volume's three rays land on: the tangent planes at their hits, widened by a margin
+/// for receiver points rebuilt from a depth buffer. A view at a slant crosses a beam
+/// in a long sliver of pixels, and the slab in a few; the surfaces the volume lights
+/// are those its rays land on, so the surface pass draws the slab alone. A receiver
+/// between the generator and that surface that none of the three rays meets (smaller
+/// than the caustic triangle there) gets no light from the volume, as it casts no
+/// shadow in it. Likewise a volume whose rays all meet nothing lights no surface
+/// ([`SurfaceSlab::EMPTY`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceSlab {
+    /// Unit normal, pointing the way the rays travel.
+    pub normal: Vec3,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl SurfaceSlab {
+    /// The slab of a volume whose three rays meet no surface at all: it lights none.
+    pub const EMPTY: Self = Self { normal: Vec3::Y, near: 1.0, far: 0.0 };
+
+    /// Whether `p` lies in the slab.
+    #[inline]
+    pub fn contains(&self, p: Vec3) -> bool {
+        let d = self.normal.dot(p);
+        d >= self.near && d <= self.far
+    }
 }
 
 /// What one volume contributes at a point: the caustic irradiance on a surface with
@@ -269,7 +308,11 @@ impl CausticVolume {
     /// Caustic irradiance on a surface at `p` with unit normal `n` facing the light:
     /// `E = E_plane · max(0, −r·n)` with `r` scaled to unit height — the flux density
     /// on the triangle-parallel plane carried onto the receiver's own plane.
+    /// Points outside the volume's [`SurfaceSlab`] get none.
     pub fn irradiance(&self, p: Vec3, n: Vec3, settings: &VolumeSettings) -> Vec3 {
+        if self.slab.is_some_and(|slab| !slab.contains(p)) {
+            return Vec3::ZERO;
+        }
         match self.sample(p, settings) {
             Some(s) => self.color * (s.plane_irradiance * (-s.ray.dot(n)).max(0.0)),
             None => Vec3::ZERO,

@@ -31,6 +31,9 @@ pub const HEXAHEDRON_TRIANGLES: [[u32; 3]; 12] = [
 ];
 
 impl BoundingShape {
+    /// No shape: every corner at the origin, so that it rasterises no pixel.
+    pub const EMPTY: Self = Self { corners: [Vec3::ZERO; 8], is_prism: false };
+
     /// The world-space axis-aligned bounds of the corners.
     pub fn aabb(&self) -> (Vec3, Vec3) {
         let lo = self.corners.iter().copied().reduce(Vec3::min).unwrap_or(Vec3::ZERO);
@@ -39,18 +42,30 @@ impl BoundingShape {
     }
 
     /// The bounding shape of a volume given in its local frame: the three top vertices
-    /// `v` (y = 0), the scaled rays `r` (y = 1) and the depth. `to_world` maps local
-    /// points to world space.
+    /// `v` (all at one y: 0 for the whole beam, deeper for a slice of it), the scaled
+    /// rays `r` (y = 1) and the depth below the top. `to_world` maps local points to
+    /// world space.
+    #[cfg(test)]
     pub(crate) fn new(v: [Vec3; 3], r: [Vec3; 3], depth: f32, to_world: impl Fn(Vec3) -> Vec3) -> Self {
+        Self::local(v, r, depth).to_world(to_world)
+    }
+
+    /// [`Self::new`] in the local frame, before its corners are oriented.
+    pub(crate) fn local(v: [Vec3; 3], r: [Vec3; 3], depth: f32) -> Self {
         let b = [v[0] + depth * r[0], v[1] + depth * r[1], v[2] + depth * r[2]];
         let bx = local_box(&v, &b, depth);
-        let local = match tight_prism(&v, &b, depth) {
-            Some(prism) if prism_volume(&prism) <= box_volume(&bx) => (prism, true),
-            _ => (bx, false),
-        };
-        let mut corners = local.0.map(&to_world);
+        match tight_prism(&v, &b, depth) {
+            Some(prism) if prism_volume(&prism) <= box_volume(&bx) => Self { corners: prism, is_prism: true },
+            _ => Self { corners: bx, is_prism: false },
+        }
+    }
+
+    /// The shape with its local corners mapped to world space by `to_world`, ordered to
+    /// face outwards.
+    pub(crate) fn to_world(self, to_world: impl Fn(Vec3) -> Vec3) -> Self {
+        let mut corners = self.corners.map(&to_world);
         orient_outwards(&mut corners);
-        Self { corners, is_prism: local.1 }
+        Self { corners, ..self }
     }
 }
 
@@ -97,7 +112,8 @@ fn tight_prism(v: &[Vec3; 3], b: &[Vec3; 3], depth: f32) -> Option<[Vec3; 8]> {
     Some([v[0], v[1], v[2], v[2], bottom[0], bottom[1], bottom[2], bottom[2]])
 }
 
-/// The fallback: the box `[x, z ranges of top and bottom] × [0, depth]` in the local frame.
+/// The fallback: the box `[x, z ranges of top and bottom] × [top, top + depth]` in the
+/// local frame.
 fn local_box(v: &[Vec3; 3], b: &[Vec3; 3], depth: f32) -> [Vec3; 8] {
     let all = v.iter().chain(b);
     let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
@@ -105,12 +121,8 @@ fn local_box(v: &[Vec3; 3], b: &[Vec3; 3], depth: f32) -> [Vec3; 8] {
         lo = lo.min(*p);
         hi = hi.max(*p);
     }
-    let top = [
-        Vec3::new(lo.x, 0.0, lo.z),
-        Vec3::new(hi.x, 0.0, lo.z),
-        Vec3::new(hi.x, 0.0, hi.z),
-        Vec3::new(lo.x, 0.0, hi.z),
-    ];
+    let y = v[0].y;
+    let top = [Vec3::new(lo.x, y, lo.z), Vec3::new(hi.x, y, lo.z), Vec3::new(hi.x, y, hi.z), Vec3::new(lo.x, y, hi.z)];
     let bottom = top.map(|p| p + Vec3::Y * depth);
     [top[0], top[1], top[2], top[3], bottom[0], bottom[1], bottom[2], bottom[3]]
 }
