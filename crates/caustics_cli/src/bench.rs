@@ -50,8 +50,9 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
     /// The frame-cost bench instead: every technique on scenes of growing size in the
-    /// headless renderer at 1280 × 720, GPU time per pass and the plugin's CPU time per
-    /// frame (`frames.csv`, `frames.md`, `frames-gpu.png`, `frames-cpu.png`). With
+    /// headless renderer, GPU time and shader invocations per pass beside Bevy's main
+    /// pass, and the plugin's CPU time per frame (`frames.csv`, `frames.md`,
+    /// `frames-gpu.png`, `frames-cpu.png`). With
     /// `--quick`, the two smallest sizes of each.
     #[arg(long)]
     pub frames: bool,
@@ -60,6 +61,23 @@ pub struct BenchArgs {
     /// sizes in reasonable time).
     #[arg(long, default_value_t = 60.0)]
     pub frame_budget: f64,
+    /// With `--frames`: the view's size in pixels, `WIDTHxHEIGHT`.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub frame_size: (u32, u32),
+    /// With `--frames`: the families' scenes to run, comma-separated (`ocean`, `ring`,
+    /// `glass ball`, `pool`, `rippled pool`); all when not given.
+    #[arg(long, value_delimiter = ',')]
+    pub frame_scenes: Vec<String>,
+}
+
+/// `1920x1080` as (1920, 1080).
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text.split_once('x').ok_or_else(|| format!("{text}: expected WIDTHxHEIGHT"))?;
+    let parse = |n: &str| n.trim().parse::<u32>().ok().filter(|&n| (16..=8192).contains(&n));
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err(format!("{text}: each side from 16 to 8192 pixels")),
+    }
 }
 
 impl BenchArgs {
@@ -579,7 +597,9 @@ fn trace_grid(
 
 pub fn run(args: BenchArgs) -> Result<(), String> {
     if args.frames {
-        return crate::frames::run(&args.out, |t| args.runs(t), args.quick.then_some(2), args.frame_budget);
+        let scenes = |scene: &str| args.frame_scenes.is_empty() || args.frame_scenes.iter().any(|s| s == scene);
+        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size };
+        return crate::frames::run(&args.out, |t, scene| args.runs(t) && scenes(scene), &bench);
     }
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];
     methods.extend(VOLUME_METHODS.iter().map(|m| m as &dyn BenchMethod));

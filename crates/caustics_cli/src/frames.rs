@@ -1,25 +1,31 @@
 //! `caustics bench --frames`: what each technique costs per frame as its work grows.
 //!
 //! Every technique renders a family of scenes of growing size in the headless
-//! renderer at 1280 × 720 (an animated ocean and a mirror ring for the caustic volumes,
-//! the ring and a glass ball's photon buffer for the caustic maps, the pool's texels for
-//! convolution, the virtual planes' texels for illumination textures). Every generator
-//! moves (the ocean's waves, the pool's ripples; the ring and the ball turn a little
-//! each frame, [`Turning`]), so that each technique redoes its per-frame work, as for
-//! a game's moving objects: a static scene's maps, volumes and textures are made once. After the
-//! technique's first pass has run and its GPU times arrived, [`MEASURED_FRAMES`] frames
-//! record the GPU time of the caustics passes (timestamp queries, by span), Bevy's own
-//! main passes of the same view as the yardstick, and the plugin's CPU time in the
-//! main and render worlds (`CausticsCpuTime`), and how often the caustic volumes'
-//! sources were gathered on the CPU in those frames (`CausticVolumes::gathered`: none
-//! for the ocean, whose waves move on the GPU). Writes `frames.csv`, `frames.md` (each
-//! line's growth exponent, the slope of log cost against log size) and the log–log
-//! plots `frames-gpu.png` and `frames-cpu.png`, one line per technique and scene.
+//! renderer (1280 × 720 unless `--frame-size` says otherwise): an animated ocean, a
+//! mirror ring and a rippling pool for the caustic volumes, the ring and a glass ball's
+//! photon buffer for the caustic maps, the pool's texels for convolution, the virtual
+//! planes' texels for illumination textures. Every generator moves (the ocean's waves,
+//! the pool's ripples under a steady rain; the ring and the ball turn a little each
+//! frame, [`Turning`]), so that each technique redoes its per-frame work, as for a
+//! game's moving objects: a static scene's maps, volumes and textures are made once.
+//! After the technique's first pass has run and its GPU figures arrived,
+//! [`MEASURED_FRAMES`] frames record, per caustics pass, the GPU time (timestamp
+//! queries) and the shader invocations (pipeline-statistics queries: the figure that
+//! carries from a software rasteriser to any GPU), Bevy's main opaque pass of the same
+//! view as the yardstick, the receiver pixels (the composite shades each once), the
+//! plugin's CPU time in the main and render worlds (`CausticsCpuTime`), and how often
+//! the caustic volumes' sources were gathered on the CPU in those frames
+//! (`CausticVolumes::gathered`: none for the ocean, whose waves move on the GPU).
+//! Writes `frames.csv` (a row per size, a column per figure), `frames-passes.csv` (a
+//! row per pass and size), `frames.md` (each line's growth exponent, the slope of log
+//! cost against log size, and every pass at each family's largest size) and the
+//! log–log plots `frames-gpu.png` and `frames-cpu.png`.
 
 use crate::plot::{Axes, Series, plot_log_log};
 use bevy::camera::{Exposure, RenderTarget};
 use bevy::prelude::*;
-use caustics_bevy::headless::{HeadlessRenderer, is_caustic_span};
+use caustics_bevy::gpu_work::{FrameWork, PassWork};
+use caustics_bevy::headless::HeadlessRenderer;
 use caustics_bevy::prelude::*;
 use caustics_bevy::warped_volumes::CausticVolumes;
 use std::fmt::Write as _;
@@ -31,8 +37,19 @@ const MEASURED_FRAMES: usize = 3;
 /// Updates to wait at most for the technique's first pass (pipelines compile, builds
 /// finish on other threads) before a size counts as failed.
 const MAX_WARM_UP: usize = 240;
-const WIDTH: u32 = 1280;
-const HEIGHT: u32 = 720;
+/// The composite's span: it shades every receiver pixel of the view once, so its
+/// fragment invocations count the receiver pixels.
+const COMPOSITE_SPAN: &str = "caustics/composite";
+
+/// How the frame bench runs.
+pub struct FrameBench {
+    /// The first this many sizes of each family, when given.
+    pub sizes: Option<usize>,
+    /// A family stops growing once a frame took longer than this (wall time, s).
+    pub budget_s: f64,
+    /// The view's width and height in pixels.
+    pub view: (u32, u32),
+}
 
 /// One technique on one scene at growing sizes.
 struct Family {
@@ -48,9 +65,10 @@ struct Family {
     pass: &'static str,
 }
 
-const FAMILIES: [Family; 6] = [
+const FAMILIES: [Family; 7] = [
     Family { technique: "volumes", scene: "ocean", unit: "water vertices", sizes: &[32, 64, 128, 256, 512], spawn: ocean, pass: "volumes" },
     Family { technique: "volumes", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_volumes, pass: "volumes" },
+    Family { technique: "volumes", scene: "rippled pool", unit: "water vertices", sizes: &[32, 64, 128, 256], spawn: rippled_pool, pass: "volumes" },
     Family { technique: "maps", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_maps, pass: "caustic map projection" },
     Family { technique: "maps", scene: "glass ball", unit: "photons", sizes: &[256, 512, 1024, 2048, 4096], spawn: ball_maps, pass: "caustic map projection" },
     Family { technique: "convolution", scene: "pool", unit: "pool texels", sizes: &[128, 256, 512, 1024], spawn: pool, pass: "pool floor" },
@@ -70,10 +88,10 @@ fn turn(mut turning: Query<&mut Transform, With<Turning>>) {
     }
 }
 
-/// One measured frame: GPU time by span (ms), the plugin's CPU time in the main and
+/// One measured frame: every pass's GPU work, the plugin's CPU time in the main and
 /// render worlds (ms), wall time (s).
 struct Frame {
-    spans: Vec<(String, f64)>,
+    work: Vec<PassWork>,
     cpu_main: f64,
     cpu_render: f64,
     seconds: f64,
@@ -85,11 +103,10 @@ struct FrameCost {
     scene: &'static str,
     unit: &'static str,
     size: u64,
-    /// The caustics passes' GPU time (ms), and by span.
-    caustics_ms: f64,
-    spans: Vec<(String, f64)>,
-    /// Bevy's main passes of the same view (ms).
-    main_pass_ms: f64,
+    /// The caustics passes' summed work, and Bevy's main opaque pass beside it.
+    work: FrameWork,
+    /// Receiver pixels in view: the composite's fragment invocations.
+    receiver_pixels: f64,
     /// The plugin's CPU time (ms), main and render world.
     cpu_main_ms: f64,
     cpu_render_ms: f64,
@@ -97,59 +114,82 @@ struct FrameCost {
     frame_s: f64,
     /// The caustic volumes' CPU gatherings in the measured frames.
     volume_gathers: u64,
+    /// The caustic volumes of the last build: kept, drawn as surface slabs, escaping.
+    volumes: (usize, usize, usize),
 }
 
-/// Runs every family of the techniques `runs` accepts (the first `sizes` sizes of
-/// each when given) and writes the outputs to `out`. A family stops growing once a frame took longer than
-/// `budget_s` of wall time: the larger sizes are listed as skipped.
-pub fn run(out: &Path, runs: impl Fn(&str) -> bool, sizes: Option<usize>, budget_s: f64) -> Result<(), String> {
+impl FrameCost {
+    fn caustics_ms(&self) -> f64 {
+        self.work.caustics_ms()
+    }
+
+    fn main_pass_ms(&self) -> f64 {
+        self.work.main_pass.ms.unwrap_or(0.0)
+    }
+
+    /// A figure per receiver pixel, where the view shows any.
+    fn per_receiver_pixel(&self, count: Option<f64>) -> Option<f64> {
+        Some(count? / self.receiver_pixels).filter(|_| self.receiver_pixels > 0.0)
+    }
+}
+
+/// Runs every family whose technique and scene `runs` accepts and writes the outputs
+/// to `out`. A family stops growing once a frame took longer than the bench's budget
+/// of wall time: the larger sizes are listed as skipped.
+pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) -> Result<(), String> {
     let adapter = caustics_bevy::headless::probe_adapter().map_err(|e| e.to_string())?;
-    if adapter.timestamps.is_empty() {
-        return Err(format!("{} has no timestamp queries: the frame bench needs them", adapter.name));
+    if !adapter.has_timestamps() && !adapter.has_pipeline_statistics() {
+        return Err(format!("{} has neither timestamp nor pipeline-statistics queries: the frame bench needs them", adapter.name));
     }
     let mut rows: Vec<FrameCost> = Vec::new();
     let mut skipped = Vec::new();
-    for family in FAMILIES.iter().filter(|f| runs(f.technique)) {
+    for family in FAMILIES.iter().filter(|f| runs(f.technique, f.scene)) {
         let first = rows.len();
-        for &parameter in family.sizes.iter().take(sizes.unwrap_or(usize::MAX)) {
-            if let Some(last) = rows[first..].last().filter(|r| r.frame_s > budget_s) {
+        for &parameter in family.sizes.iter().take(bench.sizes.unwrap_or(usize::MAX)) {
+            if let Some(last) = rows[first..].last().filter(|r| r.frame_s > bench.budget_s) {
                 skipped.push(format!(
-                    "{} on the {} at parameter {parameter}: a frame at {} {} took {:.0} s, past the {budget_s} s budget",
-                    family.technique, family.scene, last.size, family.unit, last.frame_s
+                    "{} on the {} at parameter {parameter}: a frame at {} {} took {:.0} s, past the {} s budget",
+                    family.technique, family.scene, last.size, family.unit, last.frame_s, bench.budget_s
                 ));
                 eprintln!("skipped: {}", skipped[skipped.len() - 1]);
                 continue;
             }
             let start = Instant::now();
-            let row = measure(family, parameter)?;
+            let row = measure(family, parameter, bench.view)?;
             eprintln!(
-                "{:>11} {:>10} {:>9} {}: caustics {:9.2} ms, main pass {:8.2} ms (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {:.0} s",
+                "{:>11} {:>12} {:>9} {}: caustics {:9.2} ms, {:8.2} M invocations, {:6.2} fragments a receiver pixel; main pass {:8.2} ms, {:6.2} M fragments (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {} volumes, {} slabs, {} escaping; {:.0} s",
                 family.technique,
                 family.scene,
                 row.size,
                 family.unit,
-                row.caustics_ms,
-                row.main_pass_ms,
+                row.caustics_ms(),
+                row.work.caustics_invocations() / 1e6,
+                row.per_receiver_pixel(Some(row.work.caustics_fragments())).unwrap_or(f64::NAN),
+                row.main_pass_ms(),
+                row.work.main_pass.fragments.unwrap_or(f64::NAN) / 1e6,
                 row.cpu_main_ms,
                 row.cpu_render_ms,
                 row.volume_gathers,
+                row.volumes.0,
+                row.volumes.1,
+                row.volumes.2,
                 start.elapsed().as_secs_f64()
             );
             rows.push(row);
         }
     }
-    write_outputs(out, &adapter.name, &rows, &skipped)
+    write_outputs(out, &adapter.name, bench.view, &rows, &skipped)
 }
 
 /// Renders one family's scene at one size until the technique runs, then averages
 /// [`MEASURED_FRAMES`] frames.
-fn measure(family: &Family, parameter: u32) -> Result<FrameCost, String> {
-    let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
+fn measure(family: &Family, parameter: u32, (width, height): (u32, u32)) -> Result<FrameCost, String> {
+    let mut renderer = HeadlessRenderer::timed(width, height).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
-    renderer.app.add_systems(Update, turn);
+    renderer.app.add_systems(Update, (turn, rain));
     let size = (family.spawn)(renderer.world_mut(), target, parameter);
     let failed = |what: &str| format!("{} on the {} at {size} {}: {what}", family.technique, family.scene, family.unit);
-    // Warm up: the first pass, then two frames for its GPU times to arrive.
+    // Warm up: the first pass, then two frames for its GPU figures to arrive.
     let mut left = None;
     for _ in 0..MAX_WARM_UP {
         renderer.app.update();
@@ -172,38 +212,46 @@ fn measure(family: &Family, parameter: u32) -> Result<FrameCost, String> {
         let start = Instant::now();
         renderer.app.update();
         let seconds = start.elapsed().as_secs_f64();
-        let spans = renderer.gpu_pass_times();
+        let work = renderer.gpu_pass_work();
         let (cpu_main, cpu_render) = renderer.plugin_cpu_times().ok_or_else(|| failed("no CPU times"))?;
-        frames.push(Frame { spans, cpu_main, cpu_render, seconds });
+        frames.push(Frame { work, cpu_main, cpu_render, seconds });
     }
     let mean = |f: &dyn Fn(&Frame) -> f64| frames.iter().map(f).sum::<f64>() / frames.len() as f64;
-    let caustics_ms = mean(&|f| f.spans.iter().filter(|(s, _)| is_caustic_span(s)).map(|(_, ms)| ms).sum());
-    let main_pass_ms = mean(&|f| f.spans.iter().filter(|(s, _)| s.starts_with("main_")).map(|(_, ms)| ms).sum());
-    if main_pass_ms == 0.0 {
-        return Err(failed("no GPU times arrived"));
-    }
-    let mut names: Vec<String> = frames.iter().flat_map(|f| f.spans.iter().map(|(s, _)| s.clone())).filter(|s| is_caustic_span(s)).collect();
+    let mut names: Vec<String> = frames.iter().flat_map(|f| f.work.iter().map(|w| w.span.clone())).collect();
     names.sort();
     names.dedup();
-    let spans = names
+    // Each pass's figures averaged over the frames that ran it.
+    let passes: Vec<PassWork> = names
         .into_iter()
-        .map(|name| {
-            let ms = mean(&|f| f.spans.iter().filter(|(s, _)| *s == name).map(|(_, ms)| ms).sum());
-            (name, ms)
+        .map(|span| {
+            let ran: Vec<&PassWork> = frames.iter().filter_map(|f| f.work.iter().find(|w| w.span == span)).collect();
+            let average = |figure: fn(&PassWork) -> Option<f64>| {
+                let values: Vec<f64> = ran.iter().filter_map(|w| figure(w)).collect();
+                (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
+            };
+            PassWork { ms: average(|w| w.ms), vertices: average(|w| w.vertices), fragments: average(|w| w.fragments), compute: average(|w| w.compute), span }
         })
         .collect();
+    let receiver_pixels = passes.iter().find(|w| w.span == COMPOSITE_SPAN).and_then(|w| w.fragments).unwrap_or(0.0);
+    let work = FrameWork::of(passes);
+    if work.main_pass.ms.is_none() && work.main_pass.fragments.is_none() {
+        return Err(failed("no GPU figures arrived"));
+    }
     Ok(FrameCost {
         technique: family.technique,
         scene: family.scene,
         unit: family.unit,
         size,
-        caustics_ms,
-        spans,
-        main_pass_ms,
+        work,
+        receiver_pixels,
         cpu_main_ms: mean(&|f| f.cpu_main),
         cpu_render_ms: mean(&|f| f.cpu_render),
         frame_s: mean(&|f| f.seconds),
         volume_gathers: gathered(&mut renderer) - gathered_before,
+        volumes: {
+            let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
+            (stats.volumes, stats.surface_slabs, stats.escaping)
+        },
     })
 }
 
@@ -220,32 +268,78 @@ fn growth_exponent(points: &[(f64, f64)]) -> Option<f64> {
     (sxx > 0.0).then(|| sxy / sxx)
 }
 
-fn write_outputs(out: &Path, adapter: &str, rows: &[FrameCost], skipped: &[String]) -> Result<(), String> {
+/// A count (millions) or `–` where the adapter gave none.
+fn millions(count: Option<f64>) -> String {
+    count.map_or("–".into(), |c| format!("{:.3}", c / 1e6))
+}
+
+/// A figure with `digits` decimals, or `–`.
+fn figure(value: Option<f64>, digits: usize) -> String {
+    value.filter(|v| v.is_finite()).map_or("–".into(), |v| format!("{v:.digits$}"))
+}
+
+fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &[FrameCost], skipped: &[String]) -> Result<(), String> {
     std::fs::create_dir_all(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let mut csv = String::from(
-        "adapter,technique,scene,unit,size,caustics_gpu_ms,main_pass_gpu_ms,caustics_over_main_pass,plugin_cpu_main_ms,plugin_cpu_render_ms,cpu_volume_gathers,frame_wall_s,spans\n",
+        "adapter,width,height,technique,scene,unit,size,caustics_gpu_ms,main_pass_gpu_ms,caustics_over_main_pass,\
+         caustics_vertex_invocations,caustics_fragment_invocations,caustics_compute_invocations,main_pass_fragment_invocations,\
+         receiver_pixels,caustics_fragments_per_receiver_pixel,plugin_cpu_main_ms,plugin_cpu_render_ms,cpu_volume_gathers,\
+         volumes,volume_surface_slabs,volumes_escaping,frame_wall_s,spans\n",
     );
+    let mut passes_csv = String::from(
+        "adapter,width,height,technique,scene,size,span,gpu_ms,vertex_invocations,fragment_invocations,compute_invocations,fragments_per_receiver_pixel\n",
+    );
+    let sum = |r: &FrameCost, figure: fn(&PassWork) -> Option<f64>| {
+        let values: Vec<f64> = r.work.caustics.iter().filter_map(figure).collect();
+        (!values.is_empty()).then(|| values.iter().sum::<f64>())
+    };
+    let number = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.0}"));
     for r in rows {
-        let spans: Vec<String> = r.spans.iter().map(|(s, ms)| format!("{s}={ms:.3}")).collect();
+        let spans: Vec<String> = r.work.caustics.iter().map(|w| format!("{}={:.3}", w.span, w.ms.unwrap_or(f64::NAN))).collect();
         let _ = writeln!(
             csv,
-            "\"{adapter}\",{},{},{},{},{:.3},{:.3},{:.3},{:.4},{:.4},{},{:.2},{}",
+            "\"{adapter}\",{width},{height},{},{},{},{},{:.3},{:.3},{:.3},{},{},{},{},{:.0},{},{:.4},{:.4},{},{},{},{},{:.2},{}",
             r.technique,
             r.scene,
             r.unit,
             r.size,
-            r.caustics_ms,
-            r.main_pass_ms,
-            r.caustics_ms / r.main_pass_ms,
+            r.caustics_ms(),
+            r.main_pass_ms(),
+            r.caustics_ms() / r.main_pass_ms(),
+            number(sum(r, |w| w.vertices)),
+            number(sum(r, |w| w.fragments)),
+            number(sum(r, |w| w.compute)),
+            number(r.work.main_pass.fragments),
+            r.receiver_pixels,
+            figure(r.per_receiver_pixel(sum(r, |w| w.fragments)), 3),
             r.cpu_main_ms,
             r.cpu_render_ms,
             r.volume_gathers,
+            r.volumes.0,
+            r.volumes.1,
+            r.volumes.2,
             r.frame_s,
             spans.join(";")
         );
+        for w in r.work.caustics.iter().chain(std::iter::once(&r.work.main_pass)) {
+            let _ = writeln!(
+                passes_csv,
+                "\"{adapter}\",{width},{height},{},{},{},{},{},{},{},{},{}",
+                r.technique,
+                r.scene,
+                r.size,
+                w.span,
+                w.ms.map_or(String::new(), |ms| format!("{ms:.4}")),
+                number(w.vertices),
+                number(w.fragments),
+                number(w.compute),
+                figure(r.per_receiver_pixel(w.fragments), 3)
+            );
+        }
     }
     let write = |name: &str, text: &str| std::fs::write(out.join(name), text).map_err(|e| format!("cannot write {name}: {e}"));
     write("frames.csv", &csv)?;
+    write("frames-passes.csv", &passes_csv)?;
     let mut lines: Vec<(String, Vec<&FrameCost>)> = Vec::new();
     for r in rows {
         let label = format!("{} on the {} ({})", r.technique, r.scene, r.unit);
@@ -255,29 +349,55 @@ fn write_outputs(out: &Path, adapter: &str, rows: &[FrameCost], skipped: &[Strin
         }
     }
     let mut md = format!(
-        "# Frame cost as the work grows\n\nAdapter: {adapter}. {WIDTH} × {HEIGHT}, the mean of {MEASURED_FRAMES} frames in steady state.\n\n\
-         | technique and scene | size range | GPU time ∝ size^k | caustics / main pass | plugin CPU (main + render) |\n|---|---|---|---|---|\n"
+        "# Frame cost as the work grows\n\nAdapter: {adapter}. {width} × {height}, the mean of {MEASURED_FRAMES} frames in steady state. \
+         GPU times are this adapter's; shader invocations (pipeline statistics) carry to any GPU.\n\n\
+         | technique and scene | size range | GPU time ∝ size^k | caustics / main pass (GPU time) | caustics / main pass (fragments) | plugin CPU (main + render) |\n|---|---|---|---|---|---|\n"
     );
     let series = |cost: fn(&FrameCost) -> f64| -> Vec<Series> {
         lines.iter().map(|(label, members)| Series { label: label.clone(), points: members.iter().map(|r| (r.size as f64, cost(r))).collect() }).collect()
     };
-    let gpu = series(|r| r.caustics_ms);
+    let gpu = series(|r| r.caustics_ms());
     let cpu = series(|r| r.cpu_main_ms + r.cpu_render_ms);
+    let fragment_ratio = |r: &FrameCost| Some(r.work.caustics_fragments() / r.work.main_pass.fragments?).filter(|v| v.is_finite());
     for ((label, members), (g, c)) in lines.iter().zip(gpu.iter().zip(&cpu)) {
         let (first, last) = (members[0], members[members.len() - 1]);
         let exponent = |s: &Series| growth_exponent(&s.points).map_or("—".to_string(), |k| format!("{k:.2}"));
         let _ = writeln!(
             md,
-            "| {label} | {} – {} | k = {} | {:.2} – {:.2} | {:.2} – {:.2} ms (k = {}) |",
+            "| {label} | {} – {} | k = {} | {:.2} – {:.2} | {} – {} | {:.2} – {:.2} ms (k = {}) |",
             first.size,
             last.size,
             exponent(g),
-            first.caustics_ms / first.main_pass_ms,
-            last.caustics_ms / last.main_pass_ms,
+            first.caustics_ms() / first.main_pass_ms(),
+            last.caustics_ms() / last.main_pass_ms(),
+            figure(fragment_ratio(first), 2),
+            figure(fragment_ratio(last), 2),
             first.cpu_main_ms + first.cpu_render_ms,
             last.cpu_main_ms + last.cpu_render_ms,
             exponent(c),
         );
+    }
+    let _ = writeln!(
+        md,
+        "\nEvery pass at each family's largest size: GPU time, shader invocations (millions) and fragments per receiver pixel \
+         (receiver pixels: the composite's fragments).\n\n\
+         | family | size | pass | GPU ms | vertices (M) | fragments (M) | compute (M) | fragments / receiver pixel |\n|---|---|---|---:|---:|---:|---:|---:|"
+    );
+    for (label, members) in &lines {
+        let r = members[members.len() - 1];
+        for w in r.work.caustics.iter().chain(std::iter::once(&r.work.main_pass)) {
+            let _ = writeln!(
+                md,
+                "| {label} | {} | {} | {} | {} | {} | {} | {} |",
+                r.size,
+                w.span,
+                figure(w.ms, 3),
+                millions(w.vertices),
+                millions(w.fragments),
+                millions(w.compute),
+                figure(r.per_receiver_pixel(w.fragments), 2)
+            );
+        }
     }
     if !skipped.is_empty() {
         let _ = writeln!(md, "\nSkipped (`--frame-budget`):\n");
@@ -290,7 +410,7 @@ fn write_outputs(out: &Path, adapter: &str, rows: &[FrameCost], skipped: &[Strin
     plot_log_log(&out.join("frames-gpu.png"), &gpu_axes, &gpu.iter().collect::<Vec<_>>())?;
     let cpu_axes = Axes { caption: "Plugin CPU time per frame", x: "work size (vertices, triangles, photons, texels)", y: "CPU time (ms)" };
     plot_log_log(&out.join("frames-cpu.png"), &cpu_axes, &cpu.iter().collect::<Vec<_>>())?;
-    eprintln!("wrote frames.csv, frames.md, frames-gpu.png and frames-cpu.png to {}", out.display());
+    eprintln!("wrote frames.csv, frames-passes.csv, frames.md, frames-gpu.png and frames-cpu.png to {}", out.display());
     Ok(())
 }
 
@@ -392,4 +512,44 @@ fn pool(world: &mut World, target: RenderTarget, texels: u32) -> u64 {
         Transform::from_xyz(0.0, 1.0, 0.0),
     ));
     u64::from(texels).pow(2)
+}
+
+/// Pebbles a frame the rain drops into every rippling pool: with the ripples' lifetime,
+/// about 50 live impulses.
+const PEBBLES_A_FRAME: u32 = 1;
+
+/// A marker on a pool the bench rains on.
+#[derive(Component)]
+struct Raining;
+
+/// Drops [`PEBBLES_A_FRAME`] pebbles at reproducible places into each raining pool.
+fn rain(pools: Query<(&PoolRipples, &GlobalTransform), With<Raining>>, mut seed: Local<u64>, mut pebbles: MessageWriter<DropPebble>) {
+    for (pool, at) in &pools {
+        let extent = Vec2::new(pool.columns as f32, pool.rows as f32) * pool.cell_size;
+        for _ in 0..PEBBLES_A_FRAME {
+            *seed += 1;
+            let mut random = caustics_core::rng::Pcg32::for_photon(7, 0, *seed);
+            let (u, v) = (random.next_f32() - 0.5, random.next_f32() - 0.5);
+            let position = at.translation() + Vec3::new(0.9 * u * extent.x, 0.0, 0.9 * v * extent.y);
+            pebbles.write(DropPebble { position, strength: 0.01 });
+        }
+    }
+}
+
+/// A 4 m pool 1 m deep of `resolution`² water cells under steady rain, drawn by the
+/// caustic volumes with shafts in its water, seen at a slant as a swimmer by the side
+/// sees it.
+fn rippled_pool(world: &mut World, target: RenderTarget, resolution: u32) -> u64 {
+    stage(world, target, Vec3::new(0.3, -1.0, -0.2), (Vec3::new(0.0, 2.6, 3.6), Vec3::new(0.0, 0.0, 0.0)));
+    world.spawn((
+        PoolRipples { columns: resolution, rows: resolution, cell_size: 4.0 / resolution as f32, depth: 1.0, ..default() },
+        CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.333) },
+        Transform::from_xyz(0.0, 1.0, 0.0),
+        Raining,
+    ));
+    world.spawn((
+        ParticipatingMedium { scattering: 0.25, absorption: 0.1, asymmetry: 0.6 },
+        Transform::from_xyz(0.0, 0.5, 0.0).with_scale(Vec3::new(4.0, 1.0, 4.0)),
+    ));
+    u64::from(resolution + 1).pow(2)
 }

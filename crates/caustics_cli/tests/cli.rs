@@ -109,29 +109,67 @@ fn bench_runs_only_the_methods_asked_for() {
 }
 
 #[test]
-fn the_frame_bench_times_every_pass_of_a_moving_generator_and_the_plugins_cpu() {
+fn the_frame_bench_counts_and_times_every_pass_of_moving_generators_and_the_plugins_cpu() {
     let dir = out_dir("frames");
-    let out = caustics(&["bench", "--frames", "--quick", "--methods", "maps", "--out", dir.to_str().unwrap()]);
+    let args = ["--methods", "maps,volumes", "--frame-scenes", "glass ball,rippled pool", "--frame-size", "480x270"];
+    let out = caustics(&[&["bench", "--frames", "--quick", "--out", dir.to_str().unwrap()][..], &args[..]].concat());
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let csv = std::fs::read_to_string(dir.join("frames.csv")).unwrap();
     // The adapter's name is quoted and may hold commas: the columns start after it.
-    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|r| r.rsplit_once("\",").unwrap().1.split(',').collect()).collect();
-    assert_eq!(rows.len(), 4, "two sizes of the ring and of the ball: {csv}");
+    let table = |name: &str| -> (Vec<String>, Vec<Vec<String>>) {
+        let csv = std::fs::read_to_string(dir.join(name)).unwrap();
+        let mut lines = csv.lines();
+        let header = lines.next().unwrap().split(',').skip(1).map(String::from).collect();
+        let rows = lines.map(|r| r.rsplit_once("\",").unwrap().1.split(',').map(String::from).collect()).collect();
+        (header, rows)
+    };
+    let (header, rows) = table("frames.csv");
+    let column = |name: &str| header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
+    let number = |row: &[String], name: &str| row[column(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name} in {row:?}"));
+    let family = |row: &[String]| (row[column("technique")].clone(), row[column("scene")].clone());
+    let families: Vec<_> = rows.iter().map(|r| family(r)).collect();
+    assert_eq!(rows.len(), 4, "two sizes of the glass ball's maps and of the rippled pool's volumes: {families:?}");
     for pair in rows.chunks(2) {
-        let size = |r: &[&str]| r[3].parse::<u64>().unwrap();
-        assert!(size(&pair[1]) > size(&pair[0]), "{csv}");
+        assert!(number(&pair[1], "size") > number(&pair[0], "size"), "{families:?}");
     }
     for row in &rows {
-        let number = |i: usize| row[i].parse::<f64>().unwrap();
-        assert!(number(4) > 0.0 && number(5) > 0.0, "caustics and main pass GPU times: {csv}");
-        assert!(number(7) + number(8) > 0.0, "the plugin's CPU time: {csv}");
-        // The turning generator's maps are remade every frame, and every stage is timed.
-        for stage in ["caustic_maps/photon_buffer", "caustic_maps/gather", "caustic_maps/splat", "caustic_maps/projection"] {
-            assert!(row[11].contains(stage), "{stage} missing: {csv}");
+        assert_eq!((number(row, "width"), number(row, "height")), (480.0, 270.0));
+        assert!(number(row, "caustics_gpu_ms") > 0.0 && number(row, "main_pass_gpu_ms") > 0.0, "GPU times: {row:?}");
+        assert!(number(row, "plugin_cpu_main_ms") + number(row, "plugin_cpu_render_ms") > 0.0, "the plugin's CPU time: {row:?}");
+        // Pipeline statistics (lavapipe answers them): the main pass's fragments, the
+        // receiver pixels the composite shades, and the caustics passes' work.
+        assert!(number(row, "main_pass_fragment_invocations") > 0.0 && number(row, "receiver_pixels") > 1000.0, "{row:?}");
+        assert!(number(row, "caustics_fragment_invocations") > 0.0, "{row:?}");
+    }
+    // Every pass of the turning ball's maps is remade, timed and counted every frame; the
+    // rippled pool's volumes run a few fragments a receiver pixel, seen at a slant.
+    let (pass_header, passes) = table("frames-passes.csv");
+    let at = |name: &str| pass_header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}: {pass_header:?}"));
+    for row in &rows {
+        let (scene, size) = (family(row).1, row[column("size")].clone());
+        let pass = |span: &str| {
+            passes
+                .iter()
+                .find(|p| p[at("scene")] == scene && p[at("size")] == size && p[at("span")] == span)
+                .unwrap_or_else(|| panic!("no {span} for the {scene} at {size}"))
+        };
+        let figure = |p: &[String], name: &str| p[at(name)].parse::<f64>().unwrap_or_else(|_| panic!("{name} in {p:?}"));
+        if scene == "glass ball" {
+            for stage in ["photon_buffer", "gather", "splat"] {
+                let p = pass(&format!("caustic_maps/{stage}"));
+                assert!(figure(p, "gpu_ms") > 0.0 && figure(p, "compute_invocations") > 0.0, "{p:?}");
+            }
+            let p = pass("caustic_maps/light_maps");
+            assert!(figure(p, "vertex_invocations") > 0.0 && figure(p, "fragment_invocations") > 0.0, "{p:?}");
+        } else {
+            let p = pass("caustics/volumes");
+            let per_pixel = figure(p, "fragments_per_receiver_pixel");
+            eprintln!("the rippled pool at {size} water vertices: the volumes' surface pass shades {per_pixel:.2} fragments a receiver pixel");
+            assert!(per_pixel > 0.05 && per_pixel <= 4.0, "{p:?}");
         }
     }
     let md = std::fs::read_to_string(dir.join("frames.md")).unwrap();
     assert_eq!(md.matches("k = ").count(), 4, "a GPU and a CPU growth exponent per line: {md}");
+    assert!(md.contains("| caustics/volumes |") && md.contains("| main_opaque_pass_3d |"), "every pass at the largest size: {md}");
     for plot in ["frames-gpu.png", "frames-cpu.png"] {
         assert!(std::fs::metadata(dir.join(plot)).unwrap().len() > 1000, "{plot}");
     }
