@@ -51,9 +51,12 @@ impl PassWork {
     }
 }
 
+/// Where a figure goes in [`PassWork`].
+type Figure = fn(&mut PassWork) -> &mut Option<f64>;
+
 /// The figures `RenderDiagnosticsPlugin` records under `render/<span>/<figure>`, and
-/// where each goes in [`PassWork`].
-const FIGURES: [(&str, fn(&mut PassWork) -> &mut Option<f64>); 4] = [
+/// where each goes.
+const FIGURES: [(&str, Figure); 4] = [
     ("elapsed_gpu", |w| &mut w.ms),
     ("vertex_shader_invocations", |w| &mut w.vertices),
     ("fragment_shader_invocations", |w| &mut w.fragments),

@@ -234,7 +234,7 @@ fn occluded_beyond(v: [Vec3; 3], r: [Vec3; 3], planes: [Vec4; 3]) -> Option<f32>
             let (at, ray) = if j == i { (v[i], r[i]) } else { (0.25 * v[i] + 0.75 * v[j], 0.25 * r[i] + 0.75 * r[j]) };
             // The plane's value n·q + w along the corner's ray q(α) = at + α ray.
             let (start, slope) = (n.dot(at) + plane.w, n.dot(ray));
-            if !(slope < 0.0) {
+            if slope.is_nan() || slope >= 0.0 {
                 return None;
             }
             end = end.max(-start / slope);
@@ -281,7 +281,8 @@ fn local_slab(v: [Vec3; 3], r: [Vec3; 3], hits: [Option<(Vec3, Vec3)>; 3]) -> Op
         let own = crossing(normals[j], normals[j].dot(hits[j].0), j)?;
         for (n, (point, _)) in normals.iter().zip(hits) {
             let at = crossing(*n, n.dot(point), j)?;
-            if !((at - own).abs() <= ONE_SURFACE * own) {
+            // Both finite and positive (`crossing`).
+            if (at - own).abs() > ONE_SURFACE * own {
                 return None;
             }
             deepest = deepest.max(at);
