@@ -131,6 +131,11 @@ impl FrameWork {
         Self { caustics: passes.into_iter().filter(PassWork::is_caustic).collect(), main_pass }
     }
 
+    /// The caustics passes, then the main pass.
+    pub fn passes(&self) -> impl Iterator<Item = &PassWork> {
+        self.caustics.iter().chain(std::iter::once(&self.main_pass))
+    }
+
     /// The caustics passes' summed GPU time (ms).
     pub fn caustics_ms(&self) -> f64 {
         self.caustics.iter().filter_map(|w| w.ms).sum()

@@ -321,7 +321,7 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
             r.frame_s,
             spans.join(";")
         );
-        for w in r.work.caustics.iter().chain(std::iter::once(&r.work.main_pass)) {
+        for w in r.work.passes() {
             let _ = writeln!(
                 passes_csv,
                 "\"{adapter}\",{width},{height},{},{},{},{},{},{},{},{},{}",
@@ -385,7 +385,7 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
     );
     for (label, members) in &lines {
         let r = members[members.len() - 1];
-        for w in r.work.caustics.iter().chain(std::iter::once(&r.work.main_pass)) {
+        for w in r.work.passes() {
             let _ = writeln!(
                 md,
                 "| {label} | {} | {} | {} | {} | {} | {} | {} |",

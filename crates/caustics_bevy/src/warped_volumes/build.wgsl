@@ -698,15 +698,16 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     // on one surface, the surface pass draws only the slab around it.
     var points: array<vec3<f32>, 3>;
     var normals: array<vec3<f32>, 3>;
-    var hit = true;
+    // How many of the three rays meet a surface.
+    var hits = 0u;
     for (var i = 0u; i < 3u; i++) {
         let ray = rays[tri[i]];
-        hit = hit && ray.hit.w > 0.0;
+        hits += select(0u, 1u, ray.hit.w > 0.0);
         points[i] = local(frame, ray.hit.xyz);
         normals[i] = local_dir(frame, ray.hit_normal.xyz);
     }
     var slab = Slab(vec3(0.0), 0.0, 0.0, 0.0, 0.0, false);
-    if hit {
+    if hits == 3u {
         slab = local_slab(v, r, points, normals);
     }
     var corners: array<vec3<f32>, 8>;
@@ -736,7 +737,7 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
         surface = corners;
         // `SurfaceSlab::EMPTY`, `BoundingShape::EMPTY`: rays that all meet nothing
         // light no surface.
-        if job.counts.z != 0u && !any(vec3(rays[tri.x].hit.w, rays[tri.y].hit.w, rays[tri.z].hit.w) > vec3(0.0)) {
+        if job.counts.z != 0u && hits == 0u {
             out.slab = vec4(0.0, 1.0, 0.0, 1.0);
             surface = array<vec3<f32>, 8>();
         }

@@ -587,12 +587,13 @@ impl TriangleContext<'_> {
             to_vertex - frame.local(p[i]).y * r[i].length()
         }));
         let owned_edges = fans.owned_edges(mesh, t);
-        let hit_planes: [Vec4; 3] =
-            std::array::from_fn(|i| hits.get(tri[i] as usize).copied().flatten().map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth)));
+        // Each vertex ray's first hit (point, normal), if it meets a surface.
+        let vertex_hits: [Option<(Vec3, Vec3)>; 3] = std::array::from_fn(|i| hits.get(tri[i] as usize).copied().flatten());
+        let hit_planes: [Vec4; 3] = std::array::from_fn(|i| vertex_hits[i].map_or(NO_HIT_PLANE, |hit| frame.hit_plane(hit, r[i], depth)));
         // The volume ends where its rays have met the surfaces they hit, not at the far
         // side of every receiver: the points past there are occluded. Where the rays
         // land on one surface, the surface pass draws only the slab around it.
-        let local_hits = std::array::from_fn(|i| hits.get(tri[i] as usize).copied().flatten().map(|(p, n)| (frame.local(p), frame.local_dir(n))));
+        let local_hits = vertex_hits.map(|hit| hit.map(|(p, n)| (frame.local(p), frame.local_dir(n))));
         let whole = |depth: f32| occluded_beyond(v, r, hit_planes).map_or(depth, |end| end.clamp(1e-3 * depth, depth));
         // Rays that all meet nothing land on no surface: the volume lights none, though
         // its beam still scatters in a medium.
