@@ -11,7 +11,7 @@ use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::reference::{bevy_mesh, to_core};
-use bevy_caustics::warped_volumes::{CausticVolumes, WarpedVolumesSettings};
+use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
@@ -19,7 +19,7 @@ use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
-use caustics_core::volumes::{MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
+use caustics_core::volumes::{BeamGrid, MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
 use support::{caustic_irradiance, exposure, render, render_without_caustics};
 
 const SIZE: u32 = 96;
@@ -146,8 +146,9 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let medium_transform = Transform::from_xyz(0.0, 0.4, 0.0).with_scale(Vec3::new(4.0, 0.8, 4.0));
     renderer.world_mut().spawn((medium, medium_transform));
     // Every pixel integrated, to hold the pass to the twin pixel by pixel (the
-    // default integrates one in sixteen, below).
-    renderer.world_mut().insert_resource(WarpedVolumesSettings { shaft_downsample: 1, ..default() });
+    // default integrates one in sixteen, below), first through every volume.
+    let exact = WarpedVolumesSettings { shaft_downsample: 1, shaft_integral: ShaftIntegral::Exact, ..default() };
+    renderer.world_mut().insert_resource(exact);
     let foggy = render(&mut renderer, 3);
     save(&foggy, "gpu_volumes_medium.png");
     let report = renderer.pass_report();
@@ -173,6 +174,27 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     // Order of magnitude: σs · 0.8 m · E · p(θ ≈ 105°, g = ½) ≈ 0.3 · 0.8 · 10 · 0.03 ≈ 0.07.
     assert!(scattered > 0.01, "too little in-scattering to compare ({scattered})");
     assert!(error < 0.01, "GPU and CPU in-scattering differ: relative L2 {error}");
+    // The default: each beam deposited on a grid over the medium, each eye ray marched
+    // through it in a fixed number of steps. Against its own twin pixel by pixel (the
+    // deposit adds in whatever order the GPU runs it), and near the exact integral.
+    let marched = WarpedVolumesSettings { shaft_downsample: 1, ..default() };
+    renderer.world_mut().insert_resource(marched);
+    let grid_image = render(&mut renderer, 3);
+    save(&grid_image, "gpu_volumes_medium_grid.png");
+    let mut grid = BeamGrid::new(medium_box, marched.shaft_grid);
+    grid.deposit_all(&set.volumes, &settings.core());
+    let grid_twin: Vec<f32> = (0..SIZE * SIZE)
+        .map(|i| {
+            let floor = to_core(world_at(i % SIZE, i / SIZE));
+            grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).x
+        })
+        .collect();
+    let gpu_grid: Vec<f32> = grid_image.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let (against_twin, against_exact) = (relative_l2(&gpu_grid, &grid_twin), relative_l2(&gpu_grid, &cpu));
+    eprintln!("shafts marched through the grid: relative L2 {against_twin:.2e} from its twin, {against_exact:.2e} from the exact integral's");
+    assert!(against_twin < 0.01, "GPU and CPU beam grids differ: relative L2 {against_twin}");
+    assert!(against_exact < 0.1, "the beam grid is far from the exact integral: relative L2 {against_exact}");
+    let cpu = grid_twin;
     // The camera's CausticsSettings: shafts at half intensity are half the twin's;
     // shafts off, no volumetric pass.
     let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
@@ -186,7 +208,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().entity_mut(camera).insert(CausticsSettings::default());
     // The default: shafts integrated at one pixel in sixteen and spread bilinearly over
     // the image. Against every pixel's own (the GPU's, above, and the twin's).
-    let full: Vec<f32> = foggy.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let full = gpu_grid;
     renderer.world_mut().insert_resource(WarpedVolumesSettings::default());
     let sampled = render(&mut renderer, 3);
     let gpu: Vec<f32> = sampled.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();

@@ -120,7 +120,7 @@ pub mod prelude {
     #[cfg(feature = "illumination-textures")]
     pub use crate::illumination_textures::{IlluminationCosine, IlluminationTexturesSettings};
     #[cfg(feature = "warped-volumes")]
-    pub use crate::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
+    pub use crate::warped_volumes::{ShaftIntegral, VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
         AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticReceiverMaterialPlugin,
         CausticTechnique,

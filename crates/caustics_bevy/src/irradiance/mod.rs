@@ -99,8 +99,8 @@ pub const MAX_MEDIA: usize = 4;
 /// unit cube `[-½, ½]³` of its entity's transform, and (σₛ, σₐ, g).
 #[derive(Clone, Copy, Default, ShaderType)]
 pub struct GpuMedium {
-    local_from_world: Mat4,
-    coefficients: Vec4,
+    pub(crate) local_from_world: Mat4,
+    pub(crate) coefficients: Vec4,
 }
 
 /// Render world: the visible valid media of this frame, at most [`MAX_MEDIA`].

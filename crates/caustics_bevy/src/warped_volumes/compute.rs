@@ -205,6 +205,13 @@ pub(super) struct VolumeBuild {
     counted: Arc<Mutex<Option<(u64, u32)>>>,
 }
 
+impl VolumeBuild {
+    /// Whether the volumes are built this frame.
+    pub(super) fn builds_this_frame(&self) -> bool {
+        !self.dispatches.is_empty()
+    }
+}
+
 /// The build's pipelines (vertex rays, slicing axis, triangle volumes) and layout.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {

@@ -23,16 +23,22 @@
 //!    buffer with additive blending; the composite then shows it on receivers;
 //! 2. **volumetric pass** (after the main pass), only for views that see a
 //!    [`crate::ParticipatingMedium`] and show shafts (`CausticsSettings::shafts`): the
-//!    same prisms, with the eye ray's exact path through each warped volume and the
-//!    single-scattering term of §3.5 added to the view's HDR image — at one pixel in
-//!    every `shaft_downsample`² block, into a smaller texture that a fullscreen pass
-//!    then adds to the image bilinearly ([`WarpedVolumesSettings::shaft_downsample`]).
+//!    single-scattering term of §3.5 added to the view's HDR image. By default
+//!    ([`ShaftIntegral::Grid`]) a compute pass deposits every beam once per build on a
+//!    grid over each medium's box (`beam_grid.wgsl`, the twin of
+//!    `caustics_core::volumes::BeamGrid`), and a fullscreen pass marches each eye ray
+//!    through it in a fixed number of steps; [`ShaftIntegral::Exact`] draws the prisms
+//!    again and integrates the eye ray's exact path through each warped volume. Either
+//!    runs at one pixel in every `shaft_downsample`² block, into a smaller texture that
+//!    a fullscreen pass then adds to the image bilinearly
+//!    ([`WarpedVolumesSettings::shaft_downsample`]).
 //!
 //! Both read Bevy's `DepthPrepass` and `NormalPrepass`, which
 //! [`crate::CausticsSettings`] requires on the camera. The WGSL in `build.wgsl` and
 //! `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU tests hold the
 //! two together.
 
+mod beam_grid;
 mod build;
 mod compute;
 mod pass;
@@ -58,12 +64,43 @@ pub struct WarpedVolumesSettings {
     /// every pixel's own, for a volumetric pass eleven times cheaper. 1 integrates every
     /// pixel.
     pub shaft_downsample: u32,
+    /// How the shafts are integrated along each eye ray.
+    pub shaft_integral: ShaftIntegral,
+    /// [`ShaftIntegral::Grid`]'s cells along the longest side of each medium's box
+    /// (fewer along the others, so that cells are about cubes): 96 by default, 32 bytes
+    /// a cell (28 MiB for a cube). Finer grids keep narrower beams sharp.
+    pub shaft_grid: u32,
+    /// [`ShaftIntegral::Grid`]'s steps along the part of each eye ray inside a medium
+    /// (64 by default).
+    pub shaft_steps: u32,
+}
+
+/// How the volumetric pass integrates the light scattered out of the caustic beams.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
+pub enum ShaftIntegral {
+    /// Every beam deposited once per build on a grid over each medium's box, each
+    /// eye ray marched through it in [`WarpedVolumesSettings::shaft_steps`] steps: a
+    /// cost per pixel that does not grow with the volumes an eye ray crosses (the
+    /// default). Within 2 % (relative L2) of [`Self::Exact`] on the ocean example's
+    /// shafts, 5.4 % on the disco ball's, whose beams are a few cells across.
+    #[default]
+    Grid,
+    /// The exact integral through every volume the eye ray crosses (§3.5): each
+    /// volume's bounding shape drawn, its cost growing with the volumes in view.
+    Exact,
 }
 
 impl Default for WarpedVolumesSettings {
     fn default() -> Self {
         let core = VolumeSettings::default();
-        Self { intensity: VolumeIntensity::Conserving, max_magnification: core.max_magnification, shaft_downsample: 4 }
+        Self {
+            intensity: VolumeIntensity::Conserving,
+            max_magnification: core.max_magnification,
+            shaft_downsample: 4,
+            shaft_integral: ShaftIntegral::Grid,
+            shaft_grid: 96,
+            shaft_steps: 64,
+        }
     }
 }
 
@@ -105,6 +142,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "upsample.wgsl");
     bevy::asset::embedded_asset!(app, "receiver_depth.wgsl");
     bevy::asset::embedded_asset!(app, "build.wgsl");
+    bevy::asset::embedded_asset!(app, "beam_grid.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
     crate::mesh_vertices::build(app);

@@ -1,5 +1,6 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
+use super::beam_grid::{BeamGridBuffers, BeamGridPipelines};
 use super::render::{ReceiverDepthPipeline, VolumeBuffers, VolumesPipeline, ViewReceiverDepth, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
@@ -21,6 +22,8 @@ pub(super) struct VolumeDraw<'w> {
     cache: Res<'w, PipelineCache>,
     view_uniforms: Res<'w, ViewUniforms>,
     recorder: Res<'w, PassRecorder>,
+    grids: Res<'w, BeamGridBuffers>,
+    march: Res<'w, BeamGridPipelines>,
 }
 
 impl VolumeDraw<'_> {
@@ -83,6 +86,57 @@ impl VolumeDraw<'_> {
     }
 }
 
+impl VolumeDraw<'_> {
+    /// The volumetric pass into `target` (as [`Self::draw`]): the eye rays marched
+    /// through the beam grid where the view has that pipeline, else every volume drawn.
+    fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
+        let Some(march) = view.2.march else {
+            return self.draw(ctx, "volumetric", (target, None, scale, clear), view.2.volumetric, view);
+        };
+        if self.buffers.empty {
+            return false;
+        }
+        let (irradiance, work, pipelines, prepass, view_offset) = view;
+        let (Some(pipeline), Some(depth), Some(view_binding), Some(settings), Some(grids), Some(cells)) = (
+            self.cache.get_render_pipeline(march),
+            prepass.depth_view(),
+            self.view_uniforms.uniforms.binding(),
+            self.buffers.settings.binding(),
+            self.grids.grids.binding(),
+            self.grids.cells.as_ref(),
+        ) else {
+            return false;
+        };
+        let bind_group = ctx.render_device().create_bind_group(
+            "caustic_shaft_march_bind_group",
+            &self.cache.get_bind_group_layout(&self.march.march_layouts[pipelines.multisampled as usize]),
+            &BindGroupEntries::sequential((view_binding, settings, grids, cells.as_entire_binding(), depth)),
+        );
+        let diagnostics = ctx.diagnostic_recorder();
+        let diagnostics = diagnostics.as_deref();
+        let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+            label: Some("volumetric"),
+            color_attachments: &[Some(RenderPassColorAttachment {
+                view: target,
+                depth_slice: None,
+                resolve_target: None,
+                ops: Operations { load: if clear { LoadOp::Clear(default()) } else { LoadOp::Load }, store: StoreOp::Store },
+            })],
+            ..default()
+        });
+        irradiance.set_scaled_viewport(&mut render_pass, scale);
+        let span = diagnostics.pass_span(&mut render_pass, "caustics/volumetric");
+        render_pass.set_pipeline(pipeline);
+        let intensity = f64::from(work.0.applied_intensity());
+        render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
+        render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
+        render_pass.draw(0..3, 0..1);
+        span.end(&mut render_pass);
+        self.recorder.record("volumetric");
+        true
+    }
+}
+
 /// What the passes read of a view.
 type VolumeView<'a> =
     (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
@@ -131,11 +185,11 @@ pub(super) fn volumetric_pass(
 ) {
     let (target, shafts, view) = view.into_inner();
     let (Some(shafts), Some(upsample)) = (shafts, view.2.upsample) else {
-        draw.draw(&mut ctx, "volumetric", (target.main_texture_view(), None, 1, false), view.2.volumetric, view);
+        draw.integrate(&mut ctx, (target.main_texture_view(), 1, false), view);
         return;
     };
     let Some(pipeline) = draw.cache.get_render_pipeline(upsample) else { return };
-    if !draw.draw(&mut ctx, "volumetric", (&shafts.texture.default_view, None, shafts.scale, true), view.2.volumetric, view) {
+    if !draw.integrate(&mut ctx, (&shafts.texture.default_view, shafts.scale, true), view) {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();

@@ -1,7 +1,8 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
 use super::build::BuildStatsChannel;
-use super::{WarpedVolumesSettings, compute, pass};
+use super::beam_grid::{self, BeamGridPipelines, MarchKey};
+use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
@@ -71,7 +72,7 @@ pub(super) struct GpuVolumeSettings {
 
 /// Render world: the main world's settings.
 #[derive(Resource, Default)]
-struct ExtractedVolumeSettings(WarpedVolumesSettings);
+pub(super) struct ExtractedVolumeSettings(pub WarpedVolumesSettings);
 
 /// Render world: the volumes the GPU build wrote (`None` while no generator, light or
 /// receiver calls for any), the counters whose first words are the passes' indirect
@@ -99,6 +100,9 @@ pub(super) struct ViewVolumePipelines {
     /// [`ViewShafts`] texture first.
     pub volumetric: CachedRenderPipelineId,
     pub upsample: Option<CachedRenderPipelineId>,
+    /// The eye rays marched through the beam grid ([`ShaftIntegral::Grid`]), drawn in
+    /// place of `volumetric`, into the same target.
+    pub march: Option<CachedRenderPipelineId>,
     pub multisampled: bool,
 }
 
@@ -151,17 +155,26 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<VolumeBuffers>()
         .init_resource::<SpecializedRenderPipelines<VolumesPipeline>>()
         .init_resource::<SpecializedRenderPipelines<ShaftUpsamplePipeline>>()
-        .add_systems(RenderStartup, (init_pipeline, compute::init_pipelines))
+        .init_resource::<SpecializedRenderPipelines<BeamGridPipelines>>()
+        .init_resource::<beam_grid::BeamGridBuffers>()
+        .add_systems(RenderStartup, (init_pipeline, compute::init_pipelines, beam_grid::init_pipelines))
         .add_systems(
             ExtractSchedule,
             (timed(&cpu, extract_settings), timed(&cpu, compute::extract_sources), timed(&cpu, mark_views_seeing_media)),
         )
-        .add_systems(RenderGraph, timed(&cpu, compute::build_volumes).in_set(RenderGraphSystems::Render).before(camera_driver))
+        .add_systems(
+            RenderGraph,
+            (timed(&cpu, compute::build_volumes), timed(&cpu, beam_grid::deposit_beams))
+                .chain()
+                .in_set(RenderGraphSystems::Render)
+                .before(camera_driver),
+        )
         .add_systems(
             Render,
             (
                 timed(&cpu, prepare_buffers).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, compute::prepare_build).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, beam_grid::prepare_grids).in_set(RenderSystems::PrepareResources).after(compute::prepare_build).after(prepare_buffers),
                 timed(&cpu, compute::read_back_counts).in_set(RenderSystems::Cleanup),
                 timed(&cpu, prepare_shaft_textures).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, prepare_receiver_depth).in_set(RenderSystems::PrepareBindGroups),
@@ -398,10 +411,12 @@ fn prepare_pipelines(
     mut pipelines: ResMut<SpecializedRenderPipelines<VolumesPipeline>>,
     upsample: Res<ShaftUpsamplePipeline>,
     mut upsample_pipelines: ResMut<SpecializedRenderPipelines<ShaftUpsamplePipeline>>,
+    (march, mut march_pipelines): (Res<BeamGridPipelines>, ResMut<SpecializedRenderPipelines<BeamGridPipelines>>),
     extracted: Res<ExtractedVolumeSettings>,
     cache: Res<PipelineCache>,
 ) {
     let scale = extracted.0.shaft_scale();
+    let grid = extracted.0.shaft_integral == ShaftIntegral::Grid;
     for (entity, view, msaa, prepass) in &views {
         if prepass.depth.is_none() || prepass.normal.is_none() {
             continue;
@@ -417,7 +432,9 @@ fn prepare_pipelines(
         } else {
             (specialize(true, view.target_format, 1), None)
         };
-        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, upsample, multisampled });
+        let target_format = if scale > 1 { SHAFT_FORMAT } else { view.target_format };
+        let march = grid.then(|| march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format }));
+        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, upsample, march, multisampled });
     }
 }
 

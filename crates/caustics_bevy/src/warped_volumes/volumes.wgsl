@@ -6,14 +6,8 @@
 
 #import bevy_render::view::View
 #import bevy_caustics::receiver::{Medium, centre_depth, clip_medium, exposed, world_at}
-#import bevy_caustics::warped_volumes::CausticVolume
+#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, beta, sample_volume, to_local}
 
-struct VolumeSettings {
-    intensity_mode: u32,        // 0 conserving, 1 the paper's interpolation, 2 constant
-    max_magnification: f32,
-    medium_count: u32,
-    media: array<Medium, 4>,
-}
 
 @group(0) @binding(0) var<uniform> view: View;
 @group(0) @binding(1) var<storage, read> volumes: array<CausticVolume>;
@@ -27,8 +21,6 @@ struct VolumeSettings {
 #endif
 
 const PI: f32 = 3.141592653589793;
-// `caustics_core::volumes::EDGE_EPSILON`.
-const EDGE_EPSILON: f32 = 1.0e-4;
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -59,115 +51,6 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     return out;
 }
 
-fn to_local(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
-    let d = p - v.origin.xyz;
-    return vec3(dot(d, v.axis_x.xyz), dot(d, v.axis_y.xyz), dot(d, v.axis_z.xyz));
-}
-
-// Unnormalised barycentric coordinates βᵢ in the caustic triangle at depth α = y
-// (§3.3, §4.1), from the edge vectors p − cⁱ (see `CausticVolume::beta`).
-fn beta(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
-    let ex = p.x - (v.vertex_x.xyz + p.y * v.ray_x.xyz);
-    let ez = p.z - (v.vertex_z.xyz + p.y * v.ray_z.xyz);
-    return ez.yzx * ex.zxy - ex.yzx * ez.zxy;
-}
-
-// Normalised barycentric coordinates in .xyz; .w = 1 inside the volume, 0 outside.
-fn barycentric(v: CausticVolume, p: vec3<f32>) -> vec4<f32> {
-    if !(p.y >= 0.0 && p.y <= v.origin.w) {
-        return vec4(0.0);
-    }
-    let n = v.surface_normal.xyz;
-    let height = p.x * dot(v.axis_x.xyz, n) + p.y * dot(v.axis_y.xyz, n) + p.z * dot(v.axis_z.xyz, n);
-    if height < 0.0 {
-        return vec4(0.0);
-    }
-    let b = beta(v, p);
-    let sum = b.x + b.y + b.z;
-    if sum == 0.0 {
-        return vec4(0.0);
-    }
-    let lambda = b / sum;
-    // A side shared with a neighbour belongs to one of the two (`owned_edges`).
-    let owned = u32(v.surface_normal.w);
-    var inside = true;
-    for (var i = 0u; i < 3u; i++) {
-        if (owned & (1u << i)) != 0u {
-            inside = inside && lambda[i] >= -EDGE_EPSILON;
-        } else {
-            inside = inside && lambda[i] > EDGE_EPSILON;
-        }
-    }
-    return vec4(lambda, select(0.0, 1.0, inside));
-}
-
-// `CausticVolume::occluded`: behind the hit planes of vertices weighing past one half.
-fn occluded(v: CausticVolume, p: vec3<f32>, lambda: vec3<f32>) -> bool {
-    var behind = 0.0;
-    for (var i = 0; i < 3; i++) {
-        if dot(v.hit_planes[i].xyz, p) + v.hit_planes[i].w < 0.0 {
-            behind += lambda[i];
-        }
-    }
-    return behind > 0.5;
-}
-
-struct VolumeSample {
-    inside: bool,
-    plane_irradiance: f32,
-    ray: vec3<f32>,  // world, unit height along the slicing axis
-    depth: f32,
-}
-
-// `CausticVolume::sample`: irradiance on the slicing plane and the interpolated ray.
-fn sample_volume(v: CausticVolume, world: vec3<f32>) -> VolumeSample {
-    var s: VolumeSample;
-    s.inside = false;
-    let p = to_local(v, world);
-    let bary = barycentric(v, p);
-    if bary.w == 0.0 {
-        return s;
-    }
-    let lambda = bary.xyz;
-    if occluded(v, p, lambda) {
-        return s;
-    }
-    let alpha = p.y;
-    let max_mag = max(settings.max_magnification, 1.0);
-    let abc = v.triangle_abc.xyz;
-    let triangle_area = abs(abc.x + alpha * abc.y + alpha * alpha * abc.z);
-    if triangle_area < abc.x / max_mag {
-        return s;
-    }
-    let flux = v.flux.xyz;
-    let constant = (flux.x + flux.y + flux.z) / 3.0 * abc.x / triangle_area;
-    let fan_area = v.fan_a.xyz + alpha * v.fan_b.xyz + alpha * alpha * v.fan_c.xyz;
-    var e = constant;
-    if settings.intensity_mode == 1u {
-        let a = dot(lambda, v.fan_a.xyz);
-        e = dot(lambda, flux * v.fan_a.xyz) / max(abs(dot(lambda, fan_area)), a / max_mag);
-    } else if settings.intensity_mode == 0u {
-        let vertex = flux * v.fan_a.xyz / max(abs(fan_area), v.fan_a.xyz / max_mag);
-        let mean = (vertex.x + vertex.y + vertex.z) / 3.0;
-        if mean > 0.0 {
-            e = constant * dot(lambda, vertex) / mean;
-        }
-    }
-    s.inside = true;
-    s.ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
-    // `range_window` on the light's whole path to the point.
-    var window = 1.0;
-    if v.light_distance.w > 0.0 {
-        let path = dot(lambda, v.light_distance.xyz) + alpha * length(s.ray);
-        let f = path * path * v.light_distance.w;
-        window = clamp(1.0 - f * f, 0.0, 1.0);
-        window *= window;
-    }
-    s.plane_irradiance = e * window;
-    s.depth = alpha;
-    return s;
-}
-
 fn load_depth(pixel: vec2<i32>) -> f32 {
     return textureLoad(depth_prepass, pixel, 0);
 }
@@ -188,12 +71,21 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
         discard;
     }
-    let s = sample_volume(v, p);
+    let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
     if !s.inside {
         discard;
     }
     let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
     return exposed(v.color.rgb * e, view.exposure);
+}
+
+// `caustics_core::volumes::mean_attenuation`: the mean of e^{−σt d} over σt d ∈ [m − x, m + x].
+fn mean_attenuation(m: f32, x: f32) -> f32 {
+    let h = abs(x);
+    if h < 1.0e-3 {
+        return exp(-m) * (1.0 + h * h / 6.0);
+    }
+    return (exp(h - m) - exp(-h - m)) / (2.0 * h);
 }
 
 // Real roots of a s² + b s + c (NaN-free: a missing root is returned as 2, outside [−1, 1]).
@@ -283,7 +175,7 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
             continue;
         }
         let t = 0.5 * (a + b);
-        let s = sample_volume(v, eye + t * dir);
+        let s = sample_volume(v, eye + t * dir, settings.intensity_mode, settings.max_magnification);
         if !s.inside {
             continue;
         }
@@ -292,7 +184,8 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
         let g = clamp(c.z, -0.999, 0.999);
         let denom = max(1.0 + g * g - 2.0 * g * dot(beam, -dir), 1e-12);
         let phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
-        let attenuation = exp(-sigma_t * ((t - enter) + s.depth * beam_length));
+        // `mean_attenuation`: the path grows along the piece by (1 + d_α |r|) per unit.
+        let attenuation = mean_attenuation(sigma_t * ((t - enter) + s.depth * beam_length), 0.5 * sigma_t * (b - a) * (1.0 + d.y * beam_length));
         radiance += v.color.rgb * (attenuation * (b - a) * c.x * phase * s.plane_irradiance * beam_length);
     }
     return radiance;

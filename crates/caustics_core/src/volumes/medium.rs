@@ -99,6 +99,13 @@ pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32
     (pieces, count)
 }
 
+/// The mean of `e^{−σₜ d}` over a piece whose path `d` grows linearly over
+/// `σₜ d ∈ [m − x, m + x]`: `e^{−m} sinh(x)/x`, without overflow.
+pub fn mean_attenuation(m: f32, x: f32) -> f32 {
+    let x = x.abs();
+    if x < 1e-3 { (-m).exp() * (1.0 + x * x / 6.0) } else { ((x - m).exp() - (-x - m).exp()) / (2.0 * x) }
+}
+
 /// Real roots of `a s² + b s + c`, robust when `a` vanishes (then the linear root).
 fn quadratic_roots(a: f32, b: f32, c: f32) -> [f32; 2] {
     let scale = a.abs().max(b.abs()).max(c.abs());
@@ -125,7 +132,10 @@ fn quadratic_roots(a: f32, b: f32, c: f32) -> [f32; 2] {
 /// `L = Σ e^{−σₜ dₑ} e^{−σₜ dₛ} Δx σₛ p(cos θ) E_beam`, summed over every volume and
 /// every piece of the ray inside it; `dₑ` is the medium path from where the eye ray
 /// enters the medium to the piece's midpoint, `dₛ` the beam's path from its generator
-/// triangle, `E_beam` the beam irradiance (flux per area across the beam).
+/// triangle, `E_beam` the beam irradiance (flux per area across the beam). The
+/// attenuation is integrated over the piece, along which `dₑ + dₛ` grows linearly
+/// (exactly so with the midpoint's ray), rather than taken at its midpoint: a piece
+/// down the length of a beam may be metres long.
 pub fn in_scattered_radiance(
     volumes: &[CausticVolume],
     eye: Vec3,
@@ -159,7 +169,8 @@ pub fn in_scattered_radiance(
             let d_e = t - enter;
             let d_s = sample.depth * beam_length;
             let phase = henyey_greenstein(beam.dot(-dir), c.asymmetry);
-            let attenuation = (-sigma_t * (d_e + d_s)).exp();
+            // The light's path dₑ + dₛ grows along the piece by (1 + d_α |r|) per unit.
+            let attenuation = mean_attenuation(sigma_t * (d_e + d_s), 0.5 * sigma_t * (b - a) * (1.0 + d.y * beam_length));
             radiance += volume.color * (attenuation * (b - a) * c.scattering * phase * e_beam);
         }
     }

@@ -1,0 +1,241 @@
+//! Render world: light shafts at a fixed cost per eye ray (`beam_grid.wgsl`, the twin
+//! of `caustics_core::volumes::BeamGrid`). After each build of the volumes, and when
+//! the media change, a compute pass adds every volume's beam to a grid over each
+//! medium's box; the volumetric pass then marches each eye ray through the grid in
+//! [`WarpedVolumesSettings::shaft_steps`] steps, whatever the number of volumes.
+
+use super::ShaftIntegral;
+use super::compute::VolumeBuild;
+use super::render::{ExtractedVolumeSettings, GpuCausticVolume, VolumeBuffers};
+use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
+use crate::report::PassRecorder;
+use bevy::core_pipeline::FullscreenShader;
+use bevy::prelude::*;
+use bevy::render::{
+    diagnostic::RecordDiagnostics,
+    render_resource::{
+        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
+        *,
+    },
+    renderer::{RenderContext, RenderDevice, RenderQueue},
+    view::ViewUniform,
+};
+use bevy::shader::ShaderDefVal;
+use caustics_core::glam;
+use caustics_core::params::MediumCoefficients;
+use caustics_core::volumes::{MediumBox, grid_size};
+
+/// `Grid` in `beam_grid.wgsl`: one medium's cells (xyz) and the first one's index (w);
+/// a cell's smallest world edge (x) and world volume (y).
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuGrid {
+    size: UVec4,
+    cell: Vec4,
+}
+
+/// `Grids` in `beam_grid.wgsl`.
+#[derive(Clone, Copy, Default, ShaderType)]
+pub(super) struct GpuBeamGrids {
+    grids: [GpuGrid; MAX_MEDIA],
+    steps: u32,
+}
+
+/// Eight words a cell: source and summed direction.
+const CELL_BYTES: u64 = 32;
+
+/// Render world: the grids of this frame's media and whether they need a deposit.
+#[derive(Resource, Default)]
+pub(super) struct BeamGridBuffers {
+    pub cells: Option<Buffer>,
+    pub grids: UniformBuffer<GpuBeamGrids>,
+    /// The media, cells and steps the grid was laid out for.
+    layout: Vec<(Mat4, Vec4, UVec4)>,
+    deposit: bool,
+}
+
+/// The deposit's compute pipeline and the march's render pipelines.
+#[derive(Resource)]
+pub(super) struct BeamGridPipelines {
+    deposit_layout: BindGroupLayoutDescriptor,
+    deposit: CachedComputePipelineId,
+    pub march_layouts: [BindGroupLayoutDescriptor; 2],
+    shader: Handle<Shader>,
+    fullscreen: FullscreenShader,
+}
+
+pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, fullscreen: Res<FullscreenShader>, cache: Res<PipelineCache>) {
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "beam_grid.wgsl");
+    let deposit_layout = BindGroupLayoutDescriptor::new(
+        "caustic_shaft_deposit_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                storage_buffer_read_only_sized(false, None),
+                storage_buffer_read_only_sized(false, None),
+                uniform_buffer::<super::render::GpuVolumeSettings>(false),
+                uniform_buffer::<GpuBeamGrids>(false),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    );
+    let deposit = cache.queue_compute_pipeline(ComputePipelineDescriptor {
+        label: Some("caustic_shaft_deposit".into()),
+        layout: vec![deposit_layout.clone()],
+        shader: shader.clone(),
+        shader_defs: vec!["DEPOSIT".into()],
+        entry_point: Some("deposit".into()),
+        ..default()
+    });
+    let march_layouts = [false, true].map(|multisampled| {
+        BindGroupLayoutDescriptor::new(
+            "caustic_shaft_march_layout",
+            &BindGroupLayoutEntries::sequential(
+                ShaderStages::FRAGMENT,
+                (
+                    uniform_buffer::<ViewUniform>(true),
+                    uniform_buffer::<super::render::GpuVolumeSettings>(false),
+                    uniform_buffer::<GpuBeamGrids>(false),
+                    storage_buffer_read_only_sized(false, None),
+                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                ),
+            ),
+        )
+    });
+    commands.insert_resource(BeamGridPipelines { deposit_layout, deposit, march_layouts, shader, fullscreen: fullscreen.clone() });
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub(super) struct MarchKey {
+    pub multisampled: bool,
+    pub shaft_scale: u32,
+    pub target_format: TextureFormat,
+}
+
+impl SpecializedRenderPipeline for BeamGridPipelines {
+    type Key = MarchKey;
+
+    fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
+        let mut shader_defs: Vec<ShaderDefVal> = vec!["MARCH".into()];
+        if key.multisampled {
+            shader_defs.push("MULTISAMPLED".into());
+        }
+        if key.shaft_scale > 1 {
+            shader_defs.push(ShaderDefVal::UInt("SHAFT_SCALE".into(), key.shaft_scale));
+        }
+        // As the per-volume pass: scaled by the view's intensity when straight into
+        // its image, by the upsampling otherwise.
+        let src_factor = if key.shaft_scale == 1 { BlendFactor::Constant } else { BlendFactor::One };
+        let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+        RenderPipelineDescriptor {
+            label: Some("caustic_shaft_march_pipeline".into()),
+            layout: vec![self.march_layouts[key.multisampled as usize].clone()],
+            vertex: self.fullscreen.to_vertex_state(),
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                shader_defs,
+                entry_point: Some("march".into()),
+                targets: vec![Some(ColorTargetState {
+                    format: key.target_format,
+                    blend: Some(BlendState { color: additive, alpha: additive }),
+                    write_mask: ColorWrites::ALL,
+                })],
+            }),
+            ..default()
+        }
+    }
+}
+
+/// Lays the grids out over this frame's media (cells along each box's longest side:
+/// [`super::WarpedVolumesSettings::shaft_grid`]) and marks a deposit when the volumes
+/// are built this frame or the layout changed.
+pub(super) fn prepare_grids(
+    extracted: Res<ExtractedVolumeSettings>,
+    media: Res<ExtractedMedia>,
+    build: Res<VolumeBuild>,
+    volumes: Res<VolumeBuffers>,
+    mut grids: ResMut<BeamGridBuffers>,
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+) {
+    let settings = extracted.0;
+    if settings.shaft_integral != ShaftIntegral::Grid || media.0.is_empty() || volumes.volumes.is_none() {
+        *grids = BeamGridBuffers::default();
+        return;
+    }
+    let mut gpu = GpuBeamGrids { steps: settings.shaft_steps.max(1), ..default() };
+    let mut layout = Vec::new();
+    let mut first = 0u32;
+    for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {
+        let world_from_local = glam::Affine3A::from_mat4(glam::Mat4::from_cols_array(&medium.local_from_world.inverse().to_cols_array()));
+        let coefficients = MediumCoefficients { scattering: 0.0, absorption: 0.0, asymmetry: 0.0 };
+        let core = MediumBox { world_from_local, coefficients };
+        let size = grid_size(&core, settings.shaft_grid);
+        let m = world_from_local.matrix3;
+        let edge = glam::Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length()) / size.as_vec3();
+        let cells = size.x * size.y * size.z;
+        *grid = GpuGrid {
+            size: UVec4::new(size.x, size.y, size.z, first),
+            cell: Vec4::new(edge.min_element(), m.determinant().abs() / cells as f32, 0.0, 0.0),
+        };
+        layout.push((medium.local_from_world, medium.coefficients, grid.size));
+        first += cells;
+    }
+    grids.deposit |= build.builds_this_frame() || grids.layout != layout;
+    let bytes = u64::from(first) * CELL_BYTES;
+    if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
+        grids.cells = Some(device.create_buffer(&BufferDescriptor {
+            label: Some("caustic_shaft_grid"),
+            size: bytes,
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }));
+        grids.deposit = true;
+    }
+    grids.layout = layout;
+    grids.grids.set(gpu);
+    grids.grids.set_label(Some("caustic_shaft_grids"));
+    grids.grids.write_buffer(&device, &queue);
+}
+
+/// Clears the grids and adds every volume's beam to them, one workgroup a volume, when
+/// [`prepare_grids`] asked for it (after the build: the same frame's volumes).
+pub(super) fn deposit_beams(
+    mut ctx: RenderContext,
+    mut grids: ResMut<BeamGridBuffers>,
+    volumes: Res<VolumeBuffers>,
+    pipelines: Res<BeamGridPipelines>,
+    cache: Res<PipelineCache>,
+    recorder: Res<PassRecorder>,
+) {
+    let (true, Some(pipeline), Some(cells), Some(buffer), Some(counters), Some(settings), Some(uniform)) = (
+        grids.deposit,
+        cache.get_compute_pipeline(pipelines.deposit),
+        grids.cells.as_ref(),
+        volumes.volumes.as_ref(),
+        volumes.counters.as_ref(),
+        volumes.settings.binding(),
+        grids.grids.binding(),
+    ) else {
+        return;
+    };
+    let bind_group = ctx.render_device().create_bind_group(
+        "caustic_shaft_deposit_bind_group",
+        &cache.get_bind_group_layout(&pipelines.deposit_layout),
+        &BindGroupEntries::sequential((buffer.as_entire_binding(), counters.as_entire_binding(), settings, uniform, cells.as_entire_binding())),
+    );
+    // At most one workgroup a volume the buffer holds; each strides over the rest.
+    let groups = (buffer.size() / GpuCausticVolume::min_size().get()).clamp(1, 65535) as u32;
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let encoder = ctx.command_encoder();
+    encoder.clear_buffer(cells, 0, None);
+    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_deposit"), ..default() });
+    let span = diagnostics.pass_span(&mut pass, "caustics/shaft_deposit");
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, &bind_group, &[]);
+    pass.dispatch_workgroups(groups, 1, 1);
+    span.end(&mut pass);
+    drop(pass);
+    grids.deposit = false;
+    recorder.record("shaft deposit");
+}

@@ -1,0 +1,221 @@
+// Light shafts at a fixed cost per eye ray: the GPU twin of
+// `caustics_core::volumes::BeamGrid`. `deposit` adds every caustic volume's beam to a
+// grid over each medium's box (the mean of colour · E_beam · e^{−σt dₛ} per cell, and
+// the beams' summed directions); `march` integrates each eye ray through the grid in
+// a fixed number of steps (§3.5's single scattering).
+
+#import bevy_render::view::View
+#import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
+#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, sample_volume}
+
+// One medium's grid (`GpuBeamGrid` in `render.rs`).
+struct Grid {
+    size: vec4<u32>,   // xyz: cells, w: the first cell's index in `cells`
+    cell: vec4<f32>,   // x: the smallest world edge of a cell, y: a cell's world volume
+}
+
+struct Grids {
+    grids: array<Grid, 4>,
+    steps: u32,
+}
+
+// Eight words a cell: colour · E_beam · e^{−σt dₛ} (xyz), then the summed directions.
+const CELL_WORDS: u32 = 8u;
+
+#ifdef DEPOSIT
+@group(0) @binding(0) var<storage, read> volumes: array<CausticVolume>;
+@group(0) @binding(1) var<storage, read> counters: array<u32>;
+@group(0) @binding(2) var<uniform> settings: VolumeSettings;
+@group(0) @binding(3) var<uniform> grids: Grids;
+@group(0) @binding(4) var<storage, read_write> cells: array<atomic<u32>>;
+
+// `caustics_core::volumes::{MAX_DEPOSIT_STEPS, MAX_DEPOSIT_SPLIT}`.
+const MAX_DEPOSIT_STEPS: u32 = 1024u;
+const MAX_DEPOSIT_SPLIT: u32 = 64u;
+
+// An f32 added to a word holding f32 bits (WGSL has no float atomics).
+fn add(word: u32, value: f32) {
+    var old = atomicLoad(&cells[word]);
+    loop {
+        let swapped = atomicCompareExchangeWeak(&cells[word], old, bitcast<u32>(bitcast<f32>(old) + value));
+        if swapped.exchanged {
+            break;
+        }
+        old = swapped.old_value;
+    }
+}
+
+// `deposit_steps`.
+fn deposit_steps(v: CausticVolume, spacing: f32) -> u32 {
+    var longest = 1.0;
+    for (var i = 0; i < 3; i++) {
+        longest = max(longest, length(vec3(v.ray_x[i], 1.0, v.ray_z[i])));
+    }
+    let steps = ceil(v.origin.w * longest / spacing);
+    return select(1u, u32(clamp(steps, 1.0, f32(MAX_DEPOSIT_STEPS))), steps == steps);
+}
+
+// `deposit_split`.
+fn deposit_split(x: vec3<f32>, z: vec3<f32>, spacing: f32) -> u32 {
+    let sides = vec3(length(vec2(x.x - x.y, z.x - z.y)), length(vec2(x.y - x.z, z.y - z.z)), length(vec2(x.z - x.x, z.z - z.x)));
+    let split = ceil(max(sides.x, max(sides.y, sides.z)) / spacing);
+    return select(1u, u32(clamp(split, 1.0, f32(MAX_DEPOSIT_SPLIT))), split == split);
+}
+
+// `BeamGrid::corners` and the deposit's spread: the eight cells around a point of
+// the unit cube, with trilinear weights between cell centres.
+fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
+    let size = vec3<f32>(g.size.xyz);
+    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
+    let base = max(min(floor(q), size - 2.0), vec3(0.0));
+    let f = q - base;
+    let b = vec3<u32>(base);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+        let c = b + o;
+        let w = select(1.0 - f, f, o == vec3(1u));
+        let weight = w.x * w.y * w.z;
+        let word = (g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x) * CELL_WORDS;
+        for (var k = 0u; k < 3u; k++) {
+            add(word + k, weight * source[k]);
+            add(word + 4u + k, weight * direction[k]);
+        }
+    }
+}
+
+// One workgroup a volume at a time (the build's count in `counters[1]`), its
+// invocations sharing each caustic triangle's samples; `BeamGrid::deposit` per medium.
+@compute @workgroup_size(64)
+fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let count = counters[1];
+    for (var index = group.x; index < count; index += groups.x) {
+        let v = volumes[index];
+        for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
+            let medium = settings.media[m];
+            let g = grids.grids[m];
+            let spacing = 0.5 * g.cell.x;
+            let sigma_t = medium.coefficients.x + medium.coefficients.y;
+            let steps = deposit_steps(v, spacing);
+            let d_alpha = v.origin.w / f32(steps);
+            for (var step = 0u; step < steps; step++) {
+                let alpha = (f32(step) + 0.5) * d_alpha;
+                let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
+                let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
+                let split = deposit_split(x, z, spacing);
+                let n = f32(split);
+                let x1 = x.y - x.x;
+                let z1 = z.y - z.x;
+                let x2 = x.z - x.x;
+                let z2 = z.z - z.x;
+                let weight = 0.5 * abs(x1 * z2 - z1 * x2) / (n * n) * d_alpha / g.cell.y;
+                for (var k = lane; k < split * split; k += 64u) {
+                    // `deposit_sample`: a sub-triangle's centroid.
+                    let a = k / split;
+                    let b = k % split;
+                    var uw = (vec2(f32(a), f32(b)) + 1.0 / 3.0) / n;
+                    if a + b >= split {
+                        uw = (vec2(f32(split - 1u - a), f32(split - 1u - b)) + 2.0 / 3.0) / n;
+                    }
+                    let sx = x.x + uw.x * x1 + uw.y * x2;
+                    let sz = z.x + uw.x * z1 + uw.y * z2;
+                    let p = v.origin.xyz + v.axis_x.xyz * sx + v.axis_y.xyz * alpha + v.axis_z.xyz * sz;
+                    let local = (medium.local_from_world * vec4(p, 1.0)).xyz;
+                    if !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
+                        continue;
+                    }
+                    let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
+                    if !s.inside {
+                        continue;
+                    }
+                    let beam_length = length(s.ray);
+                    let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight);
+                    if any(source != source) || any(abs(source) > vec3(3.0e38)) {
+                        continue;
+                    }
+                    spread(g, local, source, s.ray / beam_length * (source.x + source.y + source.z));
+                }
+            }
+        }
+    }
+}
+#endif
+
+#ifdef MARCH
+@group(0) @binding(0) var<uniform> view: View;
+@group(0) @binding(1) var<uniform> settings: VolumeSettings;
+@group(0) @binding(2) var<uniform> grids: Grids;
+@group(0) @binding(3) var<storage, read> cells: array<vec4<f32>>;
+#ifdef MULTISAMPLED
+@group(0) @binding(4) var depth_prepass: texture_depth_multisampled_2d;
+#else
+@group(0) @binding(4) var depth_prepass: texture_depth_2d;
+#endif
+
+const PI: f32 = 3.141592653589793;
+
+// `BeamGrid::lookup`: source (xyz) and summed direction, trilinear between cell centres.
+fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
+    let size = vec3<f32>(g.size.xyz);
+    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
+    let base = max(min(floor(q), size - 2.0), vec3(0.0));
+    let f = q - base;
+    let b = vec3<u32>(base);
+    var source = vec3(0.0);
+    var direction = vec3(0.0);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+        let c = b + o;
+        let w = select(1.0 - f, f, o == vec3(1u));
+        let cell = (g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x) * 2u;
+        source += w.x * w.y * w.z * cells[cell].xyz;
+        direction += w.x * w.y * w.z * cells[cell + 1u].xyz;
+    }
+    return array(source, direction);
+}
+
+// `BeamGrid::in_scattered_radiance` at the view's pixel this fragment stands for
+// (`shaft_pixel` in `volumes.wgsl`).
+@fragment
+fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+#ifdef SHAFT_SCALE
+    let at = (floor(in.position.xy) + 0.5) * f32(#{SHAFT_SCALE});
+#else
+    let at = in.position.xy;
+#endif
+    let depth = textureLoad(depth_prepass, vec2<i32>(at), 0);
+    let eye = world_at(view, at, 1.0);
+    let dir = normalize(world_at(view, at, 0.5) - eye);
+    var len = 1.0e5;
+    if depth > 0.0 {
+        len = distance(world_at(view, at, depth), eye);
+    }
+    var radiance = vec3(0.0);
+    let steps = max(grids.steps, 1u);
+    for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
+        let medium = settings.media[m];
+        let t = clip_medium(medium, eye, dir, len);
+        if !(t.x < t.y) {
+            continue;
+        }
+        let c = medium.coefficients;
+        let sigma_t = c.x + c.y;
+        let dt = (t.y - t.x) / f32(steps);
+        for (var i = 0u; i < steps; i++) {
+            let s = t.x + (f32(i) + 0.5) * dt;
+            let local = (medium.local_from_world * vec4(eye + s * dir, 1.0)).xyz;
+            let cell = lookup(grids.grids[m], local);
+            let direction = cell[1];
+            let along = length(direction);
+            var phase = 1.0 / (4.0 * PI);
+            if along > 0.0 {
+                let g = clamp(c.z, -0.999, 0.999);
+                let denom = max(1.0 + g * g - 2.0 * g * dot(direction / along, -dir), 1e-12);
+                phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
+            }
+            radiance += cell[0] * (c.x * phase * exp(-sigma_t * (s - t.x)) * dt);
+        }
+    }
+    return exposed(radiance, view.exposure);
+}
+#endif
