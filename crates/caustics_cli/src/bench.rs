@@ -64,6 +64,11 @@ pub struct BenchArgs {
     /// With `--frames`: the view's size in pixels, `WIDTHxHEIGHT`.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub frame_size: (u32, u32),
+    /// With `--frames`: how the caustic volumes' shafts are integrated, `grid` (the
+    /// default: a fixed number of steps through the beam grid) or `exact` (through
+    /// every volume an eye ray crosses).
+    #[arg(long, default_value = "grid", value_parser = parse_shafts)]
+    pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
     /// With `--frames`: the families' scenes to run, comma-separated (`ocean`, `ring`,
     /// `glass ball`, `pool`, `rippled pool`); all when not given.
     #[arg(long, value_delimiter = ',')]
@@ -71,6 +76,15 @@ pub struct BenchArgs {
 }
 
 /// `1920x1080` as (1920, 1080).
+fn parse_shafts(text: &str) -> Result<caustics_bevy::warped_volumes::ShaftIntegral, String> {
+    use caustics_bevy::warped_volumes::ShaftIntegral;
+    match text {
+        "grid" => Ok(ShaftIntegral::Grid),
+        "exact" => Ok(ShaftIntegral::Exact),
+        _ => Err(format!("`{text}` is neither `grid` nor `exact`")),
+    }
+}
+
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
     let (w, h) = text.split_once('x').ok_or_else(|| format!("{text}: expected WIDTHxHEIGHT"))?;
     let parse = |n: &str| n.trim().parse::<u32>().ok().filter(|&n| (16..=8192).contains(&n));
@@ -598,7 +612,7 @@ fn trace_grid(
 pub fn run(args: BenchArgs) -> Result<(), String> {
     if args.frames {
         let scenes = |scene: &str| args.frame_scenes.is_empty() || args.frame_scenes.iter().any(|s| s == scene);
-        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size };
+        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size, shafts: args.shafts };
         return crate::frames::run(&args.out, |t, scene| args.runs(t) && scenes(scene), &bench);
     }
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];

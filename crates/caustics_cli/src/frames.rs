@@ -49,6 +49,8 @@ pub struct FrameBench {
     pub budget_s: f64,
     /// The view's width and height in pixels.
     pub view: (u32, u32),
+    /// How the volumes' shafts are integrated.
+    pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
 }
 
 /// One technique on one scene at growing sizes.
@@ -155,7 +157,7 @@ pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) ->
                 continue;
             }
             let start = Instant::now();
-            let row = measure(family, parameter, bench.view)?;
+            let row = measure(family, parameter, bench)?;
             eprintln!(
                 "{:>11} {:>12} {:>9} {}: caustics {:9.2} ms, {:8.2} M invocations, {:6.2} fragments a receiver pixel; main pass {:8.2} ms, {:6.2} M fragments (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {} volumes, {} slabs, {} escaping; {:.0} s",
                 family.technique,
@@ -183,8 +185,10 @@ pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) ->
 
 /// Renders one family's scene at one size until the technique runs, then averages
 /// [`MEASURED_FRAMES`] frames.
-fn measure(family: &Family, parameter: u32, (width, height): (u32, u32)) -> Result<FrameCost, String> {
+fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameCost, String> {
+    let (width, height) = bench.view;
     let mut renderer = HeadlessRenderer::timed(width, height).map_err(|e| e.to_string())?;
+    renderer.world_mut().insert_resource(WarpedVolumesSettings { shaft_integral: bench.shafts, ..default() });
     let target = renderer.render_target();
     renderer.app.add_systems(Update, (turn, rain));
     let size = (family.spawn)(renderer.world_mut(), target, parameter);

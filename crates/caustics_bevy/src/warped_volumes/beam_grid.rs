@@ -1,8 +1,9 @@
 //! Render world: light shafts at a fixed cost per eye ray (`beam_grid.wgsl`, the twin
 //! of `caustics_core::volumes::BeamGrid`). After each build of the volumes, and when
 //! the media change, a compute pass adds every volume's beam to a grid over each
-//! medium's box; the volumetric pass then marches each eye ray through the grid in
-//! [`WarpedVolumesSettings::shaft_steps`] steps, whatever the number of volumes.
+//! medium's box; the volumetric pass then marches each eye ray through the grid, one
+//! step a cell (at most [`super::WarpedVolumesSettings::shaft_steps`]), whatever the
+//! number of volumes.
 
 use super::ShaftIntegral;
 use super::compute::VolumeBuild;
@@ -37,7 +38,7 @@ pub(super) struct GpuGrid {
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuBeamGrids {
     grids: [GpuGrid; MAX_MEDIA],
-    steps: u32,
+    max_steps: u32,
 }
 
 /// Eight words a cell: source and summed direction.
@@ -162,7 +163,7 @@ pub(super) fn prepare_grids(
         *grids = BeamGridBuffers::default();
         return;
     }
-    let mut gpu = GpuBeamGrids { steps: settings.shaft_steps.max(1), ..default() };
+    let mut gpu = GpuBeamGrids { max_steps: settings.shaft_steps.max(1), ..default() };
     let mut layout = Vec::new();
     let mut first = 0u32;
     for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {

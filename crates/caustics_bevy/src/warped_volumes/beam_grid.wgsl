@@ -17,7 +17,7 @@ struct Grid {
 
 struct Grids {
     grids: array<Grid, 4>,
-    steps: u32,
+    max_steps: u32,
 }
 
 // Eight words a cell: colour · E_beam · e^{−σt dₛ} (xyz), then the summed directions.
@@ -32,7 +32,7 @@ const CELL_WORDS: u32 = 8u;
 
 // `caustics_core::volumes::{MAX_DEPOSIT_STEPS, MAX_DEPOSIT_SPLIT}`.
 const MAX_DEPOSIT_STEPS: u32 = 1024u;
-const MAX_DEPOSIT_SPLIT: u32 = 64u;
+const MAX_DEPOSIT_SPLIT: u32 = 128u;
 
 // An f32 added to a word holding f32 bits (WGSL has no float atomics).
 fn add(word: u32, value: f32) {
@@ -191,7 +191,6 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         len = distance(world_at(view, at, depth), eye);
     }
     var radiance = vec3(0.0);
-    let steps = max(grids.steps, 1u);
     for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
         let medium = settings.media[m];
         let t = clip_medium(medium, eye, dir, len);
@@ -200,6 +199,8 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
         }
         let c = medium.coefficients;
         let sigma_t = c.x + c.y;
+        // `march_steps`: one a cell.
+        let steps = u32(clamp(ceil((t.y - t.x) / grids.grids[m].cell.x), 1.0, f32(max(grids.max_steps, 1u))));
         let dt = (t.y - t.x) / f32(steps);
         for (var i = 0u; i < steps; i++) {
             let s = t.x + (f32(i) + 0.5) * dt;

@@ -22,7 +22,7 @@ use glam::{UVec3, Vec3};
 /// The most depth steps of one volume's deposit.
 pub const MAX_DEPOSIT_STEPS: u32 = 1024;
 /// The most sub-triangles along a caustic triangle's side in the deposit.
-pub const MAX_DEPOSIT_SPLIT: u32 = 64;
+pub const MAX_DEPOSIT_SPLIT: u32 = 128;
 
 /// The grid's cells along each axis of a medium's box: `longest` along its longest
 /// side, proportionally fewer (at least 2) along the others, so that cells are about
@@ -76,6 +76,13 @@ pub fn deposit_sample(x: Vec3, z: Vec3, split: u32, k: u32) -> (f32, f32, f32) {
     let (x1, z1, x2, z2) = (x.y - x.x, z.y - z.x, x.z - x.x, z.z - z.x);
     let area = 0.5 * (x1 * z2 - z1 * x2).abs();
     (x.x + u * x1 + w * x2, z.x + u * z1 + w * z2, area / (n * n))
+}
+
+/// The steps of a march `length` long through cells whose smallest edge is `cell`:
+/// one a cell, from 1 to `max_steps`.
+pub fn march_steps(length: f32, cell: f32, max_steps: u32) -> u32 {
+    let steps = (length / cell).ceil();
+    if steps.is_finite() { (steps as u32).clamp(1, max_steps.max(1)) } else { 1 }
 }
 
 /// The caustic beams' scattering source on a grid over one medium's box.
@@ -190,9 +197,11 @@ impl BeamGrid {
     }
 
     /// Radiance scattered towards the eye along the eye ray from `eye` to `end`:
-    /// `steps` midpoint samples of `σₛ p(θ) S(x) e^{−σₜ dₑ}` between where the ray
-    /// enters and leaves the medium, `dₑ` measured from the entry (§3.5).
-    pub fn in_scattered_radiance(&self, eye: Vec3, end: Vec3, steps: u32) -> Vec3 {
+    /// midpoint samples of `σₛ p(θ) S(x) e^{−σₜ dₑ}` between where the ray enters and
+    /// leaves the medium, `dₑ` measured from the entry (§3.5), one a cell's smallest
+    /// edge apart (a coarser march would step over beams a cell wide) but at most
+    /// `max_steps`.
+    pub fn in_scattered_radiance(&self, eye: Vec3, end: Vec3, max_steps: u32) -> Vec3 {
         let length = (end - eye).length();
         if length.is_nan() || length <= 0.0 || length.is_infinite() {
             return Vec3::ZERO;
@@ -203,7 +212,7 @@ impl BeamGrid {
         };
         let c = self.medium.coefficients;
         let local_from_world = self.medium.world_from_local.inverse();
-        let steps = steps.max(1);
+        let steps = march_steps(exit - enter, self.cell().0, max_steps);
         let dt = (exit - enter) / steps as f32;
         let mut radiance = Vec3::ZERO;
         for i in 0..steps {
