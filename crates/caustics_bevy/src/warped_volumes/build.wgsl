@@ -345,45 +345,61 @@ fn crossing(n: vec3<f32>, offset: f32, v: vec3<f32>, r: vec3<f32>) -> vec2<f32> 
     return vec2(at, 1.0);
 }
 
-// `local_slab`: the slab around the one surface the three rays land on (hits at
-// `points` with `normals`, local).
-fn local_slab(v: array<vec3<f32>, 3>, r: array<vec3<f32>, 3>, points: array<vec3<f32>, 3>, hit_normals: array<vec3<f32>, 3>) -> Slab {
+// `local_slab`: the slab around the one surface the rays that `hit` land on (at
+// `points` with `normals`, local), which the others hold to.
+fn local_slab(v: array<vec3<f32>, 3>, r: array<vec3<f32>, 3>, hit: vec3<bool>, points: array<vec3<f32>, 3>, hit_normals: array<vec3<f32>, 3>) -> Slab {
     var slab = Slab(vec3(0.0), 0.0, 0.0, 0.0, 0.0, false);
     let sum = r[0] + r[1] + r[2];
     var normals = hit_normals;
+    var total = vec3(0.0);
+    // The first ray that hits: a ray that meets nothing holds to its plane.
+    var first_hit = 3u;
     for (var i = 0u; i < 3u; i++) {
         if dot(normals[i], sum) < 0.0 {
             normals[i] = -normals[i];
         }
+        if hit[i] {
+            total += normals[i];
+            first_hit = min(first_hit, i);
+        }
     }
-    let normal = try_normalize(normals[0] + normals[1] + normals[2]);
-    if all(normal == vec3(0.0)) {
+    let normal = try_normalize(total);
+    if all(normal == vec3(0.0)) || first_hit == 3u {
         return slab;
     }
     for (var i = 0u; i < 3u; i++) {
-        if !(dot(normals[i], normal) >= ONE_SURFACE_COS) {
+        if hit[i] && !(dot(normals[i], normal) >= ONE_SURFACE_COS) {
             return slab;
         }
     }
     var deepest = 0.0;
+    var near = INFINITY;
+    var far = -INFINITY;
     for (var j = 0u; j < 3u; j++) {
-        let own = crossing(normals[j], dot(normals[j], points[j]), v[j], r[j]);
+        let mine = select(first_hit, j, hit[j]);
+        let own = crossing(normals[mine], dot(normals[mine], points[mine]), v[j], r[j]);
         if own.y == 0.0 {
             return slab;
         }
         for (var i = 0u; i < 3u; i++) {
+            if !hit[i] {
+                continue;
+            }
             let at = crossing(normals[i], dot(normals[i], points[i]), v[j], r[j]);
             if at.y == 0.0 || !(abs(at.x - own.x) <= ONE_SURFACE * own.x) {
                 return slab;
             }
             deepest = max(deepest, at.x);
         }
+        if hit[j] {
+            near = min(near, dot(normal, points[j]));
+            far = max(far, dot(normal, points[j]));
+        }
     }
-    let offsets = vec3(dot(normal, points[0]), dot(normal, points[1]), dot(normal, points[2]));
     let margin = SLAB_MARGIN * deepest;
     slab.normal = normal;
-    slab.near = min(min(offsets.x, offsets.y), offsets.z) - margin;
-    slab.far = max(max(offsets.x, offsets.y), offsets.z) + margin;
+    slab.near = near - margin;
+    slab.far = far + margin;
     var first = INFINITY;
     var last = 0.0;
     for (var j = 0u; j < 3u; j++) {
@@ -698,17 +714,19 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     // on one surface, the surface pass draws only the slab around it.
     var points: array<vec3<f32>, 3>;
     var normals: array<vec3<f32>, 3>;
-    // How many of the three rays meet a surface.
+    // Which of the three rays meet a surface, and how many.
+    var hit = vec3(false);
     var hits = 0u;
     for (var i = 0u; i < 3u; i++) {
         let ray = rays[tri[i]];
-        hits += select(0u, 1u, ray.hit.w > 0.0);
+        hit[i] = ray.hit.w > 0.0;
+        hits += select(0u, 1u, hit[i]);
         points[i] = local(frame, ray.hit.xyz);
         normals[i] = local_dir(frame, ray.hit_normal.xyz);
     }
     var slab = Slab(vec3(0.0), 0.0, 0.0, 0.0, 0.0, false);
-    if hits == 3u {
-        slab = local_slab(v, r, points, normals);
+    if hits > 0u {
+        slab = local_slab(v, r, hit, points, normals);
     }
     var corners: array<vec3<f32>, 8>;
     var surface: array<vec3<f32>, 8>;
@@ -716,7 +734,10 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     out.slab_far = vec4(0.0);
     let on_slab = slab.found && slab.last <= depth;
     if on_slab {
-        out.origin.w = slab.last;
+        // A beam partly past the surface's edge goes on in a medium.
+        if hits == 3u {
+            out.origin.w = slab.last;
+        }
         let normal = world_dir(frame, slab.normal);
         out.slab = vec4(normal, slab.near + dot(normal, frame.origin));
         out.slab_far = vec4(slab.far + dot(normal, frame.origin), 0.0, 0.0, 0.0);

@@ -253,34 +253,36 @@ const ONE_SURFACE_COS: f32 = 0.99;
 /// hits' depth: room for receiver points rebuilt from a depth buffer.
 const SLAB_MARGIN: f32 = 1e-3;
 
-/// The slab around the one surface a volume's three rays land on, in its local frame,
-/// and the depths α between which the volume crosses it; `None` where the rays do not
-/// land on one surface (a ray that meets nothing; rays landing on a step's edge, a
-/// corner). `hits` are the rays' first hits (point, normal), local. On one surface each
-/// ray crosses the three tangent planes within [`ONE_SURFACE`] of its own hit, and the
-/// normals agree within [`ONE_SURFACE_COS`]; the slab holds the three planes with
-/// [`SLAB_MARGIN`] either side. Over a plane the crossing depth is a
-/// linear-fractional function of the barycentric coordinates, so the volume crosses
-/// each of the slab's planes between its vertex rays' crossings.
+/// The slab around the one surface a volume's rays land on, in its local frame, and
+/// the depths α between which the volume crosses it; `None` where the rays do not land
+/// on one surface (rays landing on a step's edge, a corner; rays that all meet
+/// nothing). `hits` are the rays' first hits (point, normal), local. On one surface
+/// each ray crosses the tangent planes at the hits within [`ONE_SURFACE`] of its own
+/// hit, and the normals agree within [`ONE_SURFACE_COS`]; the slab holds the planes
+/// with [`SLAB_MARGIN`] either side. A ray that meets nothing (past the edge of a
+/// floor) holds to the others' planes instead: the surface its neighbours land on is
+/// the one the volume lights. Over a plane the crossing depth is a linear-fractional
+/// function of the barycentric coordinates, so the volume crosses each of the slab's
+/// planes between its vertex rays' crossings.
 fn local_slab(v: [Vec3; 3], r: [Vec3; 3], hits: [Option<(Vec3, Vec3)>; 3]) -> Option<(SurfaceSlab, f32, f32)> {
-    let hits = [hits[0]?, hits[1]?, hits[2]?];
-    // The normals, pointing the way the rays travel.
+    // The tangent planes n·p = offset at the hits, normals pointing the way the rays travel.
     let along = |n: Vec3| if n.dot(r[0] + r[1] + r[2]) < 0.0 { -n } else { n };
-    let normals = hits.map(|(_, n)| along(n));
-    let normal = (normals[0] + normals[1] + normals[2]).try_normalize()?;
-    if !normals.iter().all(|n| n.dot(normal) >= ONE_SURFACE_COS) {
+    let planes = hits.map(|hit| hit.map(|(point, n)| (along(n), along(n).dot(point))));
+    let normal = planes.iter().flatten().map(|&(n, _)| n).sum::<Vec3>().try_normalize()?;
+    if !planes.iter().flatten().all(|(n, _)| n.dot(normal) >= ONE_SURFACE_COS) {
         return None;
     }
     // Where ray j crosses the plane n·p = offset.
-    let crossing = |n: Vec3, offset: f32, j: usize| {
+    let crossing = |(n, offset): (Vec3, f32), j: usize| {
         let towards = n.dot(r[j]);
         Some((offset - n.dot(v[j])) / towards).filter(|at| towards > 0.0 && at.is_finite() && *at > 0.0)
     };
+    let first_plane = planes.iter().flatten().copied().next()?;
     let mut deepest = 0.0f32;
     for j in 0..3 {
-        let own = crossing(normals[j], normals[j].dot(hits[j].0), j)?;
-        for (n, (point, _)) in normals.iter().zip(hits) {
-            let at = crossing(*n, n.dot(point), j)?;
+        let own = crossing(planes[j].unwrap_or(first_plane), j)?;
+        for &plane in planes.iter().flatten() {
+            let at = crossing(plane, j)?;
             // Both finite and positive (`crossing`).
             if (at - own).abs() > ONE_SURFACE * own {
                 return None;
@@ -288,17 +290,17 @@ fn local_slab(v: [Vec3; 3], r: [Vec3; 3], hits: [Option<(Vec3, Vec3)>; 3]) -> Op
             deepest = deepest.max(at);
         }
     }
-    let offsets = hits.map(|(point, _)| normal.dot(point));
+    let offsets = hits.iter().flatten().map(|&(point, _)| normal.dot(point));
     let margin = SLAB_MARGIN * deepest;
     let slab = SurfaceSlab {
         normal,
-        near: offsets.iter().copied().fold(f32::INFINITY, f32::min) - margin,
-        far: offsets.iter().copied().fold(f32::NEG_INFINITY, f32::max) + margin,
+        near: offsets.clone().fold(f32::INFINITY, f32::min) - margin,
+        far: offsets.fold(f32::NEG_INFINITY, f32::max) + margin,
     };
     let (mut first, mut last) = (f32::INFINITY, 0.0f32);
     for j in 0..3 {
-        first = first.min(crossing(normal, slab.near, j)?);
-        last = last.max(crossing(normal, slab.far, j)?);
+        first = first.min(crossing((normal, slab.near), j)?);
+        last = last.max(crossing((normal, slab.far), j)?);
     }
     Some((slab, (1.0 - SLAB_MARGIN) * first, (1.0 + SLAB_MARGIN) * last))
 }
@@ -604,10 +606,12 @@ impl TriangleContext<'_> {
                 let offset = normal.dot(frame.origin);
                 let world = SurfaceSlab { normal, near: slab.near + offset, far: slab.far + offset };
                 // The slice of the beam that crosses the slab, bounded on its own and cut
-                // to the slab where its sides cross it.
+                // to the slab where its sides cross it. A beam partly past the surface's
+                // edge goes on in a medium.
                 let top = std::array::from_fn(|i| v[i] + first * r[i]);
                 let slice = BoundingShape::local(top, r, last - first);
-                (Some(world), last, BoundingShape::local(v, r, last), cut_to_slab(slice, &slab))
+                let end = if local_hits.iter().all(Option::is_some) { last } else { whole(depth) };
+                (Some(world), end, BoundingShape::local(v, r, end), cut_to_slab(slice, &slab))
             }
             None => {
                 let end = whole(depth);
@@ -795,8 +799,11 @@ mod tests {
         let (v, r) = ([Vec3::ZERO, Vec3::X, Vec3::Z], [Vec3::Y; 3]);
         let (floor, tread) = (Some((Vec3::new(0.0, 2.0, 0.0), Vec3::Y)), Some((Vec3::new(0.0, 1.5, 0.0), Vec3::Y)));
         assert_eq!(local_slab(v, r, [floor, floor, tread]), None);
-        assert_eq!(local_slab(v, r, [floor, floor, None]), None);
+        assert_eq!(local_slab(v, r, [None; 3]), None);
         let (slab, first, last) = local_slab(v, r, [floor; 3]).expect("one floor");
+        // A ray past the floor's edge holds to the others' floor.
+        assert_eq!(local_slab(v, r, [floor, floor, None]), Some((slab, first, last)));
+        assert_eq!(local_slab(v, r, [None, floor, None]), Some((slab, first, last)));
         assert!(slab.near > 1.99 && slab.near < 2.0 && slab.far > 2.0 && slab.far < 2.01, "{slab:?}");
         assert!(first > 1.98 && first < slab.near && last > slab.far && last < 2.02, "{first} – {last}");
     }
