@@ -32,7 +32,7 @@ const CELL_WORDS: u32 = 8u;
 
 // `caustics_core::volumes::{MAX_DEPOSIT_STEPS, MAX_DEPOSIT_SPLIT}`.
 const MAX_DEPOSIT_STEPS: u32 = 1024u;
-const MAX_DEPOSIT_SPLIT: u32 = 128u;
+const MAX_DEPOSIT_SPLIT: u32 = 64u;
 
 // An f32 added to a word holding f32 bits (WGSL has no float atomics).
 fn add(word: u32, value: f32) {
@@ -56,10 +56,17 @@ fn deposit_steps(v: CausticVolume, spacing: f32) -> u32 {
     return select(1u, u32(clamp(steps, 1.0, f32(MAX_DEPOSIT_STEPS))), steps == steps);
 }
 
-// `deposit_split`.
-fn deposit_split(x: vec3<f32>, z: vec3<f32>, spacing: f32) -> u32 {
-    let sides = vec3(length(vec2(x.x - x.y, z.x - z.y)), length(vec2(x.y - x.z, z.y - z.z)), length(vec2(x.z - x.x, z.z - z.x)));
-    let split = ceil(max(sides.x, max(sides.y, sides.z)) / spacing);
+// `deposit_split`: one split for the whole beam, at its wider end.
+fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
+    var longest = 0.0;
+    for (var end = 0; end < 2; end++) {
+        let alpha = select(0.0, v.origin.w, end == 1);
+        let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
+        let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
+        let sides = vec3(length(vec2(x.x - x.y, z.x - z.y)), length(vec2(x.y - x.z, z.y - z.z)), length(vec2(x.z - x.x, z.z - z.x)));
+        longest = max(longest, max(sides.x, max(sides.y, sides.z)));
+    }
+    let split = ceil(longest / spacing);
     return select(1u, u32(clamp(split, 1.0, f32(MAX_DEPOSIT_SPLIT))), split == split);
 }
 
@@ -94,47 +101,45 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
             let medium = settings.media[m];
             let g = grids.grids[m];
-            let spacing = 0.5 * g.cell.x;
             let sigma_t = medium.coefficients.x + medium.coefficients.y;
-            let steps = deposit_steps(v, spacing);
+            let steps = deposit_steps(v, g.cell.x);
+            let split = deposit_split(v, g.cell.x);
+            let n = f32(split);
             let d_alpha = v.origin.w / f32(steps);
-            for (var step = 0u; step < steps; step++) {
-                let alpha = (f32(step) + 0.5) * d_alpha;
+            // Every sample of the beam's lattice, shared among the invocations.
+            for (var k = lane; k < steps * split * split; k += 64u) {
+                // `deposit_slice` and `deposit_sample`: a sub-triangle's centroid.
+                let alpha = (f32(k / (split * split)) + 0.5) * d_alpha;
                 let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
                 let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
-                let split = deposit_split(x, z, spacing);
-                let n = f32(split);
                 let x1 = x.y - x.x;
                 let z1 = z.y - z.x;
                 let x2 = x.z - x.x;
                 let z2 = z.z - z.x;
                 let weight = 0.5 * abs(x1 * z2 - z1 * x2) / (n * n) * d_alpha / g.cell.y;
-                for (var k = lane; k < split * split; k += 64u) {
-                    // `deposit_sample`: a sub-triangle's centroid.
-                    let a = k / split;
-                    let b = k % split;
-                    var uw = (vec2(f32(a), f32(b)) + 1.0 / 3.0) / n;
-                    if a + b >= split {
-                        uw = (vec2(f32(split - 1u - a), f32(split - 1u - b)) + 2.0 / 3.0) / n;
-                    }
-                    let sx = x.x + uw.x * x1 + uw.y * x2;
-                    let sz = z.x + uw.x * z1 + uw.y * z2;
-                    let p = v.origin.xyz + v.axis_x.xyz * sx + v.axis_y.xyz * alpha + v.axis_z.xyz * sz;
-                    let local = (medium.local_from_world * vec4(p, 1.0)).xyz;
-                    if !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
-                        continue;
-                    }
-                    let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
-                    if !s.inside {
-                        continue;
-                    }
-                    let beam_length = length(s.ray);
-                    let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight);
-                    if any(source != source) || any(abs(source) > vec3(3.0e38)) {
-                        continue;
-                    }
-                    spread(g, local, source, s.ray / beam_length * (source.x + source.y + source.z));
+                let a = (k % (split * split)) / split;
+                let b = k % split;
+                var uw = (vec2(f32(a), f32(b)) + 1.0 / 3.0) / n;
+                if a + b >= split {
+                    uw = (vec2(f32(split - 1u - a), f32(split - 1u - b)) + 2.0 / 3.0) / n;
                 }
+                let sx = x.x + uw.x * x1 + uw.y * x2;
+                let sz = z.x + uw.x * z1 + uw.y * z2;
+                let p = v.origin.xyz + v.axis_x.xyz * sx + v.axis_y.xyz * alpha + v.axis_z.xyz * sz;
+                let local = (medium.local_from_world * vec4(p, 1.0)).xyz;
+                if !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
+                    continue;
+                }
+                let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
+                if !s.inside {
+                    continue;
+                }
+                let beam_length = length(s.ray);
+                let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight);
+                if any(source != source) || any(abs(source) > vec3(3.0e38)) {
+                    continue;
+                }
+                spread(g, local, source, s.ray / beam_length * (source.x + source.y + source.z));
             }
         }
     }

@@ -8,11 +8,11 @@
 //! eye ray. The factor `S(x) = E_beam e^{−σₜ dₛ}` does not depend on the eye: each
 //! cell of the grid holds its mean over the cell, `∫_cell S dV / V_cell`, and the
 //! beams' mean direction there for the phase function. The deposit samples every
-//! volume on a lattice finer than the cells (its caustic triangles, §3.3, at a
+//! volume on a lattice as fine as the cells (its caustic triangles, §3.3, at a
 //! regular series of depths, each split into equal sub-triangles), weighting each
-//! sample by the volume it stands for: `∫ E_beam dV` over a beam is its flux times its
-//! length, which the deposit keeps exactly however thin the beam. The march samples
-//! the grid trilinearly.
+//! sample by the volume it stands for and spreading it over the eight cells around it:
+//! `∫ E_beam dV` over a beam is its flux times its length, which the deposit keeps
+//! exactly however thin the beam. The march samples the grid trilinearly.
 
 use super::medium::MediumBox;
 use super::{CausticVolume, VolumeSettings};
@@ -22,7 +22,7 @@ use glam::{UVec3, Vec3};
 /// The most depth steps of one volume's deposit.
 pub const MAX_DEPOSIT_STEPS: u32 = 1024;
 /// The most sub-triangles along a caustic triangle's side in the deposit.
-pub const MAX_DEPOSIT_SPLIT: u32 = 128;
+pub const MAX_DEPOSIT_SPLIT: u32 = 64;
 
 /// The grid's cells along each axis of a medium's box: `longest` along its longest
 /// side, proportionally fewer (at least 2) along the others, so that cells are about
@@ -53,11 +53,18 @@ pub fn deposit_slice(volume: &CausticVolume, steps: u32, step: u32) -> (Vec3, Ve
     (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z, alpha, d_alpha)
 }
 
-/// How many sub-triangles to a side the caustic triangle with corners `(x, z)` is
-/// split into, so that their centroids lie at most `spacing` apart.
-pub fn deposit_split(x: Vec3, z: Vec3, spacing: f32) -> u32 {
-    let side = |i: usize, j: usize| (x[i] - x[j]).hypot(z[i] - z[j]);
-    let split = (side(0, 1).max(side(1, 2)).max(side(2, 0)) / spacing).ceil();
+/// How many sub-triangles to a side every caustic triangle of one volume's deposit is
+/// split into, so that their centroids lie at most `spacing` apart at the wider end
+/// (the corners move linearly with depth, so the sides are longest at one end). One
+/// split for the whole beam lays its samples on one lattice, which the GPU shares
+/// among a workgroup's invocations however thin the beam.
+pub fn deposit_split(volume: &CausticVolume, spacing: f32) -> u32 {
+    let longest = |alpha: f32| {
+        let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
+        let side = |i: usize, j: usize| (x[i] - x[j]).hypot(z[i] - z[j]);
+        side(0, 1).max(side(1, 2)).max(side(2, 0))
+    };
+    let split = (longest(0.0).max(longest(volume.depth)) / spacing).ceil();
     if split.is_finite() { (split as u32).clamp(1, MAX_DEPOSIT_SPLIT) } else { 1 }
 }
 
@@ -121,22 +128,20 @@ impl BeamGrid {
 
     /// Adds one volume's beam: every sample of its lattice (its caustic triangle at
     /// [`deposit_steps`] depths, each split into [`deposit_split`]² sub-triangles, the
-    /// samples at most half a cell apart) that lies lit inside it ([`CausticVolume::sample`]) adds its source times the volume
-    /// it stands for to the eight cells around it ([`Self::corners`]).
+    /// samples at most a cell apart, where the eight cells' trilinear weights of a
+    /// sample still sum evenly over a beam) that lies lit inside it
+    /// ([`CausticVolume::sample`]) adds its source times the volume it stands for to
+    /// the eight cells around it ([`Self::corners`]).
     pub fn deposit(&mut self, volume: &CausticVolume, settings: &VolumeSettings) {
         let (cell, cell_volume) = self.cell();
-        let spacing = 0.5 * cell;
-        let steps = deposit_steps(volume, spacing);
+        let (steps, split) = (deposit_steps(volume, cell), deposit_split(volume, cell));
         let sigma_t = self.medium.coefficients.extinction();
         let local_from_world = self.medium.world_from_local.inverse();
-        for step in 0..steps {
-            let (x, z, alpha, d_alpha) = deposit_slice(volume, steps, step);
-            let split = deposit_split(x, z, spacing);
-            for k in 0..split * split {
-                let (sx, sz, area) = deposit_sample(x, z, split, k);
-                let p = volume.origin + volume.axes[0] * sx + volume.axes[1] * alpha + volume.axes[2] * sz;
-                self.deposit_at(volume, p, area * d_alpha / cell_volume, sigma_t, &local_from_world, settings);
-            }
+        for k in 0..steps * split * split {
+            let (x, z, alpha, d_alpha) = deposit_slice(volume, steps, k / (split * split));
+            let (sx, sz, area) = deposit_sample(x, z, split, k % (split * split));
+            let p = volume.origin + volume.axes[0] * sx + volume.axes[1] * alpha + volume.axes[2] * sz;
+            self.deposit_at(volume, p, area * d_alpha / cell_volume, sigma_t, &local_from_world, settings);
         }
     }
 
