@@ -26,21 +26,17 @@ pub(super) struct VolumeDraw<'w> {
     march: Res<'w, BeamGridPipelines>,
 }
 
+/// Where a pass draws: the target (the view's target size over `scale`, within the
+/// camera's viewport over `scale`; cleared first when `clear`), tested against a depth
+/// texture, read only, when given.
+type PassTarget<'a> = (&'a TextureView, Option<&'a TextureView>, u32, bool);
+
 impl VolumeDraw<'_> {
-    /// Draws every volume's bounding prism, 36 vertices an instance, into `target`
-    /// (the view's target size over `scale`, within the camera's viewport over `scale`;
-    /// cleared first when `clear`; tested against `depth`, read only, when given) with
-    /// the view's pipeline `pipeline_id`, times it as the span `caustics/{pass}` and
-    /// records `pass` in the report. Whether it drew.
-    fn draw(
-        &self,
-        ctx: &mut RenderContext,
-        pass: &'static str,
-        (target, depth_test, scale, clear): (&TextureView, Option<&TextureView>, u32, bool),
-        pipeline_id: CachedRenderPipelineId,
-        (irradiance, work, pipelines, prepass, view_offset): VolumeView,
-    ) -> bool {
-        let (Some(pipeline), Some(depth), Some(normal), Some(view), Some(volumes), Some(counters), Some(settings)) = (
+    /// Draws every volume's bounding prism, 36 vertices an instance, into `target` with
+    /// the view's pipeline `pipeline_id` ([`Self::additive_pass`]). Whether it drew.
+    fn draw(&self, ctx: &mut RenderContext, pass: &'static str, target: PassTarget, pipeline_id: CachedRenderPipelineId, view: VolumeView) -> bool {
+        let (_, _, pipelines, prepass, _) = view;
+        let (Some(pipeline), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
             self.cache.get_render_pipeline(pipeline_id),
             prepass.depth_view(),
             prepass.normal_view(),
@@ -57,8 +53,55 @@ impl VolumeDraw<'_> {
         let bind_group = ctx.render_device().create_bind_group(
             "caustic_volumes_bind_group",
             &self.cache.get_bind_group_layout(&self.layouts.layouts[pipelines.multisampled as usize]),
-            &BindGroupEntries::sequential((view, volumes.as_entire_binding(), settings, depth, normal)),
+            &BindGroupEntries::sequential((view_binding, volumes.as_entire_binding(), settings, depth, normal)),
         );
+        // As many instances as the GPU build kept (`compute.rs`).
+        self.additive_pass(ctx, pass, target, (pipeline, &bind_group), view, |render_pass| render_pass.draw_indirect(counters, 0));
+        true
+    }
+
+    /// The volumetric pass into `target`: the eye rays marched through the beam grid
+    /// (a fullscreen triangle) where the view has that pipeline, else every volume
+    /// drawn ([`Self::draw`]). Whether it drew.
+    fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
+        let Some(march) = view.2.march else {
+            return self.draw(ctx, "volumetric", (target, None, scale, clear), view.2.volumetric, view);
+        };
+        let (_, _, pipelines, prepass, _) = view;
+        let (false, Some(pipeline), Some(depth), Some(view_binding), Some(settings), Some(grids), Some(cells)) = (
+            self.buffers.empty,
+            self.cache.get_render_pipeline(march),
+            prepass.depth_view(),
+            self.view_uniforms.uniforms.binding(),
+            self.buffers.settings.binding(),
+            self.grids.grids.binding(),
+            self.grids.cells.as_ref(),
+        ) else {
+            return false;
+        };
+        let bind_group = ctx.render_device().create_bind_group(
+            "caustic_shaft_march_bind_group",
+            &self.cache.get_bind_group_layout(&self.march.march_layouts[pipelines.multisampled as usize]),
+            &BindGroupEntries::sequential((view_binding, settings, grids, cells.as_entire_binding(), depth)),
+        );
+        let target = (target, None, scale, clear);
+        self.additive_pass(ctx, "volumetric", target, (pipeline, &bind_group), view, |render_pass| render_pass.draw(0..3, 0..1));
+        true
+    }
+
+    /// One render pass into `target` with `pipeline` and `bind_group` (at the view's
+    /// uniform offset) and the view's `CausticsSettings::intensity` as the blend
+    /// constant, drawing what `draw` draws; timed as the span `caustics/{pass}` and
+    /// recorded as `pass` in the report.
+    fn additive_pass(
+        &self,
+        ctx: &mut RenderContext,
+        pass: &'static str,
+        (target, depth_test, scale, clear): PassTarget,
+        (pipeline, bind_group): (&RenderPipeline, &BindGroup),
+        (irradiance, work, _, _, view_offset): VolumeView,
+        draw: impl FnOnce(&mut wgpu::RenderPass),
+    ) {
         let diagnostics = ctx.diagnostic_recorder();
         let diagnostics = diagnostics.as_deref();
         let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
@@ -77,63 +120,10 @@ impl VolumeDraw<'_> {
         render_pass.set_pipeline(pipeline);
         let intensity = f64::from(work.0.applied_intensity());
         render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
-        render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
-        // As many instances as the GPU build kept (`compute.rs`).
-        render_pass.draw_indirect(counters, 0);
+        render_pass.set_bind_group(0, bind_group, &[view_offset.offset]);
+        draw(&mut render_pass);
         span.end(&mut render_pass);
         self.recorder.record(pass);
-        true
-    }
-}
-
-impl VolumeDraw<'_> {
-    /// The volumetric pass into `target` (as [`Self::draw`]): the eye rays marched
-    /// through the beam grid where the view has that pipeline, else every volume drawn.
-    fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
-        let Some(march) = view.2.march else {
-            return self.draw(ctx, "volumetric", (target, None, scale, clear), view.2.volumetric, view);
-        };
-        if self.buffers.empty {
-            return false;
-        }
-        let (irradiance, work, pipelines, prepass, view_offset) = view;
-        let (Some(pipeline), Some(depth), Some(view_binding), Some(settings), Some(grids), Some(cells)) = (
-            self.cache.get_render_pipeline(march),
-            prepass.depth_view(),
-            self.view_uniforms.uniforms.binding(),
-            self.buffers.settings.binding(),
-            self.grids.grids.binding(),
-            self.grids.cells.as_ref(),
-        ) else {
-            return false;
-        };
-        let bind_group = ctx.render_device().create_bind_group(
-            "caustic_shaft_march_bind_group",
-            &self.cache.get_bind_group_layout(&self.march.march_layouts[pipelines.multisampled as usize]),
-            &BindGroupEntries::sequential((view_binding, settings, grids, cells.as_entire_binding(), depth)),
-        );
-        let diagnostics = ctx.diagnostic_recorder();
-        let diagnostics = diagnostics.as_deref();
-        let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
-            label: Some("volumetric"),
-            color_attachments: &[Some(RenderPassColorAttachment {
-                view: target,
-                depth_slice: None,
-                resolve_target: None,
-                ops: Operations { load: if clear { LoadOp::Clear(default()) } else { LoadOp::Load }, store: StoreOp::Store },
-            })],
-            ..default()
-        });
-        irradiance.set_scaled_viewport(&mut render_pass, scale);
-        let span = diagnostics.pass_span(&mut render_pass, "caustics/volumetric");
-        render_pass.set_pipeline(pipeline);
-        let intensity = f64::from(work.0.applied_intensity());
-        render_pass.set_blend_constant(wgpu::Color { r: intensity, g: intensity, b: intensity, a: intensity });
-        render_pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
-        render_pass.draw(0..3, 0..1);
-        span.end(&mut render_pass);
-        self.recorder.record("volumetric");
-        true
     }
 }
 
