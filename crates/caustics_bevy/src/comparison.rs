@@ -143,11 +143,15 @@ impl ReferenceComparison {
         matches!(self.state, ComparisonState::Measuring(_) | ComparisonState::Tracing)
     }
 
-    /// Writes [`Self::frame`] as JSON ([`SceneView::to_json`]) to `path`, for
-    /// `caustics bench --scene`.
+    /// Writes [`Self::frame`] as JSON ([`SceneView::to_json`]) to `path`, making its
+    /// folder if needed, for `caustics bench --scene`.
     pub fn save_frame(&self, path: &std::path::Path) -> Result<(), String> {
         let frame = self.frame.as_ref().ok_or("no frame has been traced")?;
-        std::fs::write(path, frame.to_json()).map_err(|e| format!("cannot write {}: {e}", path.display()))
+        let cannot = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(cannot)?;
+        }
+        std::fs::write(path, frame.to_json()).map_err(cannot)
     }
 }
 

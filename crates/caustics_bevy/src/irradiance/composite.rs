@@ -297,18 +297,28 @@ impl SpecializedMeshPipeline for CausticCompositePipeline {
 }
 
 /// A receiver's albedo parameters on the GPU.
-#[derive(ShaderType, Clone, Copy)]
+#[derive(ShaderType, Clone, Copy, PartialEq)]
 struct ReceiverUniform {
     base_color: Vec4,
     uv_transform: Mat3,
     fog_enabled: u32,
 }
 
+/// A receiver's albedo uniform and bind group, kept across frames while its albedo and
+/// its texture stay the same.
+struct ReceiverBinding {
+    uniform: UniformBuffer<ReceiverUniform>,
+    texture: TextureViewId,
+    bind_group: BindGroup,
+}
+
 /// Render world: each receiver's albedo bind group, by main-world entity.
 #[derive(Resource, Default)]
-pub(super) struct ReceiverBindGroups(HashMap<MainEntity, BindGroup>);
+pub(super) struct ReceiverBindGroups(HashMap<MainEntity, ReceiverBinding>);
 
-/// Builds each receiver's albedo bind group, when some view has caustics work.
+/// Keeps each receiver's albedo bind group up to date, when some view has caustics
+/// work: a new uniform buffer and bind group only for a new receiver or a new texture,
+/// an upload only when its albedo changed.
 #[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_receiver_bind_groups(
     views: Query<(), With<ViewCausticWork>>,
@@ -321,25 +331,40 @@ pub(super) fn prepare_receiver_bind_groups(
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
 ) {
-    bind_groups.0.clear();
     if views.is_empty() {
+        bind_groups.0.clear();
         return;
     }
+    bind_groups.0.retain(|entity, _| receivers.0.contains_key(entity));
     let layout = pipeline_cache.get_bind_group_layout(&pipeline.material_layout);
     for (entity, albedo) in &receivers.0 {
         let image = match albedo.texture {
             Some(id) => match images.get(id) {
                 Some(image) => image,
                 // Texture still loading: draw nothing rather than the wrong colour.
-                None => continue,
+                None => {
+                    bind_groups.0.remove(entity);
+                    continue;
+                }
             },
             None => &fallback.d2,
         };
-        let mut uniform = UniformBuffer::from(ReceiverUniform {
+        let value = ReceiverUniform {
             base_color: Vec4::from_array(albedo.base_color.to_f32_array()),
             uv_transform: albedo.uv_transform,
             fog_enabled: albedo.fog_enabled as u32,
-        });
+        };
+        let texture = image.texture_view.id();
+        if let Some(kept) = bind_groups.0.get_mut(entity) {
+            if kept.texture == texture {
+                if *kept.uniform.get() != value {
+                    kept.uniform.set(value);
+                    kept.uniform.write_buffer(&device, &queue);
+                }
+                continue;
+            }
+        }
+        let mut uniform = UniformBuffer::from(value);
         uniform.set_label(Some("caustic_receiver_albedo"));
         uniform.write_buffer(&device, &queue);
         let Some(binding) = uniform.binding() else { continue };
@@ -348,7 +373,7 @@ pub(super) fn prepare_receiver_bind_groups(
             &layout,
             &BindGroupEntries::sequential((binding, &image.texture_view, &image.sampler)),
         );
-        bind_groups.0.insert(*entity, bind_group);
+        bind_groups.0.insert(*entity, ReceiverBinding { uniform, texture, bind_group });
     }
 }
 
@@ -460,10 +485,10 @@ impl<P: PhaseItem, const I: usize> RenderCommand<P> for SetReceiverBindGroup<I> 
         bind_groups: SystemParamItem<'w, '_, Self::Param>,
         pass: &mut TrackedRenderPass<'w>,
     ) -> RenderCommandResult {
-        let Some(bind_group) = bind_groups.into_inner().0.get(&item.main_entity()) else {
+        let Some(binding) = bind_groups.into_inner().0.get(&item.main_entity()) else {
             return RenderCommandResult::Skip;
         };
-        pass.set_bind_group(I, bind_group, &[]);
+        pass.set_bind_group(I, &binding.bind_group, &[]);
         RenderCommandResult::Success
     }
 }

@@ -97,7 +97,7 @@ pub const MAX_MEDIA: usize = 4;
 
 /// A [`ParticipatingMedium`] as the shaders read it (`Medium` in `receiver.wgsl`): the
 /// unit cube `[-½, ½]³` of its entity's transform, and (σₛ, σₐ, g).
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub struct GpuMedium {
     pub(crate) local_from_world: Mat4,
     pub(crate) coefficients: Vec4,
@@ -118,7 +118,7 @@ impl ExtractedMedia {
 
 /// What the composite reads of a view besides its buffer (`ViewCaustics` in
 /// `composite.wgsl`).
-#[derive(Clone, Copy, ShaderType)]
+#[derive(Clone, Copy, PartialEq, ShaderType)]
 struct GpuViewCaustics {
     intensity: f32,
     medium_count: u32,
@@ -137,6 +137,9 @@ pub struct ViewCausticIrradiance {
     pub bind_group: BindGroup,
     /// The camera's viewport, `None` for the whole target.
     pub viewport: Option<Viewport>,
+    /// What the composite reads besides the buffer, kept across frames with
+    /// `bind_group` while the buffer's texture stays the same.
+    settings: UniformBuffer<GpuViewCaustics>,
 }
 
 impl ViewCausticIrradiance {
@@ -529,7 +532,7 @@ fn mark_views_with_work(
 #[expect(clippy::too_many_arguments)]
 fn prepare_irradiance_buffers(
     mut commands: Commands,
-    views: Query<(Entity, &ExtractedCamera, &ViewCausticWork)>,
+    mut views: Query<(Entity, &ExtractedCamera, &ViewCausticWork, Option<&mut ViewCausticIrradiance>)>,
     media: Res<ExtractedMedia>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
@@ -538,7 +541,7 @@ fn prepare_irradiance_buffers(
     pipeline_cache: Res<PipelineCache>,
 ) {
     let (padded_media, medium_count) = media.padded();
-    for (entity, camera, work) in &views {
+    for (entity, camera, work, kept) in &mut views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
             continue;
         };
@@ -556,21 +559,28 @@ fn prepare_irradiance_buffers(
                 view_formats: &[],
             },
         );
-        let mut uniform = UniformBuffer::from(GpuViewCaustics {
-            intensity: work.0.applied_intensity(),
-            medium_count,
-            media: padded_media,
-        });
-        uniform.set_label(Some("caustic_view_settings"));
-        uniform.write_buffer(&device, &queue);
-        let Some(binding) = uniform.binding() else { continue };
+        let value = GpuViewCaustics { intensity: work.0.applied_intensity(), medium_count, media: padded_media };
+        let viewport = camera.viewport.clone();
+        // The same texture as last frame: the bind group stands, the settings are
+        // uploaded only when they changed.
+        if let Some(mut kept) = kept.filter(|kept| kept.texture.default_view.id() == texture.default_view.id()) {
+            if *kept.settings.get() != value {
+                kept.settings.set(value);
+                kept.settings.write_buffer(&device, &queue);
+            }
+            kept.viewport = viewport;
+            continue;
+        }
+        let mut settings = UniformBuffer::from(value);
+        settings.set_label(Some("caustic_view_settings"));
+        settings.write_buffer(&device, &queue);
+        let Some(binding) = settings.binding() else { continue };
         let bind_group = device.create_bind_group(
             "caustic_irradiance_bind_group",
             &pipeline_cache.get_bind_group_layout(&pipeline.view_layout),
             &BindGroupEntries::sequential((&texture.default_view, binding)),
         );
-        let viewport = camera.viewport.clone();
-        commands.entity(entity).insert(ViewCausticIrradiance { texture, bind_group, viewport });
+        commands.entity(entity).insert(ViewCausticIrradiance { texture, bind_group, viewport, settings });
     }
 }
 
