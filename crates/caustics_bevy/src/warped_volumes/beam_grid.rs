@@ -7,7 +7,7 @@
 
 use super::ShaftIntegral;
 use super::compute::VolumeBuild;
-use super::render::{ExtractedVolumeSettings, GpuCausticVolume, VolumeBuffers};
+use super::render::{ExtractedVolumeSettings, GpuCausticVolume, ViewSeesMedium, VolumeBuffers};
 use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
@@ -148,8 +148,10 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
 
 /// Lays the grids out over this frame's media (cells along each box's longest side:
 /// [`super::WarpedVolumesSettings::shaft_grid`]) and marks a deposit when the volumes
-/// are built this frame or the layout changed.
+/// are built this frame or the layout changed; none while no view shows shafts.
+#[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_grids(
+    views: Query<(), With<ViewSeesMedium>>,
     extracted: Res<ExtractedVolumeSettings>,
     media: Res<ExtractedMedia>,
     build: Res<VolumeBuild>,
@@ -159,7 +161,7 @@ pub(super) fn prepare_grids(
     queue: Res<RenderQueue>,
 ) {
     let settings = extracted.0;
-    if settings.shaft_integral != ShaftIntegral::Grid || media.0.is_empty() || volumes.volumes.is_none() {
+    if settings.shaft_integral != ShaftIntegral::Grid || views.is_empty() || media.0.is_empty() || volumes.volumes.is_none() {
         *grids = BeamGridBuffers::default();
         return;
     }
