@@ -264,8 +264,8 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
         // half floats (5·10⁻⁴ relative) and samples the same 4 × 4 points per cell.
         assert!(agree < 5e-3, "{scene} {method}: the GPU passes and their twin differ: relative L2 {agree}");
         // Against the tracer (10⁶ photons on 64² cells), measured: 0.009 on the sphere,
-        // 0.57–0.63 on the pools (the volumes' error on 128² water cells, README), 0.98
-        // for the roofed pool's maps (they lose its shadow's edge, README). Well past
+        // 0.57–0.63 on the pools (the volumes' error on 128² water cells, docs/warped-volumes.md), 0.98
+        // for the roofed pool's maps (they lose its shadow's edge, docs/choosing-a-technique.md). Well past
         // that is a failure.
         let bound = if scene == "sphere" { 0.02 } else { 1.3 };
         assert!(error < bound, "{scene} {method}: relative L2 {error} against the reference");

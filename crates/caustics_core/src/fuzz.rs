@@ -101,7 +101,7 @@ pub const CATEGORIES: [Category; 13] = [
 ];
 
 impl Category {
-    /// What the twins do with this category's inputs (the README's table).
+    /// What the twins do with this category's inputs (the table in docs/stability.md).
     pub fn handling(self) -> &'static str {
         match self {
             Category::DegenerateMesh => "zero-area triangles are dropped and counted (volumes: degenerate), slivers kept; fans and BVHs accept duplicates",

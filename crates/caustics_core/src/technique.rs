@@ -3,7 +3,7 @@
 //! generator is; one that names a technique gets it where it can run, and otherwise
 //! `Auto`'s pick with the reason it was passed over. Nothing is ever silently dark.
 //!
-//! The table, by what each technique models (README, "Choosing a technique", has the
+//! The table, by what each technique models (docs/choosing-a-technique.md has the
 //! measured errors behind it):
 //! - a **closed refractor** (a watertight glass or water body) bends light twice or
 //!   more, in and out: hierarchical maps follow every face their traced paths cross
@@ -14,7 +14,7 @@
 //!   alone draw the shafts in a participating medium (§3.5);
 //! - a **mirror** reflects once, which both model, and both keep the light off the
 //!   receivers the generator itself shadows (the maps' receiver map, the volumes' hit
-//!   planes); read at 8² points a cell the two tie on the ring (README), so the
+//!   planes); read at 8² points a cell the two tie on the ring (docs/choosing-a-technique.md), so the
 //!   mirror stays with the volumes, the default the table started from, which also
 //!   draw its beams in a participating medium — except beside a closed refractor,
 //!   where it joins the glass on the maps, whose traced paths carry light between the
@@ -122,7 +122,7 @@ pub struct GeneratorFacts {
     /// joins it there, outside a medium, so that the maps' traced paths follow the
     /// light both ways between them — glass onto the mirror, the mirror into the glass.
     /// Apart, each technique would draw only the light that meets its generator first
-    /// (README: `mirror_bunny` 0.14 L2 on the maps, 0.23 split between the two).
+    /// (docs/hierarchical-maps.md: `mirror_bunny` 0.14 L2 on the maps, 0.23 split between the two).
     pub with_closed_refractor: bool,
 }
 

@@ -115,7 +115,7 @@ impl HierarchicalMapsSettings {
     /// [`Self::FULL`] with photons traced through the generators' triangles (past the
     /// paper): right through concave glass and from one generator onto another, where
     /// the image-space pair sees one entry and the farthest exit, and the light glass
-    /// reflects off its first face as one Fresnel branch (README, "Choosing a
+    /// reflects off its first face as one Fresnel branch (docs/choosing-a-technique.md, "Choosing a
     /// technique", has the measurements).
     pub const TRACED: Self = Self { traced_paths: true, fresnel_branches: 1, ..Self::FULL };
 

@@ -18,7 +18,7 @@
 //!   see gets no caustic light.
 //!
 //! Past the paper, each measured on a glass ball over the Stanford bunny against the
-//! tracer (README, "Illumination textures"):
+//! tracer (docs/illumination-textures.md):
 //! - the cosine is taken at the receiver point's own normal, from the light vector
 //!   ([`Cosine::Receiver`]; the paper's per-texel `cos γ` stays as
 //!   [`Cosine::VirtualCamera`]): one normal per texel misjudges every point of a steep
