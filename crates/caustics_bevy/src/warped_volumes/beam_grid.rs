@@ -24,7 +24,7 @@ use bevy::render::{
 use bevy::shader::ShaderDefVal;
 use caustics_core::glam;
 use caustics_core::params::MediumCoefficients;
-use caustics_core::volumes::{MediumBox, grid_size};
+use caustics_core::volumes::{MediumBox, cell_of, grid_size};
 
 /// `Grid` in `beam_grid.wgsl`: one medium's cells (xyz) and the first one's index (w);
 /// a cell's smallest world edge (x) and world volume (y).
@@ -49,7 +49,7 @@ const CELL_BYTES: u64 = 32;
 pub(super) struct BeamGridBuffers {
     pub cells: Option<Buffer>,
     pub grids: UniformBuffer<GpuBeamGrids>,
-    /// The media, cells and steps the grid was laid out for.
+    /// The media and their cells the grid was laid out for.
     layout: Vec<(Mat4, Vec4, UVec4)>,
     deposit: bool,
 }
@@ -173,15 +173,10 @@ pub(super) fn prepare_grids(
         let coefficients = MediumCoefficients { scattering: 0.0, absorption: 0.0, asymmetry: 0.0 };
         let core = MediumBox { world_from_local, coefficients };
         let size = grid_size(&core, settings.shaft_grid);
-        let m = world_from_local.matrix3;
-        let edge = glam::Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length()) / size.as_vec3();
-        let cells = size.x * size.y * size.z;
-        *grid = GpuGrid {
-            size: UVec4::new(size.x, size.y, size.z, first),
-            cell: Vec4::new(edge.min_element(), m.determinant().abs() / cells as f32, 0.0, 0.0),
-        };
+        let (edge, volume) = cell_of(&core, size);
+        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, 0.0, 0.0) };
         layout.push((medium.local_from_world, medium.coefficients, grid.size));
-        first += cells;
+        first += size.x * size.y * size.z;
     }
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
     let bytes = u64::from(first) * CELL_BYTES;

@@ -23,6 +23,25 @@ struct Grids {
 // Eight words a cell: colour · E_beam · e^{−σt dₛ} (xyz), then the summed directions.
 const CELL_WORDS: u32 = 8u;
 
+struct GridCorner {
+    cell: u32,  // the cell's index in `cells`, all grids together
+    weight: f32,
+}
+
+// `BeamGrid::corners`: corner `corner` (0 to 7) of the eight cells around a point of
+// the unit cube, and its trilinear weight between cell centres (the outer cells'
+// centres clamp).
+fn grid_corner(g: Grid, local: vec3<f32>, corner: u32) -> GridCorner {
+    let size = vec3<f32>(g.size.xyz);
+    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
+    let base = max(min(floor(q), size - 2.0), vec3(0.0));
+    let f = q - base;
+    let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+    let c = vec3<u32>(base) + o;
+    let w = select(1.0 - f, f, o == vec3(1u));
+    return GridCorner(g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x, w.x * w.y * w.z);
+}
+
 #ifdef DEPOSIT
 @group(0) @binding(0) var<storage, read> volumes: array<CausticVolume>;
 @group(0) @binding(1) var<storage, read> counters: array<u32>;
@@ -70,23 +89,14 @@ fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
     return select(1u, u32(clamp(split, 1.0, f32(MAX_DEPOSIT_SPLIT))), split == split);
 }
 
-// `BeamGrid::corners` and the deposit's spread: the eight cells around a point of
-// the unit cube, with trilinear weights between cell centres.
+// The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point.
 fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
-    let size = vec3<f32>(g.size.xyz);
-    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
-    let base = max(min(floor(q), size - 2.0), vec3(0.0));
-    let f = q - base;
-    let b = vec3<u32>(base);
     for (var corner = 0u; corner < 8u; corner++) {
-        let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
-        let c = b + o;
-        let w = select(1.0 - f, f, o == vec3(1u));
-        let weight = w.x * w.y * w.z;
-        let word = (g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x) * CELL_WORDS;
+        let c = grid_corner(g, local, corner);
+        let word = c.cell * CELL_WORDS;
         for (var k = 0u; k < 3u; k++) {
-            add(word + k, weight * source[k]);
-            add(word + 4u + k, weight * direction[k]);
+            add(word + k, c.weight * source[k]);
+            add(word + 4u + k, c.weight * direction[k]);
         }
     }
 }
@@ -161,20 +171,12 @@ const PI: f32 = 3.141592653589793;
 
 // `BeamGrid::lookup`: source (xyz) and summed direction, trilinear between cell centres.
 fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
-    let size = vec3<f32>(g.size.xyz);
-    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
-    let base = max(min(floor(q), size - 2.0), vec3(0.0));
-    let f = q - base;
-    let b = vec3<u32>(base);
     var source = vec3(0.0);
     var direction = vec3(0.0);
     for (var corner = 0u; corner < 8u; corner++) {
-        let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
-        let c = b + o;
-        let w = select(1.0 - f, f, o == vec3(1u));
-        let cell = (g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x) * 2u;
-        source += w.x * w.y * w.z * cells[cell].xyz;
-        direction += w.x * w.y * w.z * cells[cell + 1u].xyz;
+        let c = grid_corner(g, local, corner);
+        source += c.weight * cells[c.cell * 2u].xyz;
+        direction += c.weight * cells[c.cell * 2u + 1u].xyz;
     }
     return array(source, direction);
 }

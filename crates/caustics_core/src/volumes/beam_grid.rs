@@ -35,6 +35,14 @@ pub fn grid_size(medium: &MediumBox, longest: u32) -> UVec3 {
     if size.is_finite() { size.as_uvec3() } else { UVec3::splat(2) }
 }
 
+/// The smallest world edge of a cell of a `size` grid over `medium`'s box, and a
+/// cell's world volume.
+pub fn cell_of(medium: &MediumBox, size: UVec3) -> (f32, f32) {
+    let m = medium.world_from_local.matrix3;
+    let edge = Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length()) / size.as_vec3();
+    (edge.min_element(), m.determinant().abs() / (size.x * size.y * size.z) as f32)
+}
+
 /// How many depth steps one volume's deposit takes: enough that samples along its
 /// longest ray lie at most `spacing` apart.
 pub fn deposit_steps(volume: &CausticVolume, spacing: f32) -> u32 {
@@ -114,9 +122,7 @@ impl BeamGrid {
 
     /// The smallest world edge of a cell, and a cell's world volume.
     pub fn cell(&self) -> (f32, f32) {
-        let m = self.medium.world_from_local.matrix3;
-        let edge = Vec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length()) / self.size.as_vec3();
-        (edge.min_element(), m.determinant().abs() / (self.size.x * self.size.y * self.size.z) as f32)
+        cell_of(&self.medium, self.size)
     }
 
     /// Adds every volume's beam to the grid.
@@ -141,36 +147,24 @@ impl BeamGrid {
             let (x, z, alpha, d_alpha) = deposit_slice(volume, steps, k / (split * split));
             let (sx, sz, area) = deposit_sample(x, z, split, k % (split * split));
             let p = volume.origin + volume.axes[0] * sx + volume.axes[1] * alpha + volume.axes[2] * sz;
-            self.deposit_at(volume, p, area * d_alpha / cell_volume, sigma_t, &local_from_world, settings);
-        }
-    }
-
-    /// One sample of a volume's deposit at `p`, standing for `weight` cells' volume.
-    fn deposit_at(
-        &mut self,
-        volume: &CausticVolume,
-        p: Vec3,
-        weight: f32,
-        sigma_t: f32,
-        local_from_world: &glam::Affine3A,
-        settings: &VolumeSettings,
-    ) {
-        let cell = local_from_world.transform_point3(p);
-        if !(cell.abs().max_element() <= 0.5) {
-            return;
-        }
-        let Some(s) = volume.sample(p, settings) else {
-            return;
-        };
-        let beam_length = s.ray.length();
-        let source = volume.color * (s.plane_irradiance * beam_length * (-sigma_t * s.depth * beam_length).exp() * weight);
-        if !source.is_finite() {
-            return;
-        }
-        let direction = s.ray / beam_length * source.element_sum();
-        for (index, w) in self.corners(cell) {
-            self.source[index] += w * source;
-            self.direction[index] += w * direction;
+            let local = local_from_world.transform_point3(p);
+            if !(local.abs().max_element() <= 0.5) {
+                continue;
+            }
+            let Some(s) = volume.sample(p, settings) else {
+                continue;
+            };
+            let beam_length = s.ray.length();
+            let attenuated = s.plane_irradiance * beam_length * (-sigma_t * s.depth * beam_length).exp();
+            let source = volume.color * (attenuated * area * d_alpha / cell_volume);
+            if !source.is_finite() {
+                continue;
+            }
+            let direction = s.ray / beam_length * source.element_sum();
+            for (index, w) in self.corners(local) {
+                self.source[index] += w * source;
+                self.direction[index] += w * direction;
+            }
         }
     }
 

@@ -766,7 +766,8 @@ mod tests {
 
     /// Rays landing on one tilted plane: the slab holds the plane, and the slice of the
     /// beam between the depths it gives holds the slab's part inside the volume; rays
-    /// landing on two surfaces a step apart, or on one and nothing, keep the whole beam.
+    /// landing on two surfaces a step apart keep the whole beam, and a ray that meets
+    /// nothing holds to the surface its neighbours land on.
     #[test]
     fn the_slab_holds_the_surface_the_rays_land_on() {
         let mut random = Pcg32::for_photon(5, 0, 0);

@@ -38,7 +38,7 @@ mod build;
 mod medium;
 mod prism;
 
-pub use beam_grid::{BeamGrid, MAX_DEPOSIT_SPLIT, MAX_DEPOSIT_STEPS, deposit_sample, deposit_slice, deposit_split, deposit_steps, grid_size, march_steps};
+pub use beam_grid::{BeamGrid, MAX_DEPOSIT_SPLIT, cell_of, MAX_DEPOSIT_STEPS, deposit_sample, deposit_slice, deposit_split, deposit_steps, grid_size, march_steps};
 pub use build::{BuildStats, VertexFans, build_drawn_volumes, build_generator_volumes, build_scene_volumes, channels, occluders_of};
 pub use medium::{MAX_RAY_PIECES, MediumBox, in_scattered_radiance, mean_attenuation, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
@@ -146,10 +146,10 @@ pub struct CausticVolume {
     /// Local depth α at which the volume ends: where its rays have met the surfaces
     /// they hit (every point past is occluded), else the far side of the receivers.
     pub depth: f32,
-    /// Where the three rays land on one surface, the thin slab around it: the surface
-    /// pass draws the bounding shape cut to it and lights only the points inside
-    /// ([`CausticVolume::irradiance`]); the in-scattering of a medium integrates the
-    /// whole beam. `None` elsewhere.
+    /// Where the rays that meet a surface land on one (the others meeting nothing),
+    /// the thin slab around it: the surface pass draws the bounding shape cut to it and
+    /// lights only the points inside ([`CausticVolume::irradiance`]); the in-scattering
+    /// of a medium integrates the whole beam. `None` elsewhere.
     pub slab: Option<SurfaceSlab>,
     /// Per vertex, the plane tangent to the first surface its ray meets, in the local
     /// frame and facing the ray: `n·p + w < 0` behind that surface (`w` holds a slack
@@ -165,8 +165,8 @@ pub struct CausticVolume {
 }
 
 /// The slab `near ≤ normal·p ≤ far` (world space) around the one surface a caustic
-/// volume's three rays land on: the tangent planes at their hits, widened by a margin
-/// for receiver points rebuilt from a depth buffer. A view at a slant crosses a beam
+/// volume's rays land on (those that meet any): the tangent planes at their hits,
+/// widened by a margin for receiver points rebuilt from a depth buffer. A view at a slant crosses a beam
 /// in a long sliver of pixels, and the slab in a few; the surfaces the volume lights
 /// are those its rays land on, so the surface pass draws the slab alone. A receiver
 /// between the generator and that surface that none of the three rays meets (smaller
