@@ -65,8 +65,8 @@ pub struct BenchArgs {
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub frame_size: (u32, u32),
     /// With `--frames`: how the caustic volumes' shafts are integrated, `grid` (the
-    /// default: a fixed number of steps through the beam grid) or `exact` (through
-    /// every volume an eye ray crosses).
+    /// default: one step a cell through the beam grid) or `exact` (through every
+    /// volume an eye ray crosses).
     #[arg(long, default_value = "grid", value_parser = parse_shafts)]
     pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
     /// With `--frames`: the families' scenes to run, comma-separated (`ocean`, `ring`,
@@ -75,7 +75,7 @@ pub struct BenchArgs {
     pub frame_scenes: Vec<String>,
 }
 
-/// `1920x1080` as (1920, 1080).
+/// `grid` or `exact` as a [`caustics_bevy::warped_volumes::ShaftIntegral`].
 fn parse_shafts(text: &str) -> Result<caustics_bevy::warped_volumes::ShaftIntegral, String> {
     use caustics_bevy::warped_volumes::ShaftIntegral;
     match text {
@@ -85,6 +85,7 @@ fn parse_shafts(text: &str) -> Result<caustics_bevy::warped_volumes::ShaftIntegr
     }
 }
 
+/// `1920x1080` as (1920, 1080).
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
     let (w, h) = text.split_once('x').ok_or_else(|| format!("{text}: expected WIDTHxHEIGHT"))?;
     let parse = |n: &str| n.trim().parse::<u32>().ok().filter(|&n| (16..=8192).contains(&n));

@@ -1,7 +1,7 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
 use super::beam_grid::{BeamGridBuffers, BeamGridPipelines};
-use super::render::{ReceiverDepthPipeline, VolumeBuffers, VolumesPipeline, ViewReceiverDepth, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
+use super::render::{ReceiverDepthPipeline, ShaftPipeline, VolumeBuffers, VolumesPipeline, ViewReceiverDepth, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -64,8 +64,9 @@ impl VolumeDraw<'_> {
     /// (a fullscreen triangle) where the view has that pipeline, else every volume
     /// drawn ([`Self::draw`]). Whether it drew.
     fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
-        let Some(march) = view.2.march else {
-            return self.draw(ctx, "volumetric", (target, None, scale, clear), view.2.volumetric, view);
+        let march = match view.2.shafts {
+            ShaftPipeline::Exact(exact) => return self.draw(ctx, "volumetric", (target, None, scale, clear), exact, view),
+            ShaftPipeline::March(march) => march,
         };
         let (_, _, pipelines, prepass, _) = view;
         let (false, Some(pipeline), Some(depth), Some(view_binding), Some(settings), Some(grids), Some(cells)) = (

@@ -98,12 +98,18 @@ pub(super) struct ViewVolumePipelines {
     pub surface: CachedRenderPipelineId,
     /// The volumetric pass: straight into the view's image, or with `upsample` into its
     /// [`ViewShafts`] texture first.
-    pub volumetric: CachedRenderPipelineId,
+    pub shafts: ShaftPipeline,
     pub upsample: Option<CachedRenderPipelineId>,
-    /// The eye rays marched through the beam grid ([`ShaftIntegral::Grid`]), drawn in
-    /// place of `volumetric`, into the same target.
-    pub march: Option<CachedRenderPipelineId>,
     pub multisampled: bool,
+}
+
+/// The volumetric pass's pipeline, as [`ShaftIntegral`] asks.
+#[derive(Clone, Copy)]
+pub(super) enum ShaftPipeline {
+    /// Every volume's bounding shape drawn, the eye ray integrated through each.
+    Exact(CachedRenderPipelineId),
+    /// A fullscreen triangle, the eye ray marched through the beam grid.
+    March(CachedRenderPipelineId),
 }
 
 /// Render world: the smaller texture a view's shafts are integrated into, one texel
@@ -426,15 +432,16 @@ fn prepare_pipelines(
             pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, shaft_scale, target_format })
         };
         let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT, 1);
-        let (volumetric, upsample) = if scale > 1 {
-            let key = ShaftUpsampleKey { target_format: view.target_format, scale };
-            (specialize(true, SHAFT_FORMAT, scale), Some(upsample_pipelines.specialize(&cache, &upsample, key)))
-        } else {
-            (specialize(true, view.target_format, 1), None)
-        };
+        // Below full resolution, into the shaft texture, then spread over the image.
         let target_format = if scale > 1 { SHAFT_FORMAT } else { view.target_format };
-        let march = grid.then(|| march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format }));
-        commands.entity(entity).insert(ViewVolumePipelines { surface, volumetric, upsample, march, multisampled });
+        let upsample = (scale > 1)
+            .then(|| upsample_pipelines.specialize(&cache, &upsample, ShaftUpsampleKey { target_format: view.target_format, scale }));
+        let shafts = if grid {
+            ShaftPipeline::March(march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format }))
+        } else {
+            ShaftPipeline::Exact(specialize(true, target_format, scale))
+        };
+        commands.entity(entity).insert(ViewVolumePipelines { surface, shafts, upsample, multisampled });
     }
 }
 
