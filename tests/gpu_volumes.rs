@@ -100,7 +100,12 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let report = renderer.pass_report();
     assert_eq!(report.views("volumes"), 1, "{report:?}");
     assert_eq!(report.views("volumetric"), 0, "no medium, no volumetric pass: {report:?}");
-    assert!(renderer.world_mut().resource::<CausticVolumes>().stats.volumes > 900);
+    let volumes = renderer.world_mut().resource::<CausticVolumes>().clone();
+    assert!(volumes.stats.volumes > 900);
+    // The surface pass lights small volumes in its compute pass, pixel by pixel, and
+    // rasterises the others; the twin's agreement below holds for both.
+    eprintln!("surface pass: {:?}", volumes.surface);
+    assert!(volumes.surface.splatted > 0 && volumes.surface.splatted_pixels > 0, "{:?}", volumes.surface);
 
     // GPU against CPU: the same volumes, the same formula, at the same points. The GPU
     // reconstructs each point from a 32-bit depth and stores E·exposure in half floats
@@ -116,20 +121,25 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("GPU vs CPU twin, pool, relative L2: {error:.2e} (mean irradiance {mean:.3} lux)");
     assert!(error < 0.01, "GPU and CPU caustic volumes differ: relative L2 {error}");
 
-    // The other intensity modes and single-sampled prepasses follow the same path.
-    for (intensity, msaa) in [
-        (bevy_caustics::warped_volumes::VolumeIntensity::Constant, Msaa::Off),
-        (bevy_caustics::warped_volumes::VolumeIntensity::Interpolated, Msaa::Sample4),
+    // The other intensity modes and single-sampled prepasses follow the same path, and
+    // every volume rasterised lights the same pixels as the compute pass.
+    for (intensity, msaa, splat_pixels) in [
+        (bevy_caustics::warped_volumes::VolumeIntensity::Constant, Msaa::Off, 1024),
+        (bevy_caustics::warped_volumes::VolumeIntensity::Interpolated, Msaa::Sample4, 1024),
+        (bevy_caustics::warped_volumes::VolumeIntensity::Conserving, Msaa::Sample4, 0),
     ] {
-        let settings = WarpedVolumesSettings { intensity, ..default() };
+        let settings = WarpedVolumesSettings { intensity, splat_pixels, ..default() };
         renderer.world_mut().insert_resource(settings);
         let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.world_mut()).unwrap();
         renderer.world_mut().entity_mut(camera).insert(msaa);
         let without = render_without_caustics(&mut renderer, 3);
         let gpu = caustic_irradiance(&render(&mut renderer, 3), &without);
         let error = relative_l2(&gpu, &cpu_twin(&mesh, water.specular_interaction(), SUN, &settings));
-        eprintln!("GPU vs CPU twin, {intensity:?}, {msaa:?}: {error:.2e}");
-        assert!(error < 0.01, "{intensity:?} {msaa:?}: relative L2 {error}");
+        let surface = renderer.world_mut().resource::<CausticVolumes>().surface;
+        eprintln!("GPU vs CPU twin, {intensity:?}, {msaa:?}, {surface:?}: {error:.2e}");
+        assert!(error < 0.01, "{intensity:?} {msaa:?} {surface:?}: relative L2 {error}");
+        assert_eq!(surface.splatted == 0, splat_pixels == 0, "{surface:?}");
+        assert_eq!(surface.rasterised > 0, splat_pixels == 0, "{surface:?}");
     }
 
     // A medium in view: the volumetric pass runs, and adds the CPU twin's

@@ -35,11 +35,25 @@ pub struct CausticVolumes {
     pub stats: BuildStats,
     pub generation: u64,
     pub gathered: u64,
+    /// How the surface pass shared out the volumes in a recent frame.
+    pub surface: SurfaceWork,
 }
 
-/// The counts of a GPU build on their way from the render world.
+/// How the surface pass lit a view's receivers, counted on the GPU a frame or two
+/// ago for the view drawn last: the volumes whose bounding shape covers a few pixels
+/// are lit by a compute pass, pixel by pixel (`splatted`, shading `splatted_pixels`
+/// pixels in all), the others rasterised (`rasterised`, shading the pass's fragments).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SurfaceWork {
+    pub splatted: u32,
+    pub splatted_pixels: u32,
+    pub rasterised: u32,
+}
+
+/// The counts of a GPU build, and of the surface pass, on their way from the render
+/// world.
 #[derive(Resource, Clone, Default)]
-pub(super) struct BuildStatsChannel(pub Arc<Mutex<Option<BuildStats>>>);
+pub(super) struct BuildStatsChannel(pub Arc<Mutex<Option<BuildStats>>>, pub Arc<Mutex<Option<SurfaceWork>>>);
 
 /// A mesh's triangles and what the build derives from them alone: the fans of §3.4
 /// and the sides each triangle owns (bits, `VertexFans::owned_edges`).
@@ -347,5 +361,8 @@ fn receive_stats(channel: Res<BuildStatsChannel>, mut volumes: ResMut<CausticVol
     if let Some(stats) = channel.0.lock().ok().and_then(|mut s| s.take()) {
         volumes.stats = stats;
         volumes.generation += 1;
+    }
+    if let Some(surface) = channel.1.lock().ok().and_then(|mut s| s.take()) {
+        volumes.surface = surface;
     }
 }

@@ -12,15 +12,21 @@
 //! on the GPU and drawn indirectly; what it drops (unlit, shadowed, TIR, grazing,
 //! degenerate) comes back in [`CausticVolumes`]. Then, for each caustics view:
 //!
-//! 1. **surface pass** (between the prepass and the main pass): every volume's
-//!    bounding prism (§4.3) is drawn, back faces only, so each pixel whose view ray
-//!    crosses it runs the fragment shader at most once, and only where the back face
-//!    lies behind the pixel's receiver (a read-only test against a single-sampled copy
-//!    of the depth prepass: a prism in front of the receiver cannot hold it). The shader
-//!    rebuilds the pixel's receiver point from the depth prepass, runs the exact
-//!    point-in-volume test (§3.3) and adds the interpolated irradiance (§3.4), times
-//!    the receiver's cosine from the normal prepass, to the view's caustic irradiance
-//!    buffer with additive blending; the composite then shows it on receivers;
+//! 1. **surface pass** (between the prepass and the main pass): at each pixel a
+//!    volume's bounding shape (§4.3; where the rays land on one surface, the thin
+//!    slice of it around that surface) covers, the receiver point is rebuilt from the
+//!    depth prepass, the exact point-in-volume test (§3.3) run and the interpolated
+//!    irradiance (§3.4), times the receiver's cosine from the normal prepass, added to
+//!    the view's caustic irradiance buffer; the composite then shows it on receivers.
+//!    A compute pass (`splat` in `volumes.wgsl`), one invocation a volume, projects the
+//!    shape, skips it off the view and lights the pixels it covers itself where its
+//!    box holds at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
+//!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
+//!    rasteriser, which draws their back faces indirectly, so that each pixel a shape
+//!    covers runs the fragment shader at most once, and only where the back face lies
+//!    behind the pixel's receiver (a read-only test against a single-sampled copy of
+//!    the depth prepass). Both paths shade the same pixels with the same function;
+//!    [`CausticVolumes::surface`] counts what each did;
 //! 2. **volumetric pass** (after the main pass), only for views that see a
 //!    [`crate::ParticipatingMedium`] and show shafts (`CausticsSettings::shafts`): the
 //!    single-scattering term of §3.5 added to the view's HDR image. By default
@@ -44,7 +50,7 @@ mod compute;
 mod pass;
 mod render;
 
-pub use build::CausticVolumes;
+pub use build::{CausticVolumes, SurfaceWork};
 
 use bevy::prelude::*;
 use caustics_core::volumes::{IntensityMode, VolumeSettings};
@@ -73,6 +79,13 @@ pub struct WarpedVolumesSettings {
     /// [`ShaftIntegral::Grid`]'s most steps along the part of each eye ray inside a
     /// medium, which it marches one step a cell (256 by default).
     pub shaft_steps: u32,
+    /// The surface pass lights a volume whose bounding shape projects into a box of at
+    /// most this many pixels in a compute pass, one invocation a volume looping over
+    /// the pixels the shape covers, and rasterises the larger ones (4096, a 64 × 64
+    /// box, by default; 0 rasterises every volume). A rasteriser shades a small shape
+    /// in whole blocks of pixels (2 × 2 on most GPUs, 4 × 4 on lavapipe), most of them
+    /// outside it, and a fine generator makes many small shapes.
+    pub splat_pixels: u32,
 }
 
 /// How the volumetric pass integrates the light scattered out of the caustic beams.
@@ -100,6 +113,7 @@ impl Default for WarpedVolumesSettings {
             shaft_integral: ShaftIntegral::Grid,
             shaft_grid: 96,
             shaft_steps: 256,
+            splat_pixels: 4096,
         }
     }
 }
@@ -141,6 +155,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "volumes.wgsl");
     bevy::asset::embedded_asset!(app, "upsample.wgsl");
     bevy::asset::embedded_asset!(app, "receiver_depth.wgsl");
+    bevy::asset::embedded_asset!(app, "splat_resolve.wgsl");
     bevy::asset::embedded_asset!(app, "build.wgsl");
     bevy::asset::embedded_asset!(app, "beam_grid.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");

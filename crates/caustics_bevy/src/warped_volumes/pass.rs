@@ -1,7 +1,7 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
 use super::beam_grid::{BeamGridBuffers, BeamGridPipelines};
-use super::render::{ReceiverDepthPipeline, ShaftPipeline, VolumeBuffers, VolumesPipeline, ViewReceiverDepth, ViewSeesMedium, ViewShafts, ViewVolumePipelines};
+use super::render::{ShaftPipeline, SurfacePipelines, SurfaceWorkReadback, VolumeBuffers, VolumesPipeline, ViewSeesMedium, ViewShafts, ViewSurfaceTargets, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -32,11 +32,21 @@ pub(super) struct VolumeDraw<'w> {
 type PassTarget<'a> = (&'a TextureView, Option<&'a TextureView>, u32, bool);
 
 impl VolumeDraw<'_> {
-    /// Draws every volume's bounding prism, 36 vertices an instance, into `target` with
-    /// the view's pipeline `pipeline_id` ([`Self::additive_pass`]). Whether it drew.
-    fn draw(&self, ctx: &mut RenderContext, pass: &'static str, target: PassTarget, pipeline_id: CachedRenderPipelineId, view: VolumeView) -> bool {
+    /// Draws the volumes' bounding prisms, 36 vertices an instance, into `target` with
+    /// the view's pipeline `pipeline_id` ([`Self::additive_pass`]): for the surface
+    /// pass those `splat` left in `surface`'s list, else every volume the build kept.
+    /// Whether it drew.
+    fn draw(
+        &self,
+        ctx: &mut RenderContext,
+        pass: &'static str,
+        target: PassTarget,
+        (pipeline_id, surface): (CachedRenderPipelineId, Option<&ViewSurfaceTargets>),
+        view: VolumeView,
+    ) -> bool {
         let (_, _, pipelines, prepass, _) = view;
-        let (Some(pipeline), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
+        let (false, Some(pipeline), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
+            self.buffers.empty,
             self.cache.get_render_pipeline(pipeline_id),
             prepass.depth_view(),
             prepass.normal_view(),
@@ -47,16 +57,17 @@ impl VolumeDraw<'_> {
         ) else {
             return false;
         };
-        if self.buffers.empty {
-            return false;
-        }
-        let bind_group = ctx.render_device().create_bind_group(
-            "caustic_volumes_bind_group",
-            &self.cache.get_bind_group_layout(&self.layouts.layouts[pipelines.multisampled as usize]),
-            &BindGroupEntries::sequential((view_binding, volumes.as_entire_binding(), settings, depth, normal)),
-        );
-        // As many instances as the GPU build kept (`compute.rs`).
-        self.additive_pass(ctx, pass, target, (pipeline, &bind_group), view, |render_pass| render_pass.draw_indirect(counters, 0));
+        let entries = (view_binding, volumes.as_entire_binding(), settings, depth, normal);
+        let layout = self.cache.get_bind_group_layout(self.layouts.layout(surface.is_none(), pipelines.multisampled));
+        let (bind_group, indirect) = match surface {
+            Some(surface) => {
+                let (a, b, c, d, e) = entries;
+                let entries = BindGroupEntries::sequential((a, b, c, d, e, surface.large.as_entire_binding()));
+                (ctx.render_device().create_bind_group("caustic_volumes_surface_bind_group", &layout, &entries), &surface.large)
+            }
+            None => (ctx.render_device().create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries)), counters),
+        };
+        self.additive_pass(ctx, pass, target, (pipeline, &bind_group), view, |render_pass| render_pass.draw_indirect(indirect, 0));
         true
     }
 
@@ -65,7 +76,7 @@ impl VolumeDraw<'_> {
     /// drawn ([`Self::draw`]). Whether it drew.
     fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
         let march = match view.2.shafts {
-            ShaftPipeline::Exact(exact) => return self.draw(ctx, "volumetric", (target, None, scale, clear), exact, view),
+            ShaftPipeline::Exact(exact) => return self.draw(ctx, "volumetric", (target, None, scale, clear), (exact, None), view),
             ShaftPipeline::March(march) => march,
         };
         let (_, _, pipelines, prepass, _) = view;
@@ -133,22 +144,53 @@ type VolumeView<'a> =
     (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
 
 /// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer:
-/// first copies the view's depth prepass into its [`ViewReceiverDepth`], then draws
-/// the prisms tested against it.
+/// `splat` lights the pixels of the volumes that cover a few and lists the others,
+/// its light is added to the buffer, then the listed volumes' prisms are drawn, tested
+/// against a copy of the view's depth prepass.
 pub(super) fn surface_pass(
-    view: ViewQuery<(&ViewReceiverDepth, VolumeView<'static>)>,
+    view: ViewQuery<(&ViewSurfaceTargets, VolumeView<'static>)>,
     draw: VolumeDraw,
-    depth_copy: Res<ReceiverDepthPipeline>,
+    surface: Res<SurfacePipelines>,
+    mut readback: ResMut<SurfaceWorkReadback>,
     mut ctx: RenderContext,
 ) {
-    let (depth, view) = view.into_inner();
-    let Some(copy) = draw.cache.get_render_pipeline(depth_copy.pipelines[view.2.multisampled as usize]) else {
+    let (targets, view) = view.into_inner();
+    let multisampled = view.2.multisampled as usize;
+    let (false, Some(copy), Some(splat), Some(resolve), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
+        draw.buffers.empty,
+        draw.cache.get_render_pipeline(surface.depth_copy[multisampled]),
+        draw.cache.get_compute_pipeline(surface.splat[multisampled]),
+        draw.cache.get_render_pipeline(surface.resolve),
+        view.3.depth_view(),
+        view.3.normal_view(),
+        draw.view_uniforms.uniforms.binding(),
+        draw.buffers.volumes.as_ref(),
+        draw.buffers.counters.as_ref(),
+        draw.buffers.settings.binding(),
+    ) else {
         return;
     };
-    let mut render_pass = ctx.command_encoder().begin_render_pass(&RenderPassDescriptor {
+    let splat_group = ctx.render_device().create_bind_group(
+        "caustic_volumes_splat_bind_group",
+        &draw.cache.get_bind_group_layout(&surface.splat_layouts[multisampled]),
+        &BindGroupEntries::sequential((
+            view_binding,
+            volumes.as_entire_binding(),
+            settings,
+            depth,
+            normal,
+            counters.as_entire_binding(),
+            targets.splatted.as_entire_binding(),
+            targets.large.as_entire_binding(),
+        )),
+    );
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
+    let encoder = ctx.command_encoder();
+    let mut render_pass = encoder.begin_render_pass(&RenderPassDescriptor {
         label: Some("caustic_receiver_depth"),
         depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
-            view: &depth.texture.default_view,
+            view: &targets.depth.default_view,
             depth_ops: Some(Operations { load: LoadOp::Clear(0.0), store: StoreOp::Store }),
             stencil_ops: None,
         }),
@@ -156,17 +198,51 @@ pub(super) fn surface_pass(
     });
     view.0.set_viewport(&mut render_pass);
     render_pass.set_pipeline(copy);
-    render_pass.set_bind_group(0, &depth.bind_group, &[]);
+    render_pass.set_bind_group(0, &targets.depth_bind_group, &[]);
     render_pass.draw(0..3, 0..1);
     drop(render_pass);
+    // One invocation a volume the buffer has room for; those past the build's count return.
+    encoder.clear_buffer(&targets.splatted, 0, None);
+    encoder.clear_buffer(&targets.large, 0, Some(4 * super::render::FIRST_LARGE));
+    let groups = (volumes.size() / super::render::GpuCausticVolume::min_size().get()).div_ceil(64).max(1);
+    let across = groups.min(65535);
+    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volumes_splat"), ..default() });
+    let span = diagnostics.pass_span(&mut pass, "caustics/volumes_splat");
+    pass.set_pipeline(splat);
+    pass.set_bind_group(0, &splat_group, &[view.4.offset]);
+    pass.dispatch_workgroups(across as u32, groups.div_ceil(across) as u32, 1);
+    span.end(&mut pass);
+    drop(pass);
+    let device = ctx.render_device().clone();
+    let encoder = ctx.command_encoder();
+    readback.copy(&device, encoder, &targets.large);
+    // Only where the view sees a surface (reversed z: the fullscreen triangle lies at 0).
+    let mut render_pass = encoder.begin_render_pass(&RenderPassDescriptor {
+        label: Some("caustic_volumes_resolve"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: &view.0.texture.default_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
+        })],
+        depth_stencil_attachment: Some(RenderPassDepthStencilAttachment { view: &targets.depth.default_view, depth_ops: None, stencil_ops: None }),
+        ..default()
+    });
+    view.0.set_viewport(&mut render_pass);
+    let span = diagnostics.pass_span(&mut render_pass, "caustics/volumes_resolve");
+    render_pass.set_pipeline(resolve);
+    render_pass.set_bind_group(0, &targets.resolve_bind_group, &[view.4.offset]);
+    render_pass.draw(0..3, 0..1);
+    span.end(&mut render_pass);
+    drop(render_pass);
     let target = &view.0.texture.default_view;
-    draw.draw(&mut ctx, "volumes", (target, Some(&depth.texture.default_view), 1, false), view.2.surface, view);
+    draw.draw(&mut ctx, "volumes", (target, Some(&targets.depth.default_view), 1, false), (view.2.surface, Some(targets)), view);
 }
 
 /// Caustics views that see a medium.
 type MediumViews = (With<ViewSeesMedium>, With<ViewCausticWork>);
 
-/// Adds the light scattered out of the caustic beams in media to the view's HDR image:
+/// Adds the light splatted out of the caustic beams in media to the view's HDR image:
 /// straight, or integrated into the view's smaller shaft texture and spread over the
 /// image by a fullscreen pass.
 pub(super) fn volumetric_pass(

@@ -1,6 +1,8 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
-use super::build::BuildStatsChannel;
+use super::build::{BuildStatsChannel, SurfaceWork};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use super::beam_grid::{self, BeamGridPipelines, MarchKey};
 use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
@@ -22,7 +24,7 @@ use bevy::render::{
     sync_world::RenderEntity,
     texture::{CachedTexture, TextureCache},
     camera::ExtractedCamera,
-    view::{ExtractedView, Msaa, ViewUniform},
+    view::{ExtractedView, Msaa, ViewUniform, ViewUniforms},
 };
 use bevy::shader::ShaderDefVal;
 use caustics_core::volumes::IntensityMode;
@@ -67,6 +69,8 @@ pub(super) struct GpuVolumeSettings {
     intensity_mode: u32,
     max_magnification: f32,
     medium_count: u32,
+    /// [`WarpedVolumesSettings::splat_pixels`].
+    splat_pixels: u32,
     media: [GpuMedium; MAX_MEDIA],
 }
 
@@ -125,26 +129,100 @@ pub(super) struct ViewShafts {
 /// The shaft texture's format: the view's HDR image's precision.
 const SHAFT_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
-/// Render world: a single-sampled copy of a view's depth prepass, the size of its
-/// irradiance buffer, which the surface pass tests its prisms' back faces against
-/// (read only): a prism whose back face lies in front of the receiver at a pixel
-/// cannot contain that pixel's receiver point, and shades nothing there.
+/// Render world: what a view's surface pass draws with. A single-sampled copy of the
+/// view's depth prepass, the size of its irradiance buffer, which the rasterised
+/// volumes are tested against (read only): a prism whose back face lies in front of
+/// the receiver at a pixel cannot contain that pixel's receiver point, and shades
+/// nothing there. And for `splat` (`volumes.wgsl`): the light it adds, fixed point,
+/// and the list of volumes it leaves to the rasteriser.
 #[derive(Component)]
-pub(super) struct ViewReceiverDepth {
-    pub texture: CachedTexture,
+pub(super) struct ViewSurfaceTargets {
+    pub depth: CachedTexture,
     /// Reads the view's depth prepass for the copy.
-    pub bind_group: BindGroup,
+    pub depth_bind_group: BindGroup,
+    /// Three words ([`SPLAT_SCALE`] a unit of exposed irradiance) a pixel of the
+    /// camera's viewport.
+    pub splatted: Buffer,
+    /// The rasteriser's indirect draw (four words), then the volumes it draws: room for
+    /// every volume of the build.
+    pub large: Buffer,
+    /// Reads `splatted` into the irradiance buffer.
+    pub resolve_bind_group: BindGroup,
+}
+
+/// Fixed-point units of `splat`'s light per unit of exposed irradiance: a pixel holds
+/// 2¹⁸ units of it, 128 volumes at [`crate::irradiance::MAX_EXPOSED_IRRADIANCE`].
+pub(super) const SPLAT_SCALE: u32 = 1 << 14;
+/// [`ViewSurfaceTargets::large`]: the indirect draw's four words, the counts of
+/// [`SurfaceWork`] (`volumes.wgsl`), then from this word on the rasterised volumes.
+pub(super) const FIRST_LARGE: u64 = 8;
+
+/// Render world: the counts of [`SurfaceWork`] copied from the first view's
+/// [`ViewSurfaceTargets::large`] of a frame, while no earlier copy is being read.
+#[derive(Resource, Default)]
+pub(super) struct SurfaceWorkReadback {
+    staging: Option<Buffer>,
+    reading: Arc<AtomicBool>,
+    copied: bool,
+}
+
+impl SurfaceWorkReadback {
+    /// Copies `large`'s counts for reading after this frame, unless a copy is under way.
+    pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, large: &Buffer) {
+        if self.reading.swap(true, Ordering::AcqRel) {
+            return;
+        }
+        let size = 4 * FIRST_LARGE;
+        let staging = self.staging.get_or_insert_with(|| {
+            device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_surface_work_readback"),
+                size,
+                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        });
+        encoder.copy_buffer_to_buffer(large, 0, staging, 0, size);
+        self.copied = true;
+    }
+}
+
+/// After this frame's commands went in: reads the surface pass's counts copied this
+/// frame back, on to the main world. With no surface pass and no read under way, the
+/// staging buffer goes.
+fn read_back_surface_work(mut readback: ResMut<SurfaceWorkReadback>, channel: Res<BuildStatsChannel>) {
+    let (true, Some(staging)) = (std::mem::take(&mut readback.copied), readback.staging.clone()) else {
+        if !readback.reading.load(Ordering::Acquire) {
+            readback.staging = None;
+        }
+        return;
+    };
+    let (reading, channel, buffer) = (readback.reading.clone(), channel.1.clone(), staging.clone());
+    staging.slice(..).map_async(MapMode::Read, move |result| {
+        if result.is_ok() {
+            let words: Vec<u32> = bytemuck::cast_slice(&buffer.slice(..).get_mapped_range()).to_vec();
+            buffer.unmap();
+            if let Ok(mut work) = channel.lock() {
+                *work = Some(SurfaceWork { splatted: words[4], splatted_pixels: words[5], rasterised: words[1] });
+            }
+        }
+        reading.store(false, Ordering::Release);
+    });
 }
 
 /// The receiver depth's format and the surface pass's depth test.
 const RECEIVER_DEPTH_FORMAT: TextureFormat = TextureFormat::Depth32Float;
 
-/// The fullscreen pass that fills a view's [`ViewReceiverDepth`]: for a single-sampled
-/// and a multisampled prepass.
+/// The fullscreen pass that fills a view's [`ViewSurfaceTargets::depth`], for a
+/// single-sampled and a multisampled prepass; `splat`, for each; and the fullscreen
+/// pass that adds what it splatted to the irradiance buffer.
 #[derive(Resource)]
-pub(super) struct ReceiverDepthPipeline {
-    layouts: [BindGroupLayoutDescriptor; 2],
-    pub pipelines: [CachedRenderPipelineId; 2],
+pub(super) struct SurfacePipelines {
+    depth_layouts: [BindGroupLayoutDescriptor; 2],
+    pub depth_copy: [CachedRenderPipelineId; 2],
+    pub splat_layouts: [BindGroupLayoutDescriptor; 2],
+    pub splat: [CachedComputePipelineId; 2],
+    resolve_layout: BindGroupLayoutDescriptor,
+    pub resolve: CachedRenderPipelineId,
 }
 
 pub(super) fn build(app: &mut App) {
@@ -163,6 +241,7 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<SpecializedRenderPipelines<ShaftUpsamplePipeline>>()
         .init_resource::<SpecializedRenderPipelines<BeamGridPipelines>>()
         .init_resource::<beam_grid::BeamGridBuffers>()
+        .init_resource::<SurfaceWorkReadback>()
         .add_systems(RenderStartup, (init_pipeline, compute::init_pipelines, beam_grid::init_pipelines))
         .add_systems(
             ExtractSchedule,
@@ -182,8 +261,9 @@ pub(super) fn build(app: &mut App) {
                 timed(&cpu, compute::prepare_build).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, beam_grid::prepare_grids).in_set(RenderSystems::PrepareResources).after(compute::prepare_build).after(prepare_buffers),
                 timed(&cpu, compute::read_back_counts).in_set(RenderSystems::Cleanup),
+                timed(&cpu, read_back_surface_work).in_set(RenderSystems::Cleanup),
                 timed(&cpu, prepare_shaft_textures).in_set(RenderSystems::PrepareResources),
-                timed(&cpu, prepare_receiver_depth).in_set(RenderSystems::PrepareBindGroups),
+                timed(&cpu, prepare_surface_targets).in_set(RenderSystems::PrepareBindGroups),
                 timed(&cpu, prepare_pipelines).in_set(RenderSystems::Prepare),
             ),
         )
@@ -243,17 +323,60 @@ fn prepare_buffers(
         },
         max_magnification: settings.max_magnification,
         medium_count,
+        splat_pixels: extracted.0.splat_pixels,
         media,
     });
     buffers.settings.set_label(Some("caustic_volume_settings"));
     buffers.settings.write_buffer(&device, &queue);
 }
 
-/// The bind group layouts (single-sampled and multisampled prepass) and the shader.
+/// The bind group layouts of the rasterised passes, surface and volumetric (each for a
+/// single-sampled and a multisampled prepass), and the shader.
 #[derive(Resource)]
 pub(super) struct VolumesPipeline {
-    pub layouts: [BindGroupLayoutDescriptor; 2],
+    pub surface_layouts: [BindGroupLayoutDescriptor; 2],
+    pub volumetric_layouts: [BindGroupLayoutDescriptor; 2],
     shader: Handle<Shader>,
+}
+
+impl VolumesPipeline {
+    /// The layout a pass draws with.
+    pub fn layout(&self, volumetric: bool, multisampled: bool) -> &BindGroupLayoutDescriptor {
+        let layouts = if volumetric { &self.volumetric_layouts } else { &self.surface_layouts };
+        &layouts[multisampled as usize]
+    }
+}
+
+/// What `volumes.wgsl` reads in every entry point (the view, the volumes, the settings
+/// and the prepass), seen from `visibility`, then `more` from binding 5 on.
+fn volumes_layout(label: &'static str, multisampled: bool, visibility: ShaderStages, more: &[BindingType]) -> BindGroupLayoutDescriptor {
+    let mut entries = BindGroupLayoutEntries::sequential(
+        visibility,
+        (
+            uniform_buffer::<ViewUniform>(true),
+            storage_buffer_read_only::<GpuCausticVolume>(false),
+            uniform_buffer::<GpuVolumeSettings>(false),
+            if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+            if multisampled {
+                texture_2d_multisampled(TextureSampleType::Float { filterable: false })
+            } else {
+                texture_2d(TextureSampleType::Float { filterable: false })
+            },
+        ),
+    )
+    .to_vec();
+    entries.extend(more.iter().zip(5..).map(|(&ty, binding)| BindGroupLayoutEntry { binding, visibility, ty, count: None }));
+    BindGroupLayoutDescriptor::new(label, &entries)
+}
+
+/// A storage buffer of `u32`s.
+fn words(read_only: bool) -> BindingType {
+    BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, has_dynamic_offset: false, min_binding_size: None }
+}
+
+/// The shader definition every variant of `volumes.wgsl` needs.
+fn splat_defs() -> [ShaderDefVal; 1] {
+    [ShaderDefVal::UInt("SPLAT_SCALE".into(), SPLAT_SCALE)]
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
@@ -274,29 +397,29 @@ fn init_pipeline(
     fullscreen: Res<FullscreenShader>,
     cache: Res<PipelineCache>,
 ) {
-    let layout = |multisampled: bool| {
-        BindGroupLayoutDescriptor::new(
-            if multisampled { "caustic_volumes_layout_msaa" } else { "caustic_volumes_layout" },
-            &BindGroupLayoutEntries::sequential(
-                ShaderStages::VERTEX_FRAGMENT,
-                (
-                    uniform_buffer::<ViewUniform>(true),
-                    storage_buffer_read_only::<GpuCausticVolume>(false),
-                    uniform_buffer::<GpuVolumeSettings>(false),
-                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
-                    if multisampled {
-                        texture_2d_multisampled(TextureSampleType::Float { filterable: false })
-                    } else {
-                        texture_2d(TextureSampleType::Float { filterable: false })
-                    },
-                ),
-            ),
-        )
-    };
-    commands.insert_resource(VolumesPipeline {
-        layouts: [layout(false), layout(true)],
-        shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl"),
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl");
+    let surface_layouts = [false, true].map(|multisampled| {
+        volumes_layout("caustic_volumes_surface_layout", multisampled, ShaderStages::VERTEX_FRAGMENT, &[words(true)])
     });
+    let volumetric_layouts =
+        [false, true].map(|multisampled| volumes_layout("caustic_volumes_volumetric_layout", multisampled, ShaderStages::VERTEX_FRAGMENT, &[]));
+    let splat_layouts = [false, true].map(|multisampled| {
+        volumes_layout("caustic_volumes_splat_layout", multisampled, ShaderStages::COMPUTE, &[words(true), words(false), words(false)])
+    });
+    let splat = [false, true].map(|multisampled| {
+        let mut shader_defs = vec!["SPLAT".into()];
+        shader_defs.extend(multisampled.then(|| "MULTISAMPLED".into()));
+        shader_defs.extend(splat_defs());
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some("caustic_volumes_splat_pipeline".into()),
+            layout: vec![splat_layouts[multisampled as usize].clone()],
+            shader: shader.clone(),
+            shader_defs,
+            entry_point: Some("splat".into()),
+            ..default()
+        })
+    });
+    commands.insert_resource(VolumesPipeline { surface_layouts, volumetric_layouts, shader });
     let layout = BindGroupLayoutDescriptor::new(
         "caustic_shafts_layout",
         &BindGroupLayoutEntries::sequential(
@@ -317,7 +440,7 @@ fn init_pipeline(
         fullscreen: fullscreen.clone(),
     });
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "receiver_depth.wgsl");
-    let layouts = [false, true].map(|multisampled| {
+    let depth_layouts = [false, true].map(|multisampled| {
         BindGroupLayoutDescriptor::new(
             "caustic_receiver_depth_layout",
             &BindGroupLayoutEntries::single(
@@ -326,10 +449,10 @@ fn init_pipeline(
             ),
         )
     });
-    let pipelines = [false, true].map(|multisampled| {
+    let depth_copy = [false, true].map(|multisampled| {
         cache.queue_render_pipeline(RenderPipelineDescriptor {
             label: Some("caustic_receiver_depth_pipeline".into()),
-            layout: vec![layouts[multisampled as usize].clone()],
+            layout: vec![depth_layouts[multisampled as usize].clone()],
             vertex: fullscreen.to_vertex_state(),
             fragment: Some(FragmentState {
                 shader: shader.clone(),
@@ -347,14 +470,42 @@ fn init_pipeline(
             ..default()
         })
     });
-    commands.insert_resource(ReceiverDepthPipeline { layouts, pipelines });
+    let resolve_layout = BindGroupLayoutDescriptor::new(
+        "caustic_volumes_resolve_layout",
+        &BindGroupLayoutEntries::sequential(ShaderStages::FRAGMENT, (uniform_buffer::<ViewUniform>(true), storage_buffer_read_only::<u32>(false))),
+    );
+    let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
+    let resolve = cache.queue_render_pipeline(RenderPipelineDescriptor {
+        label: Some("caustic_volumes_resolve_pipeline".into()),
+        layout: vec![resolve_layout.clone()],
+        vertex: fullscreen.to_vertex_state(),
+        fragment: Some(FragmentState {
+            shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "splat_resolve.wgsl"),
+            shader_defs: vec![ShaderDefVal::UInt("SPLAT_SCALE".into(), SPLAT_SCALE)],
+            entry_point: Some("resolve".into()),
+            targets: vec![Some(ColorTargetState {
+                format: crate::CAUSTIC_IRRADIANCE_FORMAT,
+                blend: Some(BlendState { color: additive, alpha: additive }),
+                write_mask: ColorWrites::ALL,
+            })],
+        }),
+        depth_stencil: Some(DepthStencilState {
+            format: RECEIVER_DEPTH_FORMAT,
+            depth_write_enabled: Some(false),
+            depth_compare: Some(CompareFunction::Less),
+            stencil: default(),
+            bias: default(),
+        }),
+        ..default()
+    });
+    commands.insert_resource(SurfacePipelines { depth_layouts, depth_copy, splat_layouts, splat, resolve_layout, resolve });
 }
 
 impl SpecializedRenderPipeline for VolumesPipeline {
     type Key = VolumesPipelineKey;
 
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
-        let mut shader_defs = Vec::new();
+        let mut shader_defs = splat_defs().to_vec();
         if key.multisampled {
             shader_defs.push("MULTISAMPLED".into());
         }
@@ -375,7 +526,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some(label.into()),
-            layout: vec![self.layouts[key.multisampled as usize].clone()],
+            layout: vec![self.layout(key.volumetric, key.multisampled).clone()],
             vertex: VertexState {
                 shader: self.shader.clone(),
                 shader_defs: shader_defs.clone(),
@@ -394,7 +545,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
             }),
             // Back faces only: each pixel whose ray crosses a volume's convex bounding
             // prism runs the exact test once (§4.3). The surface pass also skips back
-            // faces in front of the receiver ([`ViewReceiverDepth`]; reversed z: the
+            // faces in front of the receiver ([`ViewSurfaceTargets::depth`]; reversed z: the
             // back face's depth must not exceed the receiver's).
             primitive: PrimitiveState { cull_mode: Some(Face::Front), front_face: FrontFace::Ccw, ..default() },
             depth_stencil: (!key.volumetric).then(|| DepthStencilState {
@@ -489,25 +640,30 @@ fn prepare_shaft_textures(
     }
 }
 
-/// Gives every caustics view that reads a depth prepass its [`ViewReceiverDepth`],
-/// the size of its irradiance buffer, and takes it from views without caustics work.
+/// Gives every caustics view that reads a depth prepass its [`ViewSurfaceTargets`]
+/// (the depth the size of its irradiance buffer, the splatted light the size of its
+/// viewport), keeping its buffers while those sizes and the build's capacity stay, and
+/// takes them from views without caustics work.
 #[expect(clippy::too_many_arguments)]
-fn prepare_receiver_depth(
+fn prepare_surface_targets(
     mut commands: Commands,
-    views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa)>,
-    others: Query<Entity, (With<ViewReceiverDepth>, Without<ViewCausticIrradiance>)>,
-    pipeline: Res<ReceiverDepthPipeline>,
+    views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa, Option<&ViewSurfaceTargets>)>,
+    others: Query<Entity, (With<ViewSurfaceTargets>, Without<ViewCausticIrradiance>)>,
+    pipelines: Res<SurfacePipelines>,
     buffers: Res<VolumeBuffers>,
+    view_uniforms: Res<ViewUniforms>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
     cache: Res<PipelineCache>,
 ) {
     for entity in &others {
-        commands.entity(entity).remove::<ViewReceiverDepth>();
+        commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
-    for (entity, irradiance, prepass, msaa) in &views {
-        let Some(depth) = prepass.depth_view().filter(|_| buffers.volumes.is_some() && !buffers.empty) else {
-            commands.entity(entity).remove::<ViewReceiverDepth>();
+    for (entity, irradiance, prepass, msaa, targets) in &views {
+        let (Some(depth), Some(volumes), Some(view_binding)) =
+            (prepass.depth_view(), buffers.volumes.as_ref().filter(|_| !buffers.empty), view_uniforms.uniforms.binding())
+        else {
+            commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
         };
         let texture = texture_cache.get(
@@ -523,12 +679,29 @@ fn prepare_receiver_depth(
                 view_formats: &[],
             },
         );
-        let bind_group = device.create_bind_group(
+        let depth_bind_group = device.create_bind_group(
             "caustic_receiver_depth_bind_group",
-            &cache.get_bind_group_layout(&pipeline.layouts[(msaa.samples() > 1) as usize]),
+            &cache.get_bind_group_layout(&pipelines.depth_layouts[(msaa.samples() > 1) as usize]),
             &BindGroupEntries::single(depth),
         );
-        commands.entity(entity).insert(ViewReceiverDepth { texture, bind_group });
+        let pixels = u64::from(irradiance.region().1.element_product());
+        let splatted_size = 3 * 4 * pixels.max(1);
+        let large_size = 4 * (FIRST_LARGE + volumes.size() / GpuCausticVolume::min_size().get());
+        let buffer = |label, size, usage| device.create_buffer(&BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false });
+        let splatted = match targets.filter(|t| t.splatted.size() == splatted_size) {
+            Some(t) => t.splatted.clone(),
+            None => buffer("caustic_volumes_splatted", splatted_size, BufferUsages::STORAGE | BufferUsages::COPY_DST),
+        };
+        let large = match targets.filter(|t| t.large.size() == large_size) {
+            Some(t) => t.large.clone(),
+            None => buffer("caustic_volumes_large", large_size, BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC),
+        };
+        let resolve_bind_group = device.create_bind_group(
+            "caustic_volumes_resolve_bind_group",
+            &cache.get_bind_group_layout(&pipelines.resolve_layout),
+            &BindGroupEntries::sequential((view_binding, splatted.as_entire_binding())),
+        );
+        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, depth_bind_group, splatted, large, resolve_bind_group });
     }
 }
 

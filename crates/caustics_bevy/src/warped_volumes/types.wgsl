@@ -33,6 +33,7 @@ struct VolumeSettings {
     intensity_mode: u32,        // 0 conserving, 1 the paper's interpolation, 2 constant
     max_magnification: f32,
     medium_count: u32,
+    splat_pixels: u32,          // `splat` lights the volumes whose box holds at most this many pixels
     media: array<Medium, 4>,
 }
 

@@ -1,8 +1,11 @@
 // Warped caustic volumes (Ernst, Akenine-Möller & Jensen 2005): the GPU twin of
-// `caustics_core::volumes`. One instance per volume draws the back faces of its
-// bounding prism (§4.3); the fragment runs the exact point-in-volume test (§3.3) and
-// the interpolated intensity (§3.4) at the receiver point from the depth prepass
-// (`surface`), or the eye ray's single scattering in media (§3.5, `volumetric`).
+// `caustics_core::volumes`. The surface pass (`SURFACE`) lights each pixel's receiver
+// point with the exact point-in-volume test (§3.3) and the interpolated intensity
+// (§3.4) of every volume whose bounding shape covers the pixel: `splat` (`SPLAT`,
+// one invocation a volume) does it for shapes that cover a few pixels, looping over
+// them, and hands the larger ones to the rasteriser, which draws the back faces of
+// their bounding prisms (§4.3) into `surface`. The volumetric pass draws every prism
+// into `volumetric`, the eye ray's single scattering in media (§3.5).
 
 #import bevy_render::view::View
 #import bevy_caustics::receiver::{Medium, centre_depth, clip_medium, exposed, world_at}
@@ -19,6 +22,26 @@
 @group(0) @binding(3) var depth_prepass: texture_depth_2d;
 @group(0) @binding(4) var normal_prepass: texture_2d<f32>;
 #endif
+#ifdef SPLAT
+// The build's counters: [1] is the number of volumes it kept.
+@group(0) @binding(5) var<storage, read> counters: array<u32>;
+// The light `splat` adds, fixed point, three words a pixel of the view's viewport.
+@group(0) @binding(6) var<storage, read_write> splatted: array<atomic<u32>>;
+// The rasteriser's indirect draw ([0] vertices, [1] instances), the volumes `splat`
+// lit and the pixels it shaded for them, then from `FIRST_LARGE` on the volumes the
+// rasteriser draws.
+@group(0) @binding(7) var<storage, read_write> large: array<atomic<u32>>;
+#else
+#ifdef SURFACE
+@group(0) @binding(5) var<storage, read> large: array<u32>;
+#endif
+#endif
+
+// `render.rs`: the words of `large`, and the fixed-point scale of `splatted`.
+const SPLATTED_VOLUMES: u32 = 4u;
+const SPLATTED_PIXELS: u32 = 5u;
+const FIRST_LARGE: u32 = 8u;
+const SPLAT_SCALE: f32 = #{SPLAT_SCALE}.0;
 
 const PI: f32 = 3.141592653589793;
 
@@ -36,10 +59,12 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     );
     let k = triangles[vertex_index];
 #ifdef SURFACE
-    // Where the rays land on one surface, the slice of the beam crossing the slab
-    // around it; nothing for a volume whose rays meet no surface.
-    let corner = volumes[instance].surface_corners[k];
+    // The volumes too large for `splat`; where the rays land on one surface, the
+    // slice of the beam crossing the slab around it.
+    let volume = large[FIRST_LARGE + instance];
+    let corner = volumes[volume].surface_corners[k];
 #else
+    let volume = instance;
     let corner = volumes[instance].corners[k];
 #endif
     var out: VertexOutput;
@@ -47,7 +72,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // A hair farther (reversed z), so that the surface pass's depth test keeps the
     // back faces through a receiver point to rounding.
     out.position.z *= 1.0 - 1.0e-4;
-    out.volume = instance;
+    out.volume = volume;
     return out;
 }
 
@@ -55,29 +80,119 @@ fn load_depth(pixel: vec2<i32>) -> f32 {
     return textureLoad(depth_prepass, pixel, 0);
 }
 
-@fragment
-fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(in.position.xy);
+// What volume `v` adds to the irradiance buffer at `pixel`: its light at the receiver
+// point there, exposed; zero outside it. On the ray through the pixel's centre.
+fn surface_light(v: CausticVolume, pixel: vec2<i32>) -> vec3<f32> {
     let depth = load_depth(pixel);
     if depth <= 0.0 {
-        discard;
+        return vec3(0.0);
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    // On the ray through the pixel's centre, which the prism drew this fragment for.
-    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
-    let v = volumes[in.volume];
+    let p = world_at(view, vec2<f32>(pixel) + 0.5, centre_depth(view, depth_prepass, pixel, n));
     // `CausticVolume::irradiance`: surfaces in the volume's slab, where it has one.
     let d = dot(v.slab.xyz, p);
     if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
-        discard;
+        return vec3(0.0);
     }
     let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
     if !s.inside {
-        discard;
+        return vec3(0.0);
     }
     let e = s.plane_irradiance * max(0.0, -dot(s.ray, n));
-    return exposed(v.color.rgb * e, view.exposure);
+    return exposed(v.color.rgb * e, view.exposure).rgb;
 }
+
+@fragment
+fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
+    return vec4(surface_light(volumes[in.volume], vec2<i32>(in.position.xy)), 0.0);
+}
+
+#ifdef SPLAT
+// One volume of the surface pass: where its surface bounding shape projects within a
+// box of at most `settings.splat_pixels` pixels, the pixels whose centres the shape covers
+// (those the rasteriser would shade: the shape is convex, and a row of pixels meets it
+// between the outermost crossings of its twelve edges) get `surface_light`, added to
+// `splatted`; a larger or clipped shape goes to the rasteriser's list, and one off the
+// viewport lights nothing.
+@compute @workgroup_size(64)
+fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let index = id.x + id.y * groups.x * 64u;
+    if index == 0u {
+        atomicStore(&large[0], 36u);
+    }
+    if index >= counters[1] {
+        return;
+    }
+    let v = volumes[index];
+    // A volume whose rays meet no surface lights none (`SurfaceSlab::EMPTY`).
+    if any(v.slab.xyz != vec3(0.0)) && v.slab.w > v.slab_far.x {
+        return;
+    }
+    // The corners in pixels of the view's target.
+    let origin = view.viewport.xy;
+    let size = view.viewport.zw;
+    var corner: array<vec2<f32>, 8>;
+    var lo = vec2(3.0e38);
+    var hi = vec2(-3.0e38);
+    var behind = 0;
+    for (var k = 0; k < 8; k++) {
+        let clip = view.clip_from_world * vec4(v.surface_corners[k].xyz, 1.0);
+        behind += select(0, 1, !(clip.w > 0.0));
+        let ndc = clip.xy / clip.w;
+        corner[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
+        lo = min(lo, corner[k]);
+        hi = max(hi, corner[k]);
+    }
+    // Wholly behind the eye: nothing to light. Partly: the rasteriser clips it.
+    if behind == 8 {
+        return;
+    }
+    let clipped = behind > 0;
+    // The pixels whose centres lie in the shape's box, within the viewport.
+    let first = max(vec2<i32>(ceil(lo - 0.5)), vec2<i32>(origin));
+    let last = min(vec2<i32>(floor(hi - 0.5)), vec2<i32>(origin + size) - 1);
+    if !clipped && any(last < first) {
+        return;
+    }
+    let extent = vec2<u32>(max(last - first + 1, vec2(0)));
+    if clipped || extent.x * extent.y > settings.splat_pixels {
+        let slot = atomicAdd(&large[1], 1u);
+        atomicStore(&large[FIRST_LARGE + slot], index);
+        return;
+    }
+    // The hexahedron's edges: around the top, around the bottom, top to bottom.
+    var start = array(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
+    var end = array(1, 2, 3, 0, 5, 6, 7, 4, 4, 5, 6, 7);
+    var shaded = 0u;
+    for (var y = first.y; y <= last.y; y++) {
+        let row = f32(y) + 0.5;
+        var left = 3.0e38;
+        var right = -3.0e38;
+        for (var e = 0; e < 12; e++) {
+            let a = corner[start[e]];
+            let b = corner[end[e]];
+            if min(a.y, b.y) <= row && row <= max(a.y, b.y) {
+                let t = select(clamp((row - a.y) / (b.y - a.y), 0.0, 1.0), 0.0, a.y == b.y);
+                let x = mix(a.x, b.x, t);
+                left = min(left, min(x, select(x, b.x, a.y == b.y)));
+                right = max(right, max(x, select(x, b.x, a.y == b.y)));
+            }
+        }
+        for (var x = max(i32(ceil(left - 0.5)), first.x); x <= min(i32(floor(right - 0.5)), last.x); x++) {
+            shaded++;
+            let light = vec3<u32>(surface_light(v, vec2(x, y)) * SPLAT_SCALE + 0.5);
+            let pixel = 3u * u32((y - i32(origin.y)) * i32(size.x) + x - i32(origin.x));
+            for (var c = 0u; c < 3u; c++) {
+                if light[c] != 0u {
+                    atomicAdd(&splatted[pixel + c], light[c]);
+                }
+            }
+        }
+    }
+    atomicAdd(&large[SPLATTED_VOLUMES], 1u);
+    atomicAdd(&large[SPLATTED_PIXELS], shaded);
+}
+#endif
 
 // `caustics_core::volumes::mean_attenuation`: the mean of e^{−σt d} over σt d ∈ [m − x, m + x].
 fn mean_attenuation(m: f32, x: f32) -> f32 {
