@@ -69,6 +69,11 @@ pub struct BenchArgs {
     /// volume an eye ray crosses).
     #[arg(long, default_value = "grid", value_parser = parse_shafts)]
     pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
+    /// With `--frames`: the caustic volumes' `WarpedVolumesSettings::splat_pixels`, the
+    /// largest box in pixels whose volumes the surface pass lights in its compute pass
+    /// (0: every volume rasterised); the plugin's default when not given.
+    #[arg(long)]
+    pub splat_pixels: Option<u32>,
     /// With `--frames`: the families' scenes to run, comma-separated (`ocean`, `ring`,
     /// `glass ball`, `pool`, `rippled pool`); all when not given.
     #[arg(long, value_delimiter = ',')]
@@ -613,7 +618,7 @@ fn trace_grid(
 pub fn run(args: BenchArgs) -> Result<(), String> {
     if args.frames {
         let scenes = |scene: &str| args.frame_scenes.is_empty() || args.frame_scenes.iter().any(|s| s == scene);
-        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size, shafts: args.shafts };
+        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size, shafts: args.shafts, splat_pixels: args.splat_pixels };
         return crate::frames::run(&args.out, |t, scene| args.runs(t) && scenes(scene), &bench);
     }
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];

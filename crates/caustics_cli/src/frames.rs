@@ -27,7 +27,7 @@ use bevy::prelude::*;
 use caustics_bevy::gpu_work::{FrameWork, PassWork};
 use caustics_bevy::headless::HeadlessRenderer;
 use caustics_bevy::prelude::*;
-use caustics_bevy::warped_volumes::CausticVolumes;
+use caustics_bevy::warped_volumes::{CausticVolumes, SurfaceWork};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -51,6 +51,8 @@ pub struct FrameBench {
     pub view: (u32, u32),
     /// How the volumes' shafts are integrated.
     pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
+    /// The volumes' `splat_pixels`, where not the default.
+    pub splat_pixels: Option<u32>,
 }
 
 /// One technique on one scene at growing sizes.
@@ -118,6 +120,9 @@ struct FrameCost {
     volume_gathers: u64,
     /// The caustic volumes of the last build: kept, drawn as surface slabs, escaping.
     volumes: (usize, usize, usize),
+    /// How the volumes' surface pass shared them out: lit by its compute pass (and the
+    /// pixels it shaded for them), rasterised.
+    surface: SurfaceWork,
 }
 
 impl FrameCost {
@@ -159,7 +164,7 @@ pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) ->
             let start = Instant::now();
             let row = measure(family, parameter, bench)?;
             eprintln!(
-                "{:>11} {:>12} {:>9} {}: caustics {:9.2} ms, {:8.2} M invocations, {:6.2} fragments a receiver pixel; main pass {:8.2} ms, {:6.2} M fragments (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {} volumes, {} slabs, {} escaping; {:.0} s",
+                "{:>11} {:>12} {:>9} {}: caustics {:9.2} ms, {:8.2} M invocations, {:6.2} fragments a receiver pixel; main pass {:8.2} ms, {:6.2} M fragments (GPU); plugin CPU {:.3} + {:.3} ms, {} volume gatherings; {} volumes, {} slabs, {} escaping; surface pass: {} splatted ({:.2} pixels shaded a receiver pixel), {} rasterised; {:.0} s",
                 family.technique,
                 family.scene,
                 row.size,
@@ -175,6 +180,9 @@ pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) ->
                 row.volumes.0,
                 row.volumes.1,
                 row.volumes.2,
+                row.surface.splatted,
+                row.per_receiver_pixel(Some(f64::from(row.surface.splatted_pixels))).unwrap_or(f64::NAN),
+                row.surface.rasterised,
                 start.elapsed().as_secs_f64()
             );
             rows.push(row);
@@ -188,7 +196,9 @@ pub fn run(out: &Path, runs: impl Fn(&str, &str) -> bool, bench: &FrameBench) ->
 fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameCost, String> {
     let (width, height) = bench.view;
     let mut renderer = HeadlessRenderer::timed(width, height).map_err(|e| e.to_string())?;
-    renderer.world_mut().insert_resource(WarpedVolumesSettings { shaft_integral: bench.shafts, ..default() });
+    let defaults = WarpedVolumesSettings::default();
+    let splat_pixels = bench.splat_pixels.unwrap_or(defaults.splat_pixels);
+    renderer.world_mut().insert_resource(WarpedVolumesSettings { shaft_integral: bench.shafts, splat_pixels, ..defaults });
     let target = renderer.render_target();
     renderer.app.add_systems(Update, (turn, rain));
     let size = (family.spawn)(renderer.world_mut(), target, parameter);
@@ -256,6 +266,7 @@ fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameC
             let stats = renderer.world_mut().resource::<CausticVolumes>().stats;
             (stats.volumes, stats.surface_slabs, stats.escaping)
         },
+        surface: renderer.world_mut().resource::<CausticVolumes>().surface,
     })
 }
 
@@ -288,7 +299,7 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
         "adapter,width,height,technique,scene,unit,size,caustics_gpu_ms,main_pass_gpu_ms,caustics_over_main_pass,\
          caustics_vertex_invocations,caustics_fragment_invocations,caustics_compute_invocations,main_pass_fragment_invocations,\
          receiver_pixels,caustics_fragments_per_receiver_pixel,plugin_cpu_main_ms,plugin_cpu_render_ms,cpu_volume_gathers,\
-         volumes,volume_surface_slabs,volumes_escaping,frame_wall_s,spans\n",
+         volumes,volume_surface_slabs,volumes_escaping,volumes_splatted,splatted_pixels_per_receiver_pixel,volumes_rasterised,frame_wall_s,spans\n",
     );
     let mut passes_csv = String::from(
         "adapter,width,height,technique,scene,size,span,gpu_ms,vertex_invocations,fragment_invocations,compute_invocations,fragments_per_receiver_pixel\n",
@@ -302,7 +313,7 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
         let spans: Vec<String> = r.work.caustics.iter().map(|w| format!("{}={:.3}", w.span, w.ms.unwrap_or(f64::NAN))).collect();
         let _ = writeln!(
             csv,
-            "\"{adapter}\",{width},{height},{},{},{},{},{:.3},{:.3},{:.3},{},{},{},{},{:.0},{},{:.4},{:.4},{},{},{},{},{:.2},{}",
+            "\"{adapter}\",{width},{height},{},{},{},{},{:.3},{:.3},{:.3},{},{},{},{},{:.0},{},{:.4},{:.4},{},{},{},{},{},{},{},{:.2},{}",
             r.technique,
             r.scene,
             r.unit,
@@ -322,6 +333,9 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
             r.volumes.0,
             r.volumes.1,
             r.volumes.2,
+            r.surface.splatted,
+            figure(r.per_receiver_pixel(Some(f64::from(r.surface.splatted_pixels))), 3),
+            r.surface.rasterised,
             r.frame_s,
             spans.join(";")
         );
