@@ -242,7 +242,8 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<SpecializedRenderPipelines<BeamGridPipelines>>()
         .init_resource::<beam_grid::BeamGridBuffers>()
         .init_resource::<SurfaceWorkReadback>()
-        .add_systems(RenderStartup, (init_pipeline, compute::init_pipelines, beam_grid::init_pipelines))
+        .add_systems(RenderStartup, ((init_pipeline, beam_grid::init_pipelines), warm_pipelines).chain())
+        .add_systems(RenderStartup, compute::init_pipelines)
         .add_systems(
             ExtractSchedule,
             (timed(&cpu, extract_settings), timed(&cpu, compute::extract_sources), timed(&cpu, mark_views_seeing_media)),
@@ -594,6 +595,24 @@ fn prepare_pipelines(
         };
         commands.entity(entity).insert(ViewVolumePipelines { surface, shafts, upsample, multisampled });
     }
+}
+
+/// Queues, at startup, the pipelines a view with the default settings and an HDR
+/// target (`Rgba16Float`) specializes (single-sampled and with 4 samples), so that they compile
+/// before the first caustic volume appears instead of after it.
+fn warm_pipelines(
+    (pipeline, mut pipelines): (Res<VolumesPipeline>, ResMut<SpecializedRenderPipelines<VolumesPipeline>>),
+    (upsample, mut upsample_pipelines): (Res<ShaftUpsamplePipeline>, ResMut<SpecializedRenderPipelines<ShaftUpsamplePipeline>>),
+    (march, mut march_pipelines): (Res<BeamGridPipelines>, ResMut<SpecializedRenderPipelines<BeamGridPipelines>>),
+    cache: Res<PipelineCache>,
+) {
+    let scale = WarpedVolumesSettings::default().shaft_scale();
+    for multisampled in [false, true] {
+        let surface = VolumesPipelineKey { volumetric: false, multisampled, shaft_scale: 1, target_format: crate::CAUSTIC_IRRADIANCE_FORMAT };
+        pipelines.specialize(&cache, &pipeline, surface);
+        march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format: SHAFT_FORMAT });
+    }
+    upsample_pipelines.specialize(&cache, &upsample, ShaftUpsampleKey { target_format: TextureFormat::Rgba16Float, scale });
 }
 
 /// Gives every view that runs the volumetric pass below full resolution its shaft
