@@ -65,6 +65,7 @@ fn panel(
     invalid: Query<(Entity, &InvalidCausticParams)>,
     names: Query<&Name>,
     (mut comparison, mut requests, cameras, mut saved): Comparison,
+    #[cfg(feature = "warped-volumes")] volumes: Option<Res<crate::warped_volumes::CausticVolumes>>,
 ) -> Result {
     let label = |entity: Entity| names.get(entity).map_or_else(|_| entity.to_string(), |n| n.to_string());
     let work = FrameWork::of(diagnostics.as_deref().map(newest_pass_work).unwrap_or_default());
@@ -111,6 +112,12 @@ fn panel(
                 ui.colored_label(COLOURS[i % COLOURS.len()], format!("  {}", work_line(pass)));
             }
             ui.label(format!("  Bevy's {}", work_line(&work.main_pass)));
+            #[cfg(feature = "warped-volumes")]
+            if let Some(crate::warped_volumes::SurfaceWork { splatted, splatted_pixels, rasterised }) =
+                volumes.as_ref().map(|v| v.surface).filter(|s| *s != default())
+            {
+                ui.label(format!("  volumes' surface pass: {splatted} lit by compute ({splatted_pixels} pixels), {rasterised} rasterised"));
+            }
             graph(ui, &passes);
         }
         ui.separator();
