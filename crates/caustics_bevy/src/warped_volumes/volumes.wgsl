@@ -137,8 +137,10 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     var behind = 0;
     for (var k = 0; k < 8; k++) {
         let clip = view.clip_from_world * vec4(v.surface_corners[k].xyz, 1.0);
-        behind += select(0, 1, !(clip.w > 0.0));
         let ndc = clip.xy / clip.w;
+        // Behind the eye, or so near its plane that the corner leaves every float.
+        let projected = clip.w > 0.0 && all(abs(ndc) < vec2(1.0e30));
+        behind += select(1, 0, projected);
         corner[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
         lo = min(lo, corner[k]);
         hi = max(hi, corner[k]);
@@ -148,9 +150,10 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let clipped = behind > 0;
-    // The pixels whose centres lie in the shape's box, within the viewport.
-    let first = max(vec2<i32>(ceil(lo - 0.5)), vec2<i32>(origin));
-    let last = min(vec2<i32>(floor(hi - 0.5)), vec2<i32>(origin + size) - 1);
+    // The pixels whose centres lie in the shape's box, within the viewport (clamped
+    // first, so that every conversion to an integer is in range).
+    let first = max(vec2<i32>(ceil(clamp(lo, origin - 1.0, origin + size + 1.0) - 0.5)), vec2<i32>(origin));
+    let last = min(vec2<i32>(floor(clamp(hi, origin - 1.0, origin + size + 1.0) - 0.5)), vec2<i32>(origin + size) - 1);
     if !clipped && any(last < first) {
         return;
     }
@@ -178,7 +181,12 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
                 right = max(right, max(x, select(x, b.x, a.y == b.y)));
             }
         }
-        for (var x = max(i32(ceil(left - 0.5)), first.x); x <= min(i32(floor(right - 0.5)), last.x); x++) {
+        if !(left <= right) {
+            continue;
+        }
+        let from_x = max(i32(ceil(clamp(left, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5)), first.x);
+        let to_x = min(i32(floor(clamp(right, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5)), last.x);
+        for (var x = from_x; x <= to_x; x++) {
             shaded++;
             let light = vec3<u32>(surface_light(v, vec2(x, y)) * SPLAT_SCALE + 0.5);
             let pixel = 3u * u32((y - i32(origin.y)) * i32(size.x) + x - i32(origin.x));
