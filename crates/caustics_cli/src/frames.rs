@@ -205,8 +205,13 @@ fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameC
     let failed = |what: &str| format!("{} on the {} at {size} {}: {what}", family.technique, family.scene, family.unit);
     // Warm up: the first pass, then two frames for its GPU figures to arrive.
     let mut left = None;
+    // Bevy quits the app on a rendering error: nothing after it would be measured.
+    let quit = |renderer: &HeadlessRenderer| renderer.app.should_exit().map(|_| failed("the app quit (a rendering error, logged above)"));
     for _ in 0..MAX_WARM_UP {
         renderer.app.update();
+        if let Some(error) = quit(&renderer) {
+            return Err(error);
+        }
         if left.is_none() && renderer.pass_report().views(family.pass) > 0 {
             left = Some(2);
         }
@@ -226,6 +231,9 @@ fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameC
         let start = Instant::now();
         renderer.app.update();
         let seconds = start.elapsed().as_secs_f64();
+        if let Some(error) = quit(&renderer) {
+            return Err(error);
+        }
         let work = renderer.gpu_pass_work();
         let (cpu_main, cpu_render) = renderer.plugin_cpu_times().ok_or_else(|| failed("no CPU times"))?;
         frames.push(Frame { work, cpu_main, cpu_render, seconds });
