@@ -475,30 +475,22 @@ fn init_pipeline(
         "caustic_volumes_resolve_layout",
         &BindGroupLayoutEntries::sequential(ShaderStages::FRAGMENT, (uniform_buffer::<ViewUniform>(true), storage_buffer_read_only::<u32>(false))),
     );
-    let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
-    let resolve = cache.queue_render_pipeline(RenderPipelineDescriptor {
-        label: Some("caustic_volumes_resolve_pipeline".into()),
-        layout: vec![resolve_layout.clone()],
-        vertex: fullscreen.to_vertex_state(),
-        fragment: Some(FragmentState {
-            shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "splat_resolve.wgsl"),
-            shader_defs: vec![ShaderDefVal::UInt("SPLAT_SCALE".into(), SPLAT_SCALE)],
-            entry_point: Some("resolve".into()),
-            targets: vec![Some(ColorTargetState {
-                format: crate::CAUSTIC_IRRADIANCE_FORMAT,
-                blend: Some(BlendState { color: additive, alpha: additive }),
-                write_mask: ColorWrites::ALL,
-            })],
-        }),
-        depth_stencil: Some(DepthStencilState {
-            format: RECEIVER_DEPTH_FORMAT,
-            depth_write_enabled: Some(false),
-            depth_compare: Some(CompareFunction::Less),
-            stencil: default(),
-            bias: default(),
-        }),
-        ..default()
+    // A projection into the irradiance buffer, drawn only where the view sees a
+    // surface (its depth test against the receiver depth).
+    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "splat_resolve.wgsl");
+    let layouts = [resolve_layout.clone(), resolve_layout.clone()];
+    let mut descriptor = crate::irradiance::projection_pipeline("caustic_volumes_resolve_pipeline", &layouts, &shader, &fullscreen, false);
+    if let Some(fragment) = descriptor.fragment.as_mut() {
+        fragment.shader_defs = splat_defs().to_vec();
+    }
+    descriptor.depth_stencil = Some(DepthStencilState {
+        format: RECEIVER_DEPTH_FORMAT,
+        depth_write_enabled: Some(false),
+        depth_compare: Some(CompareFunction::Less),
+        stencil: default(),
+        bias: default(),
     });
+    let resolve = cache.queue_render_pipeline(descriptor);
     commands.insert_resource(SurfacePipelines { depth_layouts, depth_copy, splat_layouts, splat, resolve_layout, resolve });
 }
 

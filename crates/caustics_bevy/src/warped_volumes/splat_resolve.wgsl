@@ -8,7 +8,7 @@
 @group(0) @binding(1) var<storage, read> splatted: array<u32>;
 
 @fragment
-fn resolve(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
+fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let pixel = vec2<u32>(in.position.xy - view.viewport.xy);
     let at = 3u * (pixel.y * u32(view.viewport.z) + pixel.x);
     let words = vec3(splatted[at], splatted[at + 1u], splatted[at + 2u]);
