@@ -376,8 +376,10 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
     }
     let mut md = format!(
         "# Frame cost as the work grows\n\nAdapter: {adapter}. {width} × {height}, the mean of {MEASURED_FRAMES} frames in steady state. \
-         GPU times are this adapter's; shader invocations (pipeline statistics) carry to any GPU.\n\n\
-         | technique and scene | size range | GPU time ∝ size^k | caustics / main pass (GPU time) | caustics / main pass (fragments) | plugin CPU (main + render) |\n|---|---|---|---|---|---|\n"
+         GPU times are this adapter's; shader invocations (pipeline statistics) carry to any GPU. \
+         The frame's wall time is the whole `App::update` in the headless renderer, CPU and GPU: on lavapipe it also \
+         holds GPU work the timestamps miss (they can read under a millisecond for a compute pass that adds seconds).\n\n\
+         | technique and scene | size range | GPU time ∝ size^k | caustics / main pass (GPU time) | caustics / main pass (fragments) | plugin CPU (main + render) | frame wall time |\n|---|---|---|---|---|---|---|\n"
     );
     let series = |cost: fn(&FrameCost) -> f64| -> Vec<Series> {
         lines.iter().map(|(label, members)| Series { label: label.clone(), points: members.iter().map(|r| (r.size as f64, cost(r))).collect() }).collect()
@@ -390,7 +392,7 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
         let exponent = |s: &Series| growth_exponent(&s.points).map_or("—".to_string(), |k| format!("{k:.2}"));
         let _ = writeln!(
             md,
-            "| {label} | {} – {} | k = {} | {:.2} – {:.2} | {} – {} | {:.2} – {:.2} ms (k = {}) |",
+            "| {label} | {} – {} | k = {} | {:.2} – {:.2} | {} – {} | {:.2} – {:.2} ms (k = {}) | {:.2} – {:.2} s |",
             first.size,
             last.size,
             exponent(g),
@@ -401,6 +403,8 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
             first.cpu_main_ms + first.cpu_render_ms,
             last.cpu_main_ms + last.cpu_render_ms,
             exponent(c),
+            first.frame_s,
+            last.frame_s,
         );
     }
     let _ = writeln!(

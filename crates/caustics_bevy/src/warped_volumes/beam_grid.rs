@@ -1,7 +1,8 @@
 //! Render world: light shafts at a fixed cost per eye ray (`beam_grid.wgsl`, the twin
 //! of `caustics_core::volumes::BeamGrid`). After each build of the volumes, and when
 //! the media change, a compute pass adds every volume's beam to a grid over each
-//! medium's box; the volumetric pass then marches each eye ray through the grid, one
+//! medium's box (in fixed point, then turned into floats); the volumetric pass then
+//! marches each eye ray through the grid, one
 //! step a cell (at most [`super::WarpedVolumesSettings::shaft_steps`]), whatever the
 //! number of volumes.
 
@@ -41,24 +42,31 @@ pub(super) struct GpuBeamGrids {
     max_steps: u32,
 }
 
-/// Eight words a cell: source and summed direction.
+/// Eight words a cell as the march reads it: source and summed direction.
 const CELL_BYTES: u64 = 32;
+
+/// Twelve words a cell as the deposit adds to it: the same in 64-bit fixed point.
+const FIXED_CELL_BYTES: u64 = 48;
 
 /// Render world: the grids of this frame's media and whether they need a deposit.
 #[derive(Resource, Default)]
 pub(super) struct BeamGridBuffers {
     pub cells: Option<Buffer>,
+    /// What the deposit adds to, and `resolve` turns into `cells`.
+    fixed: Option<Buffer>,
     pub grids: UniformBuffer<GpuBeamGrids>,
     /// The media and their cells the grid was laid out for.
     layout: Vec<(Mat4, Vec4, UVec4)>,
     deposit: bool,
 }
 
-/// The deposit's compute pipeline and the march's render pipelines.
+/// The deposit's and the resolve's compute pipelines and the march's render pipelines.
 #[derive(Resource)]
 pub(super) struct BeamGridPipelines {
     deposit_layout: BindGroupLayoutDescriptor,
     deposit: CachedComputePipelineId,
+    resolve_layout: BindGroupLayoutDescriptor,
+    resolve: CachedComputePipelineId,
     pub march_layouts: [BindGroupLayoutDescriptor; 2],
     shader: Handle<Shader>,
     fullscreen: FullscreenShader,
@@ -87,6 +95,26 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         entry_point: Some("deposit".into()),
         ..default()
     });
+    let resolve_layout = BindGroupLayoutDescriptor::new(
+        "caustic_shaft_resolve_layout",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                storage_buffer_read_only_sized(false, None),
+                uniform_buffer::<GpuBeamGrids>(false),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    );
+    let resolve = cache.queue_compute_pipeline(ComputePipelineDescriptor {
+        label: Some("caustic_shaft_resolve".into()),
+        layout: vec![resolve_layout.clone()],
+        shader: shader.clone(),
+        shader_defs: vec!["RESOLVE".into()],
+        entry_point: Some("resolve".into()),
+        ..default()
+    });
     let march_layouts = [false, true].map(|multisampled| {
         BindGroupLayoutDescriptor::new(
             "caustic_shaft_march_layout",
@@ -102,7 +130,15 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             ),
         )
     });
-    commands.insert_resource(BeamGridPipelines { deposit_layout, deposit, march_layouts, shader, fullscreen: fullscreen.clone() });
+    commands.insert_resource(BeamGridPipelines {
+        deposit_layout,
+        deposit,
+        resolve_layout,
+        resolve,
+        march_layouts,
+        shader,
+        fullscreen: fullscreen.clone(),
+    });
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]
@@ -181,12 +217,11 @@ pub(super) fn prepare_grids(
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
-        grids.cells = Some(device.create_buffer(&BufferDescriptor {
-            label: Some("caustic_shaft_grid"),
-            size: bytes,
-            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        }));
+        let buffer = |label, size| {
+            Some(device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST, mapped_at_creation: false }))
+        };
+        grids.cells = buffer("caustic_shaft_grid", bytes);
+        grids.fixed = buffer("caustic_shaft_grid_fixed", u64::from(first) * FIXED_CELL_BYTES);
         grids.deposit = true;
     }
     grids.layout = layout;
@@ -195,8 +230,10 @@ pub(super) fn prepare_grids(
     grids.grids.write_buffer(&device, &queue);
 }
 
-/// Clears the grids and adds every volume's beam to them, one workgroup a volume, when
-/// [`prepare_grids`] asked for it (after the build: the same frame's volumes).
+/// Adds every volume's beam to the fixed-point grids, one workgroup a volume, then
+/// turns them into floats and clears them for the next deposit, one invocation a cell
+/// (a new buffer starts cleared), when [`prepare_grids`] asked for it (after the
+/// build: the same frame's volumes).
 pub(super) fn deposit_beams(
     mut ctx: RenderContext,
     mut grids: ResMut<BeamGridBuffers>,
@@ -205,10 +242,12 @@ pub(super) fn deposit_beams(
     cache: Res<PipelineCache>,
     recorder: Res<PassRecorder>,
 ) {
-    let (true, Some(pipeline), Some(cells), Some(buffer), Some(counters), Some(settings), Some(uniform)) = (
+    let (true, Some(deposit), Some(resolve), Some(cells), Some(fixed), Some(buffer), Some(counters), Some(settings), Some(uniform)) = (
         grids.deposit,
         cache.get_compute_pipeline(pipelines.deposit),
+        cache.get_compute_pipeline(pipelines.resolve),
         grids.cells.as_ref(),
+        grids.fixed.as_ref(),
         volumes.volumes.as_ref(),
         volumes.counters.as_ref(),
         volumes.settings.binding(),
@@ -216,22 +255,36 @@ pub(super) fn deposit_beams(
     ) else {
         return;
     };
-    let bind_group = ctx.render_device().create_bind_group(
+    let device = ctx.render_device();
+    let deposit_group = device.create_bind_group(
         "caustic_shaft_deposit_bind_group",
         &cache.get_bind_group_layout(&pipelines.deposit_layout),
-        &BindGroupEntries::sequential((buffer.as_entire_binding(), counters.as_entire_binding(), settings, uniform, cells.as_entire_binding())),
+        &BindGroupEntries::sequential((buffer.as_entire_binding(), counters.as_entire_binding(), settings, uniform.clone(), fixed.as_entire_binding())),
     );
-    // At most one workgroup a volume the buffer holds; each strides over the rest.
-    let groups = (buffer.size() / GpuCausticVolume::min_size().get()).clamp(1, 65535) as u32;
+    let resolve_group = device.create_bind_group(
+        "caustic_shaft_resolve_bind_group",
+        &cache.get_bind_group_layout(&pipelines.resolve_layout),
+        &BindGroupEntries::sequential((counters.as_entire_binding(), uniform, fixed.as_entire_binding(), cells.as_entire_binding())),
+    );
+    // At most one workgroup a volume the buffer holds, and 64 cells a workgroup; each
+    // strides over the rest.
+    let deposit_groups = (buffer.size() / GpuCausticVolume::min_size().get()).clamp(1, 65535) as u32;
+    let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
-    encoder.clear_buffer(cells, 0, None);
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_deposit"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/shaft_deposit");
-    pass.set_pipeline(pipeline);
-    pass.set_bind_group(0, &bind_group, &[]);
-    pass.dispatch_workgroups(groups, 1, 1);
+    pass.set_pipeline(deposit);
+    pass.set_bind_group(0, &deposit_group, &[]);
+    pass.dispatch_workgroups(deposit_groups, 1, 1);
+    span.end(&mut pass);
+    drop(pass);
+    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_resolve"), ..default() });
+    let span = diagnostics.pass_span(&mut pass, "caustics/shaft_resolve");
+    pass.set_pipeline(resolve);
+    pass.set_bind_group(0, &resolve_group, &[]);
+    pass.dispatch_workgroups(resolve_groups, 1, 1);
     span.end(&mut pass);
     drop(pass);
     grids.deposit = false;

@@ -20,8 +20,28 @@ struct Grids {
     max_steps: u32,
 }
 
-// Eight words a cell: colour · E_beam · e^{−σt dₛ} (xyz), then the summed directions.
-const CELL_WORDS: u32 = 8u;
+// The deposit's twelve words a cell: colour · E_beam · e^{−σt dₛ} (rgb), then the
+// summed directions (xyz), each a signed 64-bit fixed-point number (low word, high
+// word), so that it adds with one integer atomic where a float add needs a
+// compare-exchange loop. `resolve` turns them into the march's two `vec4<f32>` a cell.
+const FIXED_WORDS: u32 = 12u;
+
+// `build.wgsl`'s FLUX: the build's kept flux, three words of f32 bits.
+const FLUX: u32 = 9u;
+
+// A 64-bit word's value from its two halves.
+const TWO_32: f32 = 4294967296.0;
+
+// The fixed-point units a cell's value is counted in: 2⁴⁰ units to Φ · edge / V (Φ the
+// build's kept flux, its largest channel, `counters[9..12]`; edge and V a cell's).
+// Where every beam meets one cell it holds under 11 Φ · edge / V (a beam's path
+// through the eight cells around a sample is under 2√3 edges, its power under 3 Φ),
+// 2⁴⁴ units, far under 2⁶³; a cell a million times dimmer than the mean still counts
+// thousands of units.
+fn fixed_units(g: Grid, flux: vec3<f32>) -> f32 {
+    let unit = max(flux.x, max(flux.y, flux.z)) * g.cell.x / g.cell.y;
+    return select(1.0, clamp(1099511627776.0 / unit, 1.0e-30, 1.0e30), unit > 0.0);
+}
 
 struct GridCorner {
     cell: u32,  // the cell's index in `cells`, all grids together
@@ -47,21 +67,23 @@ fn grid_corner(g: Grid, local: vec3<f32>, corner: u32) -> GridCorner {
 @group(0) @binding(1) var<storage, read> counters: array<u32>;
 @group(0) @binding(2) var<uniform> settings: VolumeSettings;
 @group(0) @binding(3) var<uniform> grids: Grids;
-@group(0) @binding(4) var<storage, read_write> cells: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> fixed: array<atomic<u32>>;
 
 // `caustics_core::volumes::{MAX_DEPOSIT_STEPS, MAX_DEPOSIT_SPLIT}`.
 const MAX_DEPOSIT_STEPS: u32 = 1024u;
 const MAX_DEPOSIT_SPLIT: u32 = 64u;
 
-// An f32 added to a word holding f32 bits (WGSL has no float atomics).
+// `value` fixed units (rounded, within ±2⁶²) added to the 64-bit number at `word`: the
+// low word with one atomic add, the high word only when it changes (a carry, or a
+// negative value's high half without one).
 fn add(word: u32, value: f32) {
-    var old = atomicLoad(&cells[word]);
-    loop {
-        let swapped = atomicCompareExchangeWeak(&cells[word], old, bitcast<u32>(bitcast<f32>(old) + value));
-        if swapped.exchanged {
-            break;
-        }
-        old = swapped.old_value;
+    let x = clamp(value, -4.6e18, 4.6e18) + 0.5;
+    let high = floor(x / TWO_32);
+    let low = u32(clamp(x - high * TWO_32, 0.0, 4294967295.0));
+    let old = atomicAdd(&fixed[word], low);
+    let carry = bitcast<u32>(i32(high)) + select(0u, 1u, old + low < old);
+    if carry != 0u {
+        atomicAdd(&fixed[word + 1u], carry);
     }
 }
 
@@ -89,14 +111,15 @@ fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
     return select(1u, u32(clamp(split, 1.0, f32(MAX_DEPOSIT_SPLIT))), split == split);
 }
 
-// The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point.
+// The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point, in
+// fixed-point units.
 fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
     for (var corner = 0u; corner < 8u; corner++) {
         let c = grid_corner(g, local, corner);
-        let word = c.cell * CELL_WORDS;
+        let word = c.cell * FIXED_WORDS;
         for (var k = 0u; k < 3u; k++) {
-            add(word + k, c.weight * source[k]);
-            add(word + 4u + k, c.weight * direction[k]);
+            add(word + 2u * k, c.weight * source[k]);
+            add(word + 6u + 2u * k, c.weight * direction[k]);
         }
     }
 }
@@ -111,6 +134,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
             let medium = settings.media[m];
             let g = grids.grids[m];
+            let units = fixed_units(g, bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u])));
             let sigma_t = medium.coefficients.x + medium.coefficients.y;
             let steps = deposit_steps(v, g.cell.x);
             let split = deposit_split(v, g.cell.x);
@@ -145,13 +169,53 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                     continue;
                 }
                 let beam_length = length(s.ray);
-                let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight);
+                let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight * units);
                 if any(source != source) || any(abs(source) > vec3(3.0e38)) {
                     continue;
                 }
                 spread(g, local, source, s.ray / beam_length * (source.x + source.y + source.z));
             }
         }
+    }
+}
+#endif
+
+#ifdef RESOLVE
+@group(0) @binding(0) var<storage, read> counters: array<u32>;
+@group(0) @binding(1) var<uniform> grids: Grids;
+@group(0) @binding(2) var<storage, read_write> fixed: array<u32>;
+@group(0) @binding(3) var<storage, read_write> cells: array<vec4<f32>>;
+
+// A signed 64-bit fixed-point number (`add`) as a float, negated whole when negative so
+// that a small negative number keeps its digits; its words cleared for the next deposit.
+fn from_fixed(word: u32) -> f32 {
+    let low = fixed[word];
+    let high = fixed[word + 1u];
+    fixed[word] = 0u;
+    fixed[word + 1u] = 0u;
+    let negative = high >= 0x80000000u;
+    let l = select(low, ~low + 1u, negative);
+    let h = select(high, ~high + select(0u, 1u, l == 0u), negative);
+    let m = f32(h) * TWO_32 + f32(l);
+    return select(m, -m, negative);
+}
+
+// One invocation a cell of every grid: its fixed-point words as the march reads them.
+@compute @workgroup_size(64)
+fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
+    let total = arrayLength(&cells) / 2u;
+    for (var cell = id.x; cell < total; cell += groups.x * 64u) {
+        var m = 0u;
+        while m < 3u && cell >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
+            m++;
+        }
+        let units = fixed_units(grids.grids[m], flux);
+        let word = cell * FIXED_WORDS;
+        let source = vec3(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u));
+        let direction = vec3(from_fixed(word + 6u), from_fixed(word + 8u), from_fixed(word + 10u));
+        cells[2u * cell] = vec4(source / units, 0.0);
+        cells[2u * cell + 1u] = vec4(direction / units, 0.0);
     }
 }
 #endif
