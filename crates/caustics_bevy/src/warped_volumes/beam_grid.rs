@@ -8,7 +8,8 @@
 
 use super::ShaftIntegral;
 use super::compute::VolumeBuild;
-use super::render::{ExtractedVolumeSettings, GpuCausticVolume, ViewSeesMedium, VolumeBuffers};
+use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
+use crate::gpu_budget::{largest_binding, mib};
 use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
@@ -54,6 +55,8 @@ pub(super) struct BeamGridBuffers {
     pub cells: Option<Buffer>,
     /// What the deposit adds to, and `resolve` turns into `cells`.
     fixed: Option<Buffer>,
+    /// The cells along a box's longest side when fewer than asked for fit (warned once).
+    clamped: Option<u32>,
     pub grids: UniformBuffer<GpuBeamGrids>,
     /// The media and their cells the grid was laid out for.
     layout: Vec<(Mat4, Vec4, UVec4)>,
@@ -87,14 +90,6 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             ),
         ),
     );
-    let deposit = cache.queue_compute_pipeline(ComputePipelineDescriptor {
-        label: Some("caustic_shaft_deposit".into()),
-        layout: vec![deposit_layout.clone()],
-        shader: shader.clone(),
-        shader_defs: vec!["DEPOSIT".into()],
-        entry_point: Some("deposit".into()),
-        ..default()
-    });
     let resolve_layout = BindGroupLayoutDescriptor::new(
         "caustic_shaft_resolve_layout",
         &BindGroupLayoutEntries::sequential(
@@ -107,14 +102,18 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             ),
         ),
     );
-    let resolve = cache.queue_compute_pipeline(ComputePipelineDescriptor {
-        label: Some("caustic_shaft_resolve".into()),
-        layout: vec![resolve_layout.clone()],
-        shader: shader.clone(),
-        shader_defs: vec!["RESOLVE".into()],
-        entry_point: Some("resolve".into()),
-        ..default()
-    });
+    // `beam_grid.wgsl`'s entry point `entry`, under the shader def of its name.
+    let kernel = |entry: &'static str, layout: &BindGroupLayoutDescriptor| {
+        cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("caustic_shaft_{entry}").into()),
+            layout: vec![layout.clone()],
+            shader: shader.clone(),
+            shader_defs: vec![entry.to_uppercase().into()],
+            entry_point: Some(entry.into()),
+            ..default()
+        })
+    };
+    let (deposit, resolve) = (kernel("deposit", &deposit_layout), kernel("resolve", &resolve_layout));
     let march_layouts = [false, true].map(|multisampled| {
         BindGroupLayoutDescriptor::new(
             "caustic_shaft_march_layout",
@@ -182,9 +181,30 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
     }
 }
 
+/// The grids over `media`, `longest` cells along each box's longest side, their
+/// layout (to tell when it changes) and their cells together.
+fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(Mat4, Vec4, UVec4)>, u32) {
+    let mut gpu = GpuBeamGrids { max_steps, ..default() };
+    let mut layout = Vec::new();
+    let mut first = 0u32;
+    for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {
+        let world_from_local = glam::Affine3A::from_mat4(glam::Mat4::from_cols_array(&medium.local_from_world.inverse().to_cols_array()));
+        let coefficients = MediumCoefficients { scattering: 0.0, absorption: 0.0, asymmetry: 0.0 };
+        let core = MediumBox { world_from_local, coefficients };
+        let size = grid_size(&core, longest);
+        let (edge, volume) = cell_of(&core, size);
+        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, 0.0, 0.0) };
+        layout.push((medium.local_from_world, medium.coefficients, grid.size));
+        first += size.x * size.y * size.z;
+    }
+    (gpu, layout, first)
+}
+
 /// Lays the grids out over this frame's media (cells along each box's longest side:
-/// [`super::WarpedVolumesSettings::shaft_grid`]) and marks a deposit when the volumes
-/// are built this frame or the layout changed; none while no view shows shafts.
+/// [`super::WarpedVolumesSettings::shaft_grid`], fewer where the deposit's fixed-point
+/// cells would pass what the adapter binds, with a warning) and marks a deposit when
+/// the volumes are built this frame or the layout changed; none while no view shows
+/// shafts.
 #[expect(clippy::too_many_arguments)]
 pub(super) fn prepare_grids(
     views: Query<(), With<ViewSeesMedium>>,
@@ -198,22 +218,29 @@ pub(super) fn prepare_grids(
 ) {
     let settings = extracted.0;
     if settings.shaft_integral != ShaftIntegral::Grid || views.is_empty() || media.0.is_empty() || volumes.volumes.is_none() {
-        *grids = BeamGridBuffers::default();
+        *grids = BeamGridBuffers { clamped: grids.clamped, ..default() };
         return;
     }
-    let mut gpu = GpuBeamGrids { max_steps: settings.shaft_steps.max(1), ..default() };
-    let mut layout = Vec::new();
-    let mut first = 0u32;
-    for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {
-        let world_from_local = glam::Affine3A::from_mat4(glam::Mat4::from_cols_array(&medium.local_from_world.inverse().to_cols_array()));
-        let coefficients = MediumCoefficients { scattering: 0.0, absorption: 0.0, asymmetry: 0.0 };
-        let core = MediumBox { world_from_local, coefficients };
-        let size = grid_size(&core, settings.shaft_grid);
-        let (edge, volume) = cell_of(&core, size);
-        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, 0.0, 0.0) };
-        layout.push((medium.local_from_world, medium.coefficients, grid.size));
-        first += size.x * size.y * size.z;
+    let bindable = largest_binding(&device);
+    let mut longest = settings.shaft_grid.max(2);
+    let (gpu, layout, first) = loop {
+        let laid = lay_out(&media, longest, settings.shaft_steps.max(1));
+        if u64::from(laid.2) * FIXED_CELL_BYTES <= bindable || longest <= 2 {
+            break laid;
+        }
+        longest -= longest / 8 + 1;
+    };
+    let clamped = (longest < settings.shaft_grid).then_some(longest);
+    if clamped.is_some() && grids.clamped != clamped {
+        warn!(
+            "bevy_caustics: the light shafts' grids of {} media at WarpedVolumesSettings::shaft_grid = {} cells need more than this adapter binds ({}): \
+             they are laid out at {longest} cells along each box's longest side",
+            media.0.len(),
+            settings.shaft_grid,
+            mib(bindable)
+        );
     }
+    grids.clamped = clamped;
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
@@ -268,7 +295,7 @@ pub(super) fn deposit_beams(
     );
     // At most one workgroup a volume the buffer holds, and 64 cells a workgroup; each
     // strides over the rest.
-    let deposit_groups = (buffer.size() / GpuCausticVolume::min_size().get()).clamp(1, 65535) as u32;
+    let deposit_groups = volumes.capacity().clamp(1, 65535) as u32;
     let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();

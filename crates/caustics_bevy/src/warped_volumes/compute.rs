@@ -9,7 +9,7 @@
 //! indirect draw; the counts of what was dropped go back to the main world.
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
-use super::render::{GpuCausticVolume, VolumeBuffers};
+use super::render::{GpuCausticVolume, VolumeBuffers, WordsReadback};
 use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
@@ -32,7 +32,6 @@ use caustics_core::mesh::TriMesh;
 use caustics_core::scene::{Light, LightKind};
 use caustics_core::volumes::{BuildStats, channels};
 use std::sync::{Arc, Mutex};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 /// `BuildJob` in `build.wgsl`: one generator under one light in one colour channel.
 #[derive(Clone, Copy, Default, ShaderType)]
@@ -195,10 +194,8 @@ pub(super) struct VolumeBuild {
     retry: bool,
     /// The volumes asked for when the adapter's limit last lowered them (warned once).
     clamped: Option<u64>,
-    /// The counters' copy that the main world's [`super::CausticVolumes`] reads, and
-    /// whether one is on its way.
-    staging: Option<Buffer>,
-    reading: Arc<AtomicBool>,
+    /// The counters' copy that the main world's [`super::CausticVolumes`] reads.
+    readback: WordsReadback,
     /// The sources' generation of the build whose counters were copied this frame.
     copied: Option<u64>,
     /// The volumes a build of a generation kept, as read back.
@@ -353,9 +350,6 @@ pub(super) fn prepare_build(
         // once no copy is on its way).
         (buffers.volumes, buffers.counters, build.occluders) = (None, None, None);
         build.jobs = DynamicUniformBuffer::default();
-        if !build.reading.load(Ordering::Acquire) {
-            build.staging = None;
-        }
         return;
     }
     let occluders = match &build.occluders {
@@ -462,17 +456,8 @@ pub(super) fn build_volumes(
     drop(pass);
     build.dispatches.clear();
     recorder.record("volume build");
-    if !build.reading.swap(true, Ordering::AcqRel) {
-        let device = ctx.render_device().clone();
-        let staging = build.staging.get_or_insert_with(|| {
-            device.create_buffer(&BufferDescriptor {
-                label: Some("caustic_volume_counters_readback"),
-                size: (COUNTER_WORDS * 4) as u64,
-                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        });
-        ctx.command_encoder().copy_buffer_to_buffer(counters, 0, staging, 0, (COUNTER_WORDS * 4) as u64);
+    let device = ctx.render_device().clone();
+    if build.readback.copy(&device, ctx.command_encoder(), (counters, COUNTER_WORDS as u64), "caustic_volume_counters_readback") {
         build.copied = Some(extracted.generation);
     }
 }
@@ -497,19 +482,11 @@ fn stats_of(words: &[u32]) -> BuildStats {
 /// After this frame's commands went in: reads the counters copied this frame back, on
 /// to the main world.
 pub(super) fn read_back_counts(mut build: ResMut<VolumeBuild>, channel: Res<BuildStatsChannel>) {
-    let (Some(generation), Some(staging)) = (build.copied.take(), build.staging.clone()) else {
-        return;
-    };
-    let (reading, channel, counted, buffer) = (build.reading.clone(), channel.0.clone(), build.counted.clone(), staging.clone());
-    staging.slice(..).map_async(MapMode::Read, move |result| {
-        if result.is_ok() {
-            let words: Vec<u32> = bytemuck::cast_slice(&buffer.slice(..).get_mapped_range()).to_vec();
-            buffer.unmap();
-            if let (Ok(mut stats), Ok(mut count)) = (channel.lock(), counted.lock()) {
-                *stats = Some(stats_of(&words));
-                *count = Some((generation, words[1]));
-            }
+    let (generation, channel, counted) = (build.copied.take(), channel.0.clone(), build.counted.clone());
+    build.readback.read_back(move |words| {
+        if let (Some(generation), Ok(mut stats), Ok(mut count)) = (generation, channel.lock(), counted.lock()) {
+            *stats = Some(stats_of(words));
+            *count = Some((generation, words[1]));
         }
-        reading.store(false, Ordering::Release);
     });
 }

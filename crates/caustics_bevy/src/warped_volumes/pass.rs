@@ -204,7 +204,7 @@ pub(super) fn surface_pass(
     // One invocation a volume the buffer has room for; those past the build's count return.
     encoder.clear_buffer(&targets.splatted, 0, None);
     encoder.clear_buffer(&targets.large, 0, Some(4 * super::render::FIRST_LARGE));
-    let groups = (volumes.size() / super::render::GpuCausticVolume::min_size().get()).div_ceil(64).max(1);
+    let groups = draw.buffers.capacity().div_ceil(64).max(1);
     let across = groups.min(65535);
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volumes_splat"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volumes_splat");
@@ -215,7 +215,7 @@ pub(super) fn surface_pass(
     drop(pass);
     let device = ctx.render_device().clone();
     let encoder = ctx.command_encoder();
-    readback.copy(&device, encoder, &targets.large);
+    readback.copy(&device, encoder, (&targets.large, super::render::FIRST_LARGE), "caustic_surface_work_readback");
     // Only where the view sees a surface (reversed z: the fullscreen triangle lies at 0).
     let mut render_pass = encoder.begin_render_pass(&RenderPassDescriptor {
         label: Some("caustic_volumes_resolve"),

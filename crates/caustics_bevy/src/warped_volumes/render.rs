@@ -91,6 +91,59 @@ pub(super) struct VolumeBuffers {
     pub settings: UniformBuffer<GpuVolumeSettings>,
 }
 
+impl VolumeBuffers {
+    /// The volumes the buffer holds room for.
+    pub fn capacity(&self) -> u64 {
+        self.volumes.as_ref().map_or(0, |b| b.size() / GpuCausticVolume::min_size().get())
+    }
+}
+
+/// A few words of a GPU buffer copied after a frame's commands and read back
+/// asynchronously, one copy at a time: the build's counters, the surface pass's counts.
+#[derive(Default)]
+pub(super) struct WordsReadback {
+    staging: Option<Buffer>,
+    reading: Arc<AtomicBool>,
+    copied: bool,
+}
+
+impl WordsReadback {
+    /// Copies the first `words` of `source` for reading after this frame, unless a copy
+    /// is under way. Whether it copied.
+    pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, (source, words): (&Buffer, u64), label: &'static str) -> bool {
+        if self.reading.swap(true, Ordering::AcqRel) {
+            return false;
+        }
+        let size = 4 * words;
+        let staging = self.staging.get_or_insert_with(|| {
+            device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false })
+        });
+        encoder.copy_buffer_to_buffer(source, 0, staging, 0, size);
+        self.copied = true;
+        true
+    }
+
+    /// After this frame's commands went in: hands the words copied this frame to `read`
+    /// once mapped. With none copied and none being read, the staging buffer goes.
+    pub fn read_back(&mut self, read: impl FnOnce(&[u32]) + Send + 'static) {
+        let (true, Some(staging)) = (std::mem::take(&mut self.copied), self.staging.clone()) else {
+            if !self.reading.load(Ordering::Acquire) {
+                self.staging = None;
+            }
+            return;
+        };
+        let (reading, buffer) = (self.reading.clone(), staging.clone());
+        staging.slice(..).map_async(MapMode::Read, move |result| {
+            if result.is_ok() {
+                let words: Vec<u32> = bytemuck::cast_slice(&buffer.slice(..).get_mapped_range()).to_vec();
+                buffer.unmap();
+                read(&words);
+            }
+            reading.store(false, Ordering::Release);
+        });
+    }
+}
+
 /// Render world: this view shows shafts (`CausticsSettings::shafts`) and sees a
 /// participating medium, and so runs the volumetric pass.
 #[derive(Component)]
@@ -158,54 +211,18 @@ pub(super) const SPLAT_SCALE: u32 = 1 << 14;
 pub(super) const FIRST_LARGE: u64 = 8;
 
 /// Render world: the counts of [`SurfaceWork`] copied from the first view's
-/// [`ViewSurfaceTargets::large`] of a frame, while no earlier copy is being read.
-#[derive(Resource, Default)]
-pub(super) struct SurfaceWorkReadback {
-    staging: Option<Buffer>,
-    reading: Arc<AtomicBool>,
-    copied: bool,
-}
-
-impl SurfaceWorkReadback {
-    /// Copies `large`'s counts for reading after this frame, unless a copy is under way.
-    pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, large: &Buffer) {
-        if self.reading.swap(true, Ordering::AcqRel) {
-            return;
-        }
-        let size = 4 * FIRST_LARGE;
-        let staging = self.staging.get_or_insert_with(|| {
-            device.create_buffer(&BufferDescriptor {
-                label: Some("caustic_surface_work_readback"),
-                size,
-                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        });
-        encoder.copy_buffer_to_buffer(large, 0, staging, 0, size);
-        self.copied = true;
-    }
-}
+/// [`ViewSurfaceTargets::large`] of a frame.
+#[derive(Resource, Default, Deref, DerefMut)]
+pub(super) struct SurfaceWorkReadback(WordsReadback);
 
 /// After this frame's commands went in: reads the surface pass's counts copied this
-/// frame back, on to the main world. With no surface pass and no read under way, the
-/// staging buffer goes.
+/// frame back, on to the main world.
 fn read_back_surface_work(mut readback: ResMut<SurfaceWorkReadback>, channel: Res<BuildStatsChannel>) {
-    let (true, Some(staging)) = (std::mem::take(&mut readback.copied), readback.staging.clone()) else {
-        if !readback.reading.load(Ordering::Acquire) {
-            readback.staging = None;
+    let channel = channel.1.clone();
+    readback.read_back(move |words| {
+        if let Ok(mut work) = channel.lock() {
+            *work = Some(SurfaceWork { splatted: words[4], splatted_pixels: words[5], rasterised: words[1] });
         }
-        return;
-    };
-    let (reading, channel, buffer) = (readback.reading.clone(), channel.1.clone(), staging.clone());
-    staging.slice(..).map_async(MapMode::Read, move |result| {
-        if result.is_ok() {
-            let words: Vec<u32> = bytemuck::cast_slice(&buffer.slice(..).get_mapped_range()).to_vec();
-            buffer.unmap();
-            if let Ok(mut work) = channel.lock() {
-                *work = Some(SurfaceWork { splatted: words[4], splatted_pixels: words[5], rasterised: words[1] });
-            }
-        }
-        reading.store(false, Ordering::Release);
     });
 }
 
@@ -671,7 +688,7 @@ fn prepare_surface_targets(
         commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
     for (entity, irradiance, prepass, msaa, targets) in &views {
-        let (Some(depth), Some(volumes), Some(view_binding)) =
+        let (Some(depth), Some(_), Some(view_binding)) =
             (prepass.depth_view(), buffers.volumes.as_ref().filter(|_| !buffers.empty), view_uniforms.uniforms.binding())
         else {
             commands.entity(entity).remove::<ViewSurfaceTargets>();
@@ -697,7 +714,7 @@ fn prepare_surface_targets(
         );
         let pixels = u64::from(irradiance.region().1.element_product());
         let splatted_size = 3 * 4 * pixels.max(1);
-        let large_size = 4 * (FIRST_LARGE + volumes.size() / GpuCausticVolume::min_size().get());
+        let large_size = 4 * (FIRST_LARGE + buffers.capacity());
         let buffer = |label, size, usage| device.create_buffer(&BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false });
         let splatted = match targets.filter(|t| t.splatted.size() == splatted_size) {
             Some(t) => t.splatted.clone(),
