@@ -257,7 +257,7 @@ pub(super) fn prepare_grids(
     grids.grids.write_buffer(&device, &queue);
 }
 
-/// Adds every volume's beam to the fixed-point grids, one workgroup a volume, then
+/// Adds every volume's beam to the fixed-point grids, sixteen invocations a volume, then
 /// turns them into floats and clears them for the next deposit, one invocation a cell
 /// (a new buffer starts cleared), when [`prepare_grids`] asked for it (after the
 /// build: the same frame's volumes).
@@ -293,9 +293,9 @@ pub(super) fn deposit_beams(
         &cache.get_bind_group_layout(&pipelines.resolve_layout),
         &BindGroupEntries::sequential((counters.as_entire_binding(), uniform, fixed.as_entire_binding(), cells.as_entire_binding())),
     );
-    // At most one workgroup a volume the buffer holds, and 64 cells a workgroup; each
-    // strides over the rest.
-    let deposit_groups = volumes.capacity().clamp(1, 65535) as u32;
+    // At most one workgroup for four volumes the buffer holds (`VOLUME_LANES`), and 64
+    // cells a workgroup; each strides over the rest.
+    let deposit_groups = volumes.capacity().div_ceil(4).clamp(1, 65535) as u32;
     let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();

@@ -124,12 +124,19 @@ fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
     }
 }
 
-// One workgroup a volume at a time (the build's count in `counters[1]`), its
+// Invocations that share one volume's samples: a beam finer than a cell has one a
+// cell it crosses, a few tens, so a workgroup takes four volumes at a time.
+const VOLUME_LANES: u32 = 16u;
+
+// Four volumes a workgroup at a time (the build's count in `counters[1]`), sixteen
 // invocations sharing each caustic triangle's samples; `BeamGrid::deposit` per medium.
+// Integer adds: the sums do not depend on the order the GPU runs them in.
 @compute @workgroup_size(64)
-fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let count = counters[1];
-    for (var index = group.x; index < count; index += groups.x) {
+    let per_group = 64u / VOLUME_LANES;
+    let lane = local % VOLUME_LANES;
+    for (var index = group.x * per_group + local / VOLUME_LANES; index < count; index += groups.x * per_group) {
         let v = volumes[index];
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
             let medium = settings.media[m];
@@ -141,7 +148,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
             let n = f32(split);
             let d_alpha = v.origin.w / f32(steps);
             // Every sample of the beam's lattice, shared among the invocations.
-            for (var k = lane; k < steps * split * split; k += 64u) {
+            for (var k = lane; k < steps * split * split; k += VOLUME_LANES) {
                 // `deposit_slice` and `deposit_sample`: a sub-triangle's centroid.
                 let alpha = (f32(k / (split * split)) + 0.5) * d_alpha;
                 let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
