@@ -13,7 +13,7 @@ use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::reference::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
@@ -204,6 +204,33 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("shafts marched through the grid: relative L2 {against_twin:.2e} from its twin, {against_exact:.2e} from the exact integral's");
     assert!(against_twin < 0.01, "GPU and CPU beam grids differ: relative L2 {against_twin}");
     assert!(against_exact < 0.1, "the beam grid is far from the exact integral: relative L2 {against_exact}");
+    // Dispersive water: a volume a colour channel, each of its own hue, so the grid adds
+    // three channels of light where one hue needs one; every channel against the twin.
+    let dispersive = CausticGenerator {
+        technique: CausticTechnique::WarpedVolumes,
+        interaction: GeneratorInteraction::Refract { ior: 1.333, dispersion: Some(Vec2::new(1.32, 0.05)) },
+        ..CausticGenerator::refractive(1.333)
+    };
+    renderer.world_mut().entity_mut(generator).insert(dispersive.clone());
+    let coloured = render(&mut renderer, 3);
+    let coloured_set = cpu_volumes(&mesh, dispersive.specular_interaction(), SUN, &settings);
+    let mut coloured_grid = BeamGrid::new(medium_box, marched.shaft_grid);
+    coloured_grid.deposit_all(&coloured_set.volumes, &settings.core());
+    for channel in 0..3 {
+        let twin: Vec<f32> = (0..SIZE * SIZE)
+            .map(|i| {
+                let floor = to_core(world_at(i % SIZE, i / SIZE));
+                coloured_grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps)[channel]
+            })
+            .collect();
+        let gpu: Vec<f32> = coloured.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a[channel] - b[channel]) / exposure()).collect();
+        let error = relative_l2(&gpu, &twin);
+        eprintln!("dispersive shafts, channel {channel}: relative L2 {error:.2e} from the twin");
+        assert!(error < 0.01, "dispersive shafts, channel {channel}: relative L2 {error}");
+    }
+    let spread = |c: usize| coloured.pixels.iter().zip(&clear.pixels).map(|(a, b)| a[c] - b[c]).sum::<f32>();
+    assert!((spread(0) - spread(2)).abs() > 1e-3 * spread(0).abs(), "the channels' shafts do not differ: no dispersion to test");
+    renderer.world_mut().entity_mut(generator).insert(water.clone());
     let cpu = grid_twin;
     // The camera's CausticsSettings: shafts at half intensity are half the twin's;
     // shafts off, no volumetric pass.

@@ -40,6 +40,8 @@ pub(super) struct GpuGrid {
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuBeamGrids {
     grids: [GpuGrid; MAX_MEDIA],
+    /// xyz: the hue every volume shares ([`VolumeBuild::hue`]), w: 1 when they do.
+    hue: Vec4,
     max_steps: u32,
 }
 
@@ -223,7 +225,7 @@ pub(super) fn prepare_grids(
     }
     let bindable = largest_binding(&device);
     let mut longest = settings.shaft_grid.max(2);
-    let (gpu, layout, first) = loop {
+    let (mut gpu, layout, first) = loop {
         let laid = lay_out(&media, longest, settings.shaft_steps.max(1));
         if u64::from(laid.2) * FIXED_CELL_BYTES <= bindable || longest <= 2 {
             break laid;
@@ -241,6 +243,7 @@ pub(super) fn prepare_grids(
         );
     }
     grids.clamped = clamped;
+    gpu.hue = build.hue.map_or(Vec4::ZERO, |h| Vec4::new(h.x, h.y, h.z, 1.0));
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {

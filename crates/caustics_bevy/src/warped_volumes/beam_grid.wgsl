@@ -17,6 +17,7 @@ struct Grid {
 
 struct Grids {
     grids: array<Grid, 4>,
+    hue: vec4<f32>,  // xyz: the colour every volume shares up to a factor, w: 1 when they do
     max_steps: u32,
 }
 
@@ -112,13 +113,19 @@ fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
 }
 
 // The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point, in
-// fixed-point units.
+// fixed-point units: where every volume shares one hue, only the source's sum, which
+// `resolve` shares out by the hue.
 fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
+    let one_hue = grids.hue.w > 0.0;
+    let channels = select(3u, 1u, one_hue);
+    let light = select(source, vec3(source.x + source.y + source.z, 0.0, 0.0), one_hue);
     for (var corner = 0u; corner < 8u; corner++) {
         let c = grid_corner(g, local, corner);
         let word = c.cell * FIXED_WORDS;
         for (var k = 0u; k < 3u; k++) {
-            add(word + 2u * k, c.weight * source[k]);
+            if k < channels {
+                add(word + 2u * k, c.weight * light[k]);
+            }
             add(word + 6u + 2u * k, c.weight * direction[k]);
         }
     }
@@ -219,7 +226,10 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
         }
         let units = fixed_units(grids.grids[m], flux);
         let word = cell * FIXED_WORDS;
-        let source = vec3(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u));
+        var source = vec3(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u));
+        if grids.hue.w > 0.0 {
+            source = grids.hue.xyz * source.x;
+        }
         let direction = vec3(from_fixed(word + 6u), from_fixed(word + 8u), from_fixed(word + 10u));
         cells[2u * cell] = vec4(source / units, 0.0);
         cells[2u * cell + 1u] = vec4(direction / units, 0.0);

@@ -200,6 +200,9 @@ pub(super) struct VolumeBuild {
     copied: Option<u64>,
     /// The volumes a build of a generation kept, as read back.
     counted: Arc<Mutex<Option<(u64, u32)>>>,
+    /// The colour every volume of the last build shares up to a factor (summing to
+    /// one), if they share one: the shafts' grid then adds one channel of light.
+    pub(super) hue: Option<glam::Vec3>,
 }
 
 impl VolumeBuild {
@@ -321,6 +324,7 @@ pub(super) fn prepare_build(
     build.jobs.clear();
     let mut planned = Vec::new();
     let mut capacity = 0u64;
+    let mut hues = Vec::new();
     let mut vertex_bindings = HashMap::new();
     for ((entity, generator), source) in sources.generators.iter().zip(&extracted.vertices) {
         if build.generators.get(entity).is_none_or(|known| !Arc::ptr_eq(&known.topology, &generator.topology)) {
@@ -336,12 +340,14 @@ pub(super) fn prepare_build(
         vertex_bindings.insert(*entity, vertices);
         for light in &sources.lights {
             for channel in channels(&generator.interaction, light.color) {
+                hues.push(channel.1);
                 let job = GpuBuildJob::new(generator, light, channel, sources, (sources.occluders.gpu_triangle_offset(), layout));
                 planned.push((*entity, build.jobs.push(&job), job.counts));
                 capacity += u64::from(job.counts.y);
             }
         }
     }
+    build.hue = shared_hue(&hues);
     build.jobs.set_label(Some("caustic_volume_jobs"));
     build.jobs.write_buffer(&device, &queue);
     build.dispatches.clear();
@@ -460,6 +466,14 @@ pub(super) fn build_volumes(
     if build.readback.copy(&device, ctx.command_encoder(), (counters, COUNTER_WORDS as u64), "caustic_volume_counters_readback") {
         build.copied = Some(extracted.generation);
     }
+}
+
+/// The colour `colours` share up to a positive factor, summing to one (the black ones
+/// aside), or `None` where two differ in hue.
+fn shared_hue(colours: &[glam::Vec3]) -> Option<glam::Vec3> {
+    let mut hues = colours.iter().filter(|c| c.element_sum() > 0.0).map(|c| *c / c.element_sum());
+    let first = hues.next().unwrap_or(glam::Vec3::ONE / 3.0);
+    hues.all(|h| h.abs_diff_eq(first, 1e-6)).then_some(first).filter(|h| h.is_finite() && h.min_element() >= 0.0)
 }
 
 /// The counts of a build, from its counters.
