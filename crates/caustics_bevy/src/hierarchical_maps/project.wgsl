@@ -4,22 +4,14 @@
 // and adds the irradiance to the view's caustic irradiance buffer
 // (`caustic_map::irradiance_at`).
 
-#import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::{centre_depth, exposed, world_at}
+#import bevy_caustics::receiver::exposed
+#import bevy_caustics::receiver_view::{view, receiver_point}
 #import bevy_caustics::caustic_maps::{
     LightView, NO_SURFACE, map_uv, depth_of, light_ray, texel_of, texel_size, receiver_jacobian, map_texels_per_photon, bilinear_taps,
     bilinear_mix,
 }
 
-@group(0) @binding(0) var<uniform> view: View;
-#ifdef MULTISAMPLED
-@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
-@group(0) @binding(2) var normal_prepass: texture_multisampled_2d<f32>;
-#else
-@group(0) @binding(1) var depth_prepass: texture_depth_2d;
-@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
-#endif
 @group(0) @binding(3) var<uniform> light: LightView;
 @group(0) @binding(4) var receiver_map: texture_2d<f32>;
 @group(0) @binding(5) var<storage, read> resolved: array<f32>;
@@ -30,13 +22,12 @@ fn resolved_at(x: u32, y: u32) -> f32 {
 
 @fragment
 fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(in.position.xy);
-    let depth = textureLoad(depth_prepass, pixel, 0);
-    if depth <= 0.0 {
+    let receiver = receiver_point(in.position.xy);
+    if !receiver.found {
         discard;
     }
-    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
+    let p = receiver.position;
+    let n = receiver.normal;
     let m = light.map_resolution;
     let uv = map_uv(light, p);
     if uv.z == 0.0 {

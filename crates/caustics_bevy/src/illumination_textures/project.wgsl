@@ -4,19 +4,11 @@
 // where the light, followed back through the virtual camera's depth map, crosses a
 // receiver surface. The twin of `IlluminationTextures::irradiance_at`.
 
-#import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_caustics::receiver::{centre_depth, exposed, world_at}
+#import bevy_caustics::receiver::exposed
+#import bevy_caustics::receiver_view::{view, receiver_point}
 #import bevy_caustics::illumination_textures::{IlluminationFrame, FAR, plane_depth, texel_size, texel_coords, surface_index}
 
-@group(0) @binding(0) var<uniform> view: View;
-#ifdef MULTISAMPLED
-@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
-@group(0) @binding(2) var normal_prepass: texture_multisampled_2d<f32>;
-#else
-@group(0) @binding(1) var depth_prepass: texture_depth_2d;
-@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
-#endif
 @group(0) @binding(3) var<uniform> frame: IlluminationFrame;
 @group(0) @binding(4) var textures: texture_2d_array<f32>;
 @group(0) @binding(5) var<storage, read> surface: array<vec4<f32>>;
@@ -107,13 +99,12 @@ fn shadowed(q: vec2<f32>, z: f32, r: vec3<f32>, n: vec3<f32>) -> bool {
 
 @fragment
 fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
-    let pixel = vec2<i32>(in.position.xy);
-    let depth = textureLoad(depth_prepass, pixel, 0);
-    if depth <= 0.0 {
+    let receiver = receiver_point(in.position.xy);
+    if !receiver.found {
         discard;
     }
-    let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    let p = world_at(view, in.position.xy, centre_depth(view, depth_prepass, pixel, n));
+    let p = receiver.position;
+    let n = receiver.normal;
     let q = texel_coords(frame, p);
     let size = f32(frame.size);
     if !(q.x >= 0.0 && q.y >= 0.0 && q.x < size && q.y < size) {

@@ -338,6 +338,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "composite.wgsl");
     bevy::asset::embedded_asset!(app, "inject.wgsl");
     bevy::shader::load_shader_library!(app, "receiver.wgsl");
+    bevy::shader::load_shader_library!(app, "receiver_view.wgsl");
     bevy::shader::load_shader_library!(app, "optics.wgsl");
     bevy::shader::load_shader_library!(app, "triangle_bvh.wgsl");
     let cpu = crate::CausticsCpuTime::of(app);
