@@ -141,6 +141,7 @@ const VOLUME_LANES: u32 = 16u;
 @compute @workgroup_size(64)
 fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let count = counters[1];
+    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
     let per_group = 64u / VOLUME_LANES;
     let lane = local % VOLUME_LANES;
     for (var index = group.x * per_group + local / VOLUME_LANES; index < count; index += groups.x * per_group) {
@@ -148,7 +149,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
             let medium = settings.media[m];
             let g = grids.grids[m];
-            let units = fixed_units(g, bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u])));
+            let units = fixed_units(g, flux);
             let sigma_t = medium.coefficients.x + medium.coefficients.y;
             let steps = deposit_steps(v, g.cell.x);
             let split = deposit_split(v, g.cell.x);

@@ -196,8 +196,8 @@ pub(super) struct VolumeBuild {
     clamped: Option<u64>,
     /// The counters' copy that the main world's [`super::CausticVolumes`] reads.
     readback: WordsReadback,
-    /// The sources' generation of the build whose counters were copied this frame.
-    copied: Option<u64>,
+    /// The sources' generation of the build whose counters were copied last.
+    copied_generation: u64,
     /// The volumes a build of a generation kept, as read back.
     counted: Arc<Mutex<Option<(u64, u32)>>>,
     /// The colour every volume of the last build shares up to a factor (summing to
@@ -464,7 +464,7 @@ pub(super) fn build_volumes(
     recorder.record("volume build");
     let device = ctx.render_device().clone();
     if build.readback.copy(&device, ctx.command_encoder(), (counters, COUNTER_WORDS as u64), "caustic_volume_counters_readback") {
-        build.copied = Some(extracted.generation);
+        build.copied_generation = extracted.generation;
     }
 }
 
@@ -496,9 +496,9 @@ fn stats_of(words: &[u32]) -> BuildStats {
 /// After this frame's commands went in: reads the counters copied this frame back, on
 /// to the main world.
 pub(super) fn read_back_counts(mut build: ResMut<VolumeBuild>, channel: Res<BuildStatsChannel>) {
-    let (generation, channel, counted) = (build.copied.take(), channel.0.clone(), build.counted.clone());
+    let (generation, channel, counted) = (build.copied_generation, channel.0.clone(), build.counted.clone());
     build.readback.read_back(move |words| {
-        if let (Some(generation), Ok(mut stats), Ok(mut count)) = (generation, channel.lock(), counted.lock()) {
+        if let (Ok(mut stats), Ok(mut count)) = (channel.lock(), counted.lock()) {
             *stats = Some(stats_of(words));
             *count = Some((generation, words[1]));
         }
