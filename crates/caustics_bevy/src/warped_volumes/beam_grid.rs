@@ -48,8 +48,9 @@ pub(super) struct GpuBeamGrids {
 /// Eight words a cell as the march reads it: source and summed direction.
 const CELL_BYTES: u64 = 32;
 
-/// Twelve words a cell as the deposit adds to it: the same in 64-bit fixed point.
-const FIXED_CELL_BYTES: u64 = 48;
+/// Nine words a cell as the deposit adds to it: the source in 64-bit fixed point, the
+/// directions whose lowest corner the cell is in 32-bit.
+const FIXED_CELL_BYTES: u64 = 36;
 
 /// Render world: the grids of this frame's media and whether they need a deposit.
 #[derive(Resource, Default)]
@@ -99,7 +100,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             (
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<GpuBeamGrids>(false),
-                storage_buffer_sized(false, None),
+                storage_buffer_read_only_sized(false, None),
                 storage_buffer_sized(false, None),
             ),
         ),
@@ -261,7 +262,7 @@ pub(super) fn prepare_grids(
 }
 
 /// Adds every volume's beam to the fixed-point grids, sixteen invocations a volume, then
-/// turns them into floats and clears them for the next deposit, one invocation a cell
+/// turns them into floats, one invocation a cell, and clears them for the next deposit
 /// (a new buffer starts cleared), when [`prepare_grids`] asked for it (after the
 /// build: the same frame's volumes).
 pub(super) fn deposit_beams(
@@ -317,6 +318,7 @@ pub(super) fn deposit_beams(
     pass.dispatch_workgroups(resolve_groups, 1, 1);
     span.end(&mut pass);
     drop(pass);
+    encoder.clear_buffer(fixed, 0, None);
     grids.deposit = false;
     recorder.record("shaft deposit");
 }

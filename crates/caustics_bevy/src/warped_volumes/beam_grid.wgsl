@@ -21,11 +21,18 @@ struct Grids {
     max_steps: u32,
 }
 
-// The deposit's twelve words a cell: colour · E_beam · e^{−σt dₛ} (rgb), then the
-// summed directions (xyz), each a signed 64-bit fixed-point number (low word, high
-// word), so that it adds with one integer atomic where a float add needs a
-// compare-exchange loop. `resolve` turns them into the march's two `vec4<f32>` a cell.
-const FIXED_WORDS: u32 = 12u;
+// The deposit's nine words a cell: colour · E_beam · e^{−σt dₛ} (rgb), each a signed
+// 64-bit fixed-point number (low word, high word), so that it adds with one integer
+// atomic where a float add needs a compare-exchange loop; then the directions of the
+// samples whose lowest corner the cell is (xyz), each a 32-bit signed integer in
+// `DIRECTION_UNITS` of the light's units. `resolve` turns them into the march's two
+// `vec4<f32>` a cell.
+const FIXED_WORDS: u32 = 9u;
+const DIRECTION_WORD: u32 = 6u;
+
+// A direction word's units: 2⁻¹⁴ of the light's, so that a cell's sum (under 11 · 2⁴⁰
+// light units, `fixed_units`) stays under 2³¹; only the direction of the sum matters.
+const DIRECTION_UNITS: f32 = 6.103515625e-5;
 
 // `build.wgsl`'s FLUX: the build's kept flux, three words of f32 bits.
 const FLUX: u32 = 9u;
@@ -113,21 +120,22 @@ fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
 }
 
 // The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point, in
-// fixed-point units: where every volume shares one hue, only the source's sum, which
-// `resolve` shares out by the hue.
+// fixed-point units (where every volume shares one hue, only the source's sum, which
+// `resolve` shares out by the hue), and its direction added to the lowest of them.
 fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
     let light = select(source, vec3(source.x + source.y + source.z, 0.0, 0.0), one_hue);
     for (var corner = 0u; corner < 8u; corner++) {
         let c = grid_corner(g, local, corner);
-        let word = c.cell * FIXED_WORDS;
-        for (var k = 0u; k < 3u; k++) {
-            if k < channels {
-                add(word + 2u * k, c.weight * light[k]);
-            }
-            add(word + 6u + 2u * k, c.weight * direction[k]);
+        for (var k = 0u; k < channels; k++) {
+            add(c.cell * FIXED_WORDS + 2u * k, c.weight * light[k]);
         }
+    }
+    let lowest = grid_corner(g, local, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
+    let d = clamp(direction * DIRECTION_UNITS, vec3(-2.1e9), vec3(2.1e9));
+    for (var k = 0u; k < 3u; k++) {
+        atomicAdd(&fixed[lowest + k], bitcast<u32>(i32(floor(d[k] + 0.5))));
     }
 }
 
@@ -198,16 +206,14 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
 #ifdef RESOLVE
 @group(0) @binding(0) var<storage, read> counters: array<u32>;
 @group(0) @binding(1) var<uniform> grids: Grids;
-@group(0) @binding(2) var<storage, read_write> fixed: array<u32>;
+@group(0) @binding(2) var<storage, read> fixed: array<u32>;
 @group(0) @binding(3) var<storage, read_write> cells: array<vec4<f32>>;
 
 // A signed 64-bit fixed-point number (`add`) as a float, negated whole when negative so
-// that a small negative number keeps its digits; its words cleared for the next deposit.
+// that a small negative number keeps its digits.
 fn from_fixed(word: u32) -> f32 {
     let low = fixed[word];
     let high = fixed[word + 1u];
-    fixed[word] = 0u;
-    fixed[word + 1u] = 0u;
     let negative = high >= 0x80000000u;
     let l = select(low, ~low + 1u, negative);
     let h = select(high, ~high + select(0u, 1u, l == 0u), negative);
@@ -215,7 +221,15 @@ fn from_fixed(word: u32) -> f32 {
     return select(m, -m, negative);
 }
 
-// One invocation a cell of every grid: its fixed-point words as the march reads them.
+// The directions deposited at a cell's word `DIRECTION_WORD`, in light units.
+fn deposited_direction(cell: u32) -> vec3<f32> {
+    let word = cell * FIXED_WORDS + DIRECTION_WORD;
+    return vec3<f32>(bitcast<vec3<i32>>(vec3(fixed[word], fixed[word + 1u], fixed[word + 2u]))) / DIRECTION_UNITS;
+}
+
+// One invocation a cell of every grid: its fixed-point words as the march reads them,
+// its direction gathered from the eight cells below it (`BeamGrid::gather_directions`).
+// The deposit's words are cleared after this pass, since a cell reads its neighbours'.
 @compute @workgroup_size(64)
 fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
@@ -225,13 +239,24 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
         while m < 3u && cell >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
             m++;
         }
-        let units = fixed_units(grids.grids[m], flux);
+        let g = grids.grids[m];
+        let units = fixed_units(g, flux);
         let word = cell * FIXED_WORDS;
         var source = vec3(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u));
         if grids.hue.w > 0.0 {
             source = grids.hue.xyz * source.x;
         }
-        let direction = vec3(from_fixed(word + 6u), from_fixed(word + 8u), from_fixed(word + 10u));
+        let first = g.size.w;
+        let at = cell - first;
+        let c = vec3(at % g.size.x, (at / g.size.x) % g.size.y, at / (g.size.x * g.size.y));
+        var direction = vec3(0.0);
+        for (var corner = 0u; corner < 8u; corner++) {
+            let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+            if all(c >= o) {
+                let b = c - o;
+                direction += deposited_direction(first + (b.z * g.size.y + b.y) * g.size.x + b.x);
+            }
+        }
         cells[2u * cell] = vec4(source / units, 0.0);
         cells[2u * cell + 1u] = vec4(direction / units, 0.0);
     }

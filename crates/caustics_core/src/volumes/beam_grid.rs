@@ -12,7 +12,11 @@
 //! regular series of depths, each split into equal sub-triangles), weighting each
 //! sample by the volume it stands for and spreading it over the eight cells around it:
 //! `∫ E_beam dV` over a beam is its flux times its length, which the deposit keeps
-//! exactly however thin the beam. The march samples the grid trilinearly.
+//! exactly however thin the beam. A sample's direction, which only aims the phase
+//! function, goes to one cell, the lowest of its eight, and each cell's direction
+//! gathers the eight cells below it ([`BeamGrid::gather_directions`]): the sum over
+//! the samples that lit the cell, at three adds a sample where a spread took
+//! twenty-four. The march samples the grid trilinearly.
 
 use super::medium::MediumBox;
 use super::{CausticVolume, VolumeSettings};
@@ -108,8 +112,11 @@ pub struct BeamGrid {
     /// Per cell (x fastest, then y, then z of the box's local frame): the mean of
     /// `colour · E_beam · e^{−σₜ dₛ}` over the cell (linear RGB).
     pub source: Vec<Vec3>,
-    /// Per cell, the beams' directions summed with the weight of their source.
+    /// Per cell, the directions of the beam samples that lit it, summed with the
+    /// weight of their source ([`Self::gather_directions`] of `deposited`).
     pub direction: Vec<Vec3>,
+    /// Per cell, the directions of the samples whose lowest corner it is.
+    deposited: Vec<Vec3>,
 }
 
 impl BeamGrid {
@@ -117,7 +124,7 @@ impl BeamGrid {
     pub fn new(medium: MediumBox, longest: u32) -> Self {
         let size = grid_size(&medium, longest);
         let cells = (size.x * size.y * size.z) as usize;
-        Self { medium, size, source: vec![Vec3::ZERO; cells], direction: vec![Vec3::ZERO; cells] }
+        Self { medium, size, source: vec![Vec3::ZERO; cells], direction: vec![Vec3::ZERO; cells], deposited: vec![Vec3::ZERO; cells] }
     }
 
     /// The smallest world edge of a cell, and a cell's world volume.
@@ -125,10 +132,30 @@ impl BeamGrid {
         cell_of(&self.medium, self.size)
     }
 
-    /// Adds every volume's beam to the grid.
+    /// Adds every volume's beam to the grid, then gathers the directions.
     pub fn deposit_all(&mut self, volumes: &[CausticVolume], settings: &VolumeSettings) {
         for volume in volumes {
             self.deposit(volume, settings);
+        }
+        self.gather_directions();
+    }
+
+    /// Each cell's direction: the sum of those deposited at the eight cells `c − o`,
+    /// `o ∈ {0, 1}³`, the lowest corners of every sample that lit it.
+    pub fn gather_directions(&mut self) {
+        let size = self.size;
+        let index = |c: UVec3| ((c.z * size.y + c.y) * size.x + c.x) as usize;
+        for z in 0..size.z {
+            for y in 0..size.y {
+                for x in 0..size.x {
+                    let c = UVec3::new(x, y, z);
+                    self.direction[index(c)] = (0..8u32)
+                        .map(|corner| UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2))
+                        .filter(|&o| c.cmpge(o).all())
+                        .map(|o| self.deposited[index(c - o)])
+                        .sum();
+                }
+            }
         }
     }
 
@@ -137,8 +164,9 @@ impl BeamGrid {
     /// samples at most a cell apart, where the eight cells' trilinear weights of a
     /// sample still sum evenly over a beam) that lies lit inside it
     /// ([`CausticVolume::sample`]) adds its source times the volume it stands for to
-    /// the eight cells around it ([`Self::corners`]).
-    pub fn deposit(&mut self, volume: &CausticVolume, settings: &VolumeSettings) {
+    /// the eight cells around it ([`Self::corners`]), and its direction to the lowest
+    /// of them. [`Self::gather_directions`] must follow.
+    fn deposit(&mut self, volume: &CausticVolume, settings: &VolumeSettings) {
         let (cell, cell_volume) = self.cell();
         let (steps, split) = (deposit_steps(volume, cell), deposit_split(volume, cell));
         let sigma_t = self.medium.coefficients.extinction();
@@ -160,11 +188,11 @@ impl BeamGrid {
             if !source.is_finite() {
                 continue;
             }
-            let direction = s.ray / beam_length * source.element_sum();
-            for (index, w) in self.corners(local) {
+            let corners = self.corners(local);
+            for (index, w) in corners {
                 self.source[index] += w * source;
-                self.direction[index] += w * direction;
             }
+            self.deposited[corners[0].0] += s.ray / beam_length * source.element_sum();
         }
     }
 
