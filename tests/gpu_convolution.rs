@@ -63,12 +63,19 @@ fn spawn_scene(renderer: &mut HeadlessRenderer) -> Entity {
     pool
 }
 
+/// The core's heights of the pool's water at this frame's time (the GPU moves the
+/// water, so the main world evaluates none).
+fn heights_now(world: &mut World, pool: Entity) -> caustics_core::convolution::Heightfield {
+    let time = world.resource::<Time>().elapsed_secs();
+    world.get::<PoolSurface>(pool).unwrap().ripples().heightfield(time).unwrap()
+}
+
 /// The CPU twin: the convolution of the main world's heights, interpolated between
 /// texel centres at each pixel's floor point as the projection does.
 fn cpu_twin(renderer: &mut HeadlessRenderer, pool_entity: Entity) -> Vec<f32> {
     let world = renderer.world_mut();
     let pool = world.get::<PoolRipples>(pool_entity).unwrap().clone();
-    let heightfield = world.get::<PoolSurface>(pool_entity).unwrap().heightfield().clone();
+    let heightfield = heights_now(world, pool_entity);
     let light = pool.light(IOR, SUN.normalize(), ILLUMINANCE);
     let floor = ConvolutionCaustics::new(&light, 48, 48, pool.cell_size).unwrap().irradiance(&heightfield).unwrap();
     let at = |c: i32, r: i32| floor[(r.clamp(0, 47) * 48 + c.clamp(0, 47)) as usize];
@@ -119,7 +126,7 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     let rippled = caustic_irradiance(&render(&mut renderer, 3), &without);
     // The same ripples on both sides: the GPU's f32 sums against the core's f64 ones.
     let gpu = gpu_heights(&mut renderer, pool);
-    let cpu = renderer.world_mut().get::<PoolSurface>(pool).unwrap().heightfield().heights().to_vec();
+    let cpu = heights_now(renderer.world_mut(), pool).heights().to_vec();
     let highest = cpu.iter().fold(0.0f32, |m, h| m.max(h.abs()));
     let worst = gpu.iter().zip(&cpu).map(|(g, c)| (g - c).abs()).fold(0.0f32, f32::max);
     eprintln!("GPU vs CPU heights: largest difference {worst:.2e} m, highest wave {highest:.2e} m");
@@ -152,7 +159,7 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     let signed = {
         let world = renderer.world_mut();
         let settings = world.get::<PoolRipples>(pool).unwrap().light(IOR, SUN.normalize(), ILLUMINANCE);
-        let heightfield = world.get::<PoolSurface>(pool).unwrap().heightfield().clone();
+        let heightfield = heights_now(world, pool);
         ConvolutionCaustics::new(&settings, 48, 48, heightfield.cell_size()).unwrap().signed_irradiance(&heightfield).unwrap()
     };
     let lowest = signed.iter().copied().fold(f32::INFINITY, f32::min);

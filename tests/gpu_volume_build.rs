@@ -18,6 +18,7 @@ use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy::mesh::VertexAttributeValues;
 use bevy_caustics::reference::{bevy_mesh, core_mesh, to_core};
+use bevy_caustics::convolution::PoolSurface;
 use bevy_caustics::warped_volumes::CausticVolumes;
 use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, DropPebble, Ocean, PoolRipples};
 use caustics_core::bvh::SceneBvh;
@@ -66,6 +67,9 @@ fn cpu_scene(renderer: &mut HeadlessRenderer, water: Entity) -> Scene {
             let time = world.resource::<Time>().elapsed_secs() * ocean.time_scale;
             let sea = OceanSpectrum::new(&ocean.settings()).unwrap().evaluate(time).mesh();
             return core_mesh(&bevy_mesh(&sea), &transform).unwrap();
+        }
+        if let Some(surface) = world.get::<PoolSurface>(entity) {
+            return core_mesh(&surface.mesh_at(world.resource::<Time>().elapsed_secs()).unwrap(), &transform).unwrap();
         }
         core_mesh(world.resource::<Assets<Mesh>>().get(&handle).unwrap(), &transform).unwrap()
     };
@@ -195,7 +199,11 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
         renderer.world_mut().write_message(DropPebble { position, strength: 0.01 });
     }
     render(&mut renderer, 6);
+    let passes = renderer.world_mut().resource::<CausticPassReport>().passes.clone();
+    assert!(passes.iter().any(|(pass, _)| *pass == "pool water"), "the pool's water does not move on the GPU: {passes:?}");
+    let before = built(&mut renderer);
     let (worst, late) = follow(&mut renderer, camera, pool, 4, "pool");
+    assert_eq!(built(&mut renderer).gathered, before.gathered, "the water moved on the GPU, yet the volumes' sources were gathered on the CPU");
     assert!(worst < 0.01, "pool: the GPU build's irradiance is {worst} from the CPU build's");
     assert!(late > 5.0 * worst, "pool: a frame's caustics are as near the frame before's mesh ({late}) as to its own ({worst})");
     renderer.world_mut().entity_mut(pool).remove::<PoolRipples>();

@@ -29,7 +29,7 @@ pub mod hierarchical_maps;
 pub mod illumination_textures;
 pub mod irradiance;
 pub mod lights;
-#[cfg(any(feature = "ocean", feature = "warped-volumes"))]
+#[cfg(any(feature = "ocean", feature = "warped-volumes", feature = "convolution"))]
 mod mesh_vertices;
 #[cfg(feature = "ocean")]
 pub mod ocean;

@@ -14,6 +14,8 @@
 @group(0) @binding(3) var<storage, read_write> heights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;  // w: the lift's deficit ratio
 @group(0) @binding(5) var<storage, read_write> irradiance: array<f32>;
+// `write_vertices` alone: Bevy's vertex buffer of the pool's water mesh.
+@group(0) @binding(6) var<storage, read_write> vertices: array<f32>;
 
 // `caustics_core::convolution::MIN_DOWNWARD_COSINE`.
 const MIN_DOWNWARD_COSINE: f32 = 1.0e-3;
@@ -58,18 +60,41 @@ fn ripple_heights(@builtin(global_invocation_id) id: vec3<u32>) {
     heights[texel_index(id.x, id.y)] = h;
 }
 
+// `Heightfield::normal` with `Boundary::Mirror`: the upward normal from central
+// differences of the heights.
+fn surface_normal(c: i32, r: i32) -> vec3<f32> {
+    let span = 2.0 * pool.cell_size;
+    let slope = vec2(height(c + 1, r) - height(c - 1, r), height(c, r + 1) - height(c, r - 1)) / span;
+    let scale = max(max(abs(slope.x), abs(slope.y)), 1.0);
+    return normalize(vec3(-slope.x, 1.0, -slope.y) / scale);
+}
+
+// The water's mesh, one vertex over each texel centre centred on the pool
+// (`ripples.rs`' `positions` and `normals`), written in Bevy's vertex buffer from
+// `ripple_heights`' heights: the pool moves with no CPU work and no upload.
+@compute @workgroup_size(8, 8, 1)
+fn write_vertices(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= pool.columns || id.y >= pool.rows {
+        return;
+    }
+    let half = 0.5 * vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
+    let at = (vec2<f32>(id.xy) + 0.5) * pool.cell_size - half;
+    let position = vec3(at.x, heights[texel_index(id.x, id.y)], at.y);
+    let normal = surface_normal(i32(id.x), i32(id.y));
+    let base = pool.vertex.x + texel_index(id.x, id.y) * pool.vertex.y;
+    for (var k = 0u; k < 3u; k++) {
+        vertices[base + pool.vertex.z + k] = position[k];
+        vertices[base + pool.vertex.w + k] = normal[k];
+    }
+}
+
 // `transmitted_light` and `ConvolutionKernels::terms`: what each texel convolves.
 @compute @workgroup_size(8, 8, 1)
 fn convolution_terms(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= pool.columns || id.y >= pool.rows {
         return;
     }
-    let c = i32(id.x);
-    let r = i32(id.y);
-    let span = 2.0 * pool.cell_size;
-    let slope = vec2(height(c + 1, r) - height(c - 1, r), height(c, r + 1) - height(c, r - 1)) / span;
-    let scale = max(max(abs(slope.x), abs(slope.y)), 1.0);
-    let normal = normalize(vec3(-slope.x, 1.0, -slope.y) / scale);
+    let normal = surface_normal(i32(id.x), i32(id.y));
     let sun = pool.sun.xyz;
     let eta = 1.0 / pool.ior;
     let cos_i = -dot(sun, normal);

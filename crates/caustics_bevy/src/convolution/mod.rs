@@ -4,12 +4,17 @@
 //! [`PoolRipples`] on an entity makes its mesh the pool's water surface, animated from
 //! `caustics_core::convolution::ripples`: every [`DropPebble`] that lands inside the
 //! pool starts an impulse, mirrored across the four walls, and faded impulses are
-//! removed. The mesh is rewritten in place each frame while the water moves, so a
-//! [`crate::CausticGenerator`] beside it feeds the other techniques as a dynamic
-//! generator (the warped caustic volumes rebuild from it).
+//! removed. While the water moves its mesh changes every frame: with a render app, on
+//! the GPU (`water.rs`: the heights from the impulses and the vertices written in
+//! Bevy's vertex buffer, no CPU work), unless the pool is a
+//! [`crate::CausticGenerator`] whose technique reads its triangles on the CPU (the
+//! caustic maps); otherwise the mesh asset is rewritten in place. Either way a
+//! generator beside it feeds the other techniques as a dynamic generator (the warped
+//! caustic volumes rebuild from it), and still water costs nothing.
 
 mod render;
 mod ripples;
+mod water;
 
 pub use render::PoolGpu;
 pub use ripples::{PoolImpulses, PoolKernels, PoolSurface};
@@ -189,6 +194,11 @@ impl Plugin for PoolRipplesPlugin {
     fn build(&self, app: &mut App) {
         app.register_type::<PoolRipples>().add_message::<DropPebble>().init_resource::<crate::CausticsGpuBudget>();
         ripples::build(app);
+        if app.get_sub_app(bevy::render::RenderApp).is_some() {
+            app.insert_resource(ripples::WaterOnGpu);
+            crate::mesh_vertices::build(app);
+            water::build(app);
+        }
     }
 }
 

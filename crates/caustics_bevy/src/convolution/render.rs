@@ -30,8 +30,8 @@ use std::sync::Arc;
 /// `Pool` in `types.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuPool {
-    columns: u32,
-    rows: u32,
+    pub columns: u32,
+    pub rows: u32,
     cell_size: f32,
     image_count: u32,
     time: f32,
@@ -50,6 +50,44 @@ pub(super) struct GpuPool {
     floor_tolerance: f32,
     pool_from_world: Mat4,
     color: Vec4,
+    pub vertex: UVec4,
+}
+
+impl GpuPool {
+    /// The pool's texels and its water's waves at `time` (§4.3), the rest zero: what
+    /// `ripple_heights` reads.
+    pub(super) fn waves(surface: &PoolSurface, image_count: u32, time: f32) -> Self {
+        let (pool, waves) = (surface.settings(), surface.ripples().settings());
+        Self {
+            columns: pool.columns,
+            rows: pool.rows,
+            cell_size: pool.cell_size,
+            image_count,
+            time,
+            wave_number: waves.wave_number,
+            angular_frequency: waves.angular_frequency,
+            time_damping: waves.time_damping,
+            front_damping: waves.front_damping,
+            ..default()
+        }
+    }
+}
+
+/// Every live impulse's nine wall images as `ripple_heights` reads them: x, z,
+/// strength, drop time; one of zero strength for still water (a binding may not be
+/// empty), which `GpuPool::image_count` leaves out.
+pub(super) fn ripple_images(surface: &PoolSurface) -> (Vec<Vec4>, u32) {
+    let ripples = surface.ripples();
+    let mut images: Vec<Vec4> = ripples
+        .impulses()
+        .iter()
+        .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
+        .collect();
+    let count = images.len() as u32;
+    if images.is_empty() {
+        images.push(Vec4::ZERO);
+    }
+    (images, count)
 }
 
 /// Render world: one pool to draw this frame.
@@ -238,25 +276,10 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
         if surface.kernels().aimed != (ior, direction) {
             continue;
         }
-        let ripples = surface.ripples();
-        let waves = ripples.settings();
-        let mut images: Vec<Vec4> = ripples
-            .impulses()
-            .iter()
-            .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
-            .collect();
+        let (images, count) = ripple_images(surface);
         let kernels = surface.kernels();
         let color = sun.color.to_linear();
         let uniform = GpuPool {
-            columns: pool.columns,
-            rows: pool.rows,
-            cell_size: pool.cell_size,
-            image_count: images.len() as u32,
-            time: time.elapsed_secs(),
-            wave_number: waves.wave_number,
-            angular_frequency: waves.angular_frequency,
-            time_damping: waves.time_damping,
-            front_damping: waves.front_damping,
             ior,
             normaliser: kernels.normaliser as f32,
             sun: direction.extend(sun.illuminance),
@@ -268,17 +291,15 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
             floor_tolerance: 0.05 * pool.depth,
             pool_from_world,
             color: Vec4::new(color.red, color.green, color.blue, 1.0),
+            ..GpuPool::waves(surface, count, time.elapsed_secs())
         };
-        if images.is_empty() {
-            images.push(Vec4::ZERO);
-        }
         extracted.0.insert(MainEntity::from(entity), ExtractedPool { uniform, images, taps: kernels.taps.clone() });
     }
 }
 
 /// A storage buffer of `floats_per_texel` floats per texel, written by the compute
 /// passes (and copyable, so that applications and tests can read it back).
-fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_per_texel: u64) -> Buffer {
+pub(super) fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_per_texel: u64) -> Buffer {
     device.create_buffer(&BufferDescriptor {
         label: Some(label),
         size: count.max(1) as u64 * floats_per_texel * 4,

@@ -5,8 +5,14 @@ use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
+use crate::components::CausticGenerator;
+use crate::mesh_vertices::MovesOnGpu;
+use crate::technique::CausticTechniqueChoice;
+use bevy::camera::primitives::Aabb;
+use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
+use caustics_core::technique::Technique;
 use caustics_core::convolution::ripples::{Impulse, PoolRipples as Ripples};
 use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
 use std::sync::Arc;
@@ -71,9 +77,18 @@ impl PoolSurface {
         &self.ripples
     }
 
-    /// The heights at the texel centres, as of this frame.
+    /// The heights at the texel centres as the CPU last evaluated them: this frame's
+    /// while the water moves on the CPU. While it moves on the GPU (the module's text)
+    /// the CPU evaluates none, and these are still water's; `ripples().heightfield(time)`
+    /// evaluates any instant.
     pub fn heightfield(&self) -> &Heightfield {
         &self.heightfield
+    }
+
+    /// The water's mesh at `time` as the pool draws it (on the CPU or the GPU): a
+    /// vertex over each texel centre, centred on the pool; or why there is none.
+    pub fn mesh_at(&self, time: f32) -> Result<Mesh, String> {
+        self.ripples.heightfield(time).map(|heightfield| new_grid_mesh(&heightfield)).map_err(|e| e.to_string())
     }
 
     /// The convolution kernels.
@@ -140,16 +155,23 @@ fn replay_impulses(mut commands: Commands, mut pools: Query<(Entity, &PoolImpuls
 fn configure_pools(
     mut commands: Commands,
     mut pools: Query<(Entity, &PoolRipples, Option<&mut PoolSurface>), Changed<PoolRipples>>,
-    orphans: Query<Entity, (With<PoolSurface>, Without<PoolRipples>)>,
+    orphans: Query<(Entity, &PoolSurface, Option<&Mesh3d>, Has<MovesOnGpu>), Without<PoolRipples>>,
     mut removed: RemovedComponents<PoolRipples>,
     mut warned: Local<HashSet<Entity>>,
-    (device, budget): (Option<Res<RenderDevice>>, Res<CausticsGpuBudget>),
+    (device, budget, time, mut meshes): (Option<Res<RenderDevice>>, Res<CausticsGpuBudget>, Res<Time>, ResMut<Assets<Mesh>>),
 ) {
     let largest = device.as_deref().map_or(u64::MAX, largest_binding);
     for entity in removed.read() {
         warned.remove(&entity);
     }
-    for entity in &orphans {
+    // Water that moved on the GPU stays as it is now, in the mesh asset.
+    for (entity, surface, mesh3d, on_gpu) in &orphans {
+        if on_gpu {
+            if let (Ok(heightfield), Some(mut mesh)) = (surface.ripples.heightfield(time.elapsed_secs()), mesh3d.and_then(|m| meshes.get_mut(&m.0))) {
+                write_in_place(&mut mesh, &heightfield);
+            }
+            commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
+        }
         commands.entity(entity).remove::<PoolSurface>();
     }
     for (entity, asked, surface) in &mut pools {
@@ -221,24 +243,52 @@ fn drop_pebbles(
     }
 }
 
-/// Removes faded impulses and, while the water moves, evaluates the surface and writes
-/// it into the pool's mesh; still water costs nothing.
-fn animate_pools(
-    mut commands: Commands,
-    time: Res<Time>,
-    mut pools: Query<(Entity, &mut PoolSurface, Option<&Mesh3d>)>,
-    mut meshes: ResMut<Assets<Mesh>>,
-) {
+/// Present when a render app moves pools' water on the GPU (`water.rs`).
+#[derive(Resource)]
+pub(super) struct WaterOnGpu;
+
+/// The components [`animate_pools`] reads.
+type Pools<'w, 's> = Query<
+    'w,
+    's,
+    (Entity, &'static mut PoolSurface, Option<&'static Mesh3d>, Option<&'static CausticTechniqueChoice>, Has<CausticGenerator>, Has<MovesOnGpu>),
+>;
+
+/// Whether a pool's water can move on the GPU: a render app, and no technique that
+/// reads the pool's triangles on the CPU (the caustic maps; a generator whose technique
+/// is not chosen yet waits a frame).
+fn moves_on_gpu(gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: bool) -> bool {
+    gpu && (!generator || choice.is_some_and(|c| matches!(c.technique(), Technique::WarpedVolumes | Technique::Convolution)))
+}
+
+/// Removes faded impulses and, while the water moves, has the render world write it
+/// into the pool's mesh on the GPU ([`MovesOnGpu`], with an `Aabb` that holds every
+/// wave the live impulses can raise) or evaluates it here and rewrites the mesh asset.
+/// Still water costs nothing; when water that moved on the GPU stills, the asset is
+/// written once, so that Bevy uploads the still surface over the last waves.
+fn animate_pools(mut commands: Commands, time: Res<Time>, gpu: Option<Res<WaterOnGpu>>, mut pools: Pools, mut meshes: ResMut<Assets<Mesh>>) {
     let now = time.elapsed_secs();
-    for (entity, mut surface, mesh3d) in &mut pools {
+    for (entity, mut surface, mesh3d, choice, generator, was_on_gpu) in &mut pools {
         let surface = &mut *surface;
         surface.ripples.remove_expired(now);
-        let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
+        let moving = !surface.ripples.impulses().is_empty();
         let has_grid = mesh3d.and_then(|m| meshes.get(&m.0)).is_some_and(|mesh| {
             let (indices, vertices) = grid_counts(&surface.heightfield);
             is_grid(mesh, indices, vertices)
         });
-        if surface.ripples.impulses().is_empty() && was_still && has_grid {
+        if moving && has_grid && moves_on_gpu(gpu.is_some(), choice, generator) {
+            let ripples = &surface.ripples;
+            let bound = ripples.impulses().iter().map(|i| ripples.impulse_bound(i, now)).sum::<f64>().min(f32::MAX as f64) as f32;
+            let half = 0.5 * surface.settings.size();
+            let aabb = Aabb::from_min_max(Vec3::new(-half.x, -bound, -half.y), Vec3::new(half.x, bound, half.y));
+            commands.entity(entity).insert((MovesOnGpu, NoAutoAabb, aabb));
+            continue;
+        }
+        if was_on_gpu {
+            commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
+        }
+        let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
+        if !moving && was_still && has_grid && !was_on_gpu {
             continue;
         }
         surface.heightfield = match surface.ripples.heightfield(now) {

@@ -24,4 +24,7 @@ struct Pool {
     floor_tolerance: f32,
     pool_from_world: mat4x4<f32>,
     color: vec4<f32>,
+    // `write_vertices`: the water mesh's layout in its vertex buffer, in words (first
+    // vertex, stride, position, normal; `MeshVertices`).
+    vertex: vec4<u32>,
 }
