@@ -222,9 +222,10 @@ pub fn scene_from_world(world: &mut World) -> WorldScene {
     let mut generators = world.query_filtered::<(Entity, &CausticGenerator, MeshComponents), Without<crate::InvalidCausticParams>>();
     let mut meshes_of = world.query_filtered::<(Entity, OccluderComponents, Option<&MeshMaterial3d<StandardMaterial>>), Without<CausticGenerator>>();
     let mut lights = world.query_filtered::<LightComponents, AnyLight>();
+    let water = pool_meshes(world);
     let meshes = world.resource::<Assets<Mesh>>();
     let materials = world.resource::<Assets<StandardMaterial>>();
-    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match meshes.get(&mesh.0).map(|m| core_mesh(m, transform)) {
+    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match water.get(&entity).or_else(|| meshes.get(&mesh.0)).map(|m| core_mesh(m, transform)) {
         Some(Ok(mesh)) => Some(mesh),
         Some(Err(e)) => {
             skipped.push(format!("{entity}: {e}"));
@@ -289,6 +290,20 @@ pub fn to_core_affine(a: &bevy::math::Affine3A) -> glam::Affine3A {
 /// A core affine transform as a Bevy `Transform`.
 fn transform_of(a: &glam::Affine3A) -> Transform {
     Transform::from_matrix(Mat4::from_cols_array(&glam::Mat4::from(*a).to_cols_array()))
+}
+
+/// Each rippling pool's water as of now (`PoolSurface::mesh_at`): its mesh asset is
+/// not rewritten while the water moves on the GPU.
+#[cfg(feature = "convolution")]
+fn pool_meshes(world: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
+    let time = world.resource::<Time>().elapsed_secs();
+    let mut pools = world.query::<(Entity, &crate::convolution::PoolSurface)>();
+    pools.iter(world).filter_map(|(entity, surface)| Some((entity, surface.mesh_at(time).ok()?))).collect()
+}
+
+#[cfg(not(feature = "convolution"))]
+fn pool_meshes(_: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
+    Default::default()
 }
 
 /// The pool on `entity` with water, as the frame's generator `index`.
