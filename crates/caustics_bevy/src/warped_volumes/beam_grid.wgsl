@@ -60,8 +60,14 @@ struct GridCorner {
 // the unit cube, and its trilinear weight between cell centres (the outer cells'
 // centres clamp).
 fn grid_corner(g: Grid, local: vec3<f32>, corner: u32) -> GridCorner {
+    return grid_corner_at(g, (local + 0.5) * vec3<f32>(g.size.xyz) - 0.5, corner);
+}
+
+// `BeamGrid::corners_at`: the same of a point in grid coordinates (cell centres at
+// whole numbers).
+fn grid_corner_at(g: Grid, grid_point: vec3<f32>, corner: u32) -> GridCorner {
     let size = vec3<f32>(g.size.xyz);
-    let q = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0);
+    let q = clamp(grid_point, vec3(0.0), size - 1.0);
     let base = max(min(floor(q), size - 2.0), vec3(0.0));
     let f = q - base;
     let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
@@ -77,8 +83,8 @@ fn grid_corner(g: Grid, local: vec3<f32>, corner: u32) -> GridCorner {
 @group(0) @binding(3) var<uniform> grids: Grids;
 @group(0) @binding(4) var<storage, read_write> fixed: array<atomic<u32>>;
 
-// `caustics_core::volumes::{MAX_DEPOSIT_STEPS, MAX_DEPOSIT_SPLIT}`.
-const MAX_DEPOSIT_STEPS: u32 = 1024u;
+// `caustics_core::volumes::{MAX_DEPOSIT_LAYERS, MAX_DEPOSIT_SPLIT}`.
+const MAX_DEPOSIT_LAYERS: u32 = 1024u;
 const MAX_DEPOSIT_SPLIT: u32 = 64u;
 
 // `value` fixed units (rounded, within ±2⁶²) added to the 64-bit number at `word`: the
@@ -95,16 +101,6 @@ fn add(word: u32, value: f32) {
     }
 }
 
-// `deposit_steps`.
-fn deposit_steps(v: CausticVolume, spacing: f32) -> u32 {
-    var longest = 1.0;
-    for (var i = 0; i < 3; i++) {
-        longest = max(longest, length(vec3(v.ray_x[i], 1.0, v.ray_z[i])));
-    }
-    let steps = ceil(v.origin.w * longest / spacing);
-    return select(1u, u32(clamp(steps, 1.0, f32(MAX_DEPOSIT_STEPS))), steps == steps);
-}
-
 // `deposit_split`: one split for the whole beam, at its wider end.
 fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
     var longest = 0.0;
@@ -119,20 +115,104 @@ fn deposit_split(v: CausticVolume, spacing: f32) -> u32 {
     return select(1u, u32(clamp(split, 1.0, f32(MAX_DEPOSIT_SPLIT))), split == split);
 }
 
-// The deposit's spread (`BeamGrid::deposit`) over the eight cells around a point, in
-// fixed-point units (where every volume shares one hue, only the source's sum, which
-// `resolve` shares out by the hue), and its direction added to the lowest of them.
-fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
+// `deposit_barycentric`: thin beam `k` of `split²`, its sub-triangle's centroid.
+fn deposit_barycentric(split: u32, k: u32) -> vec3<f32> {
+    let a = k / split;
+    let b = k % split;
+    let n = f32(split);
+    var uw = (vec2(f32(a), f32(b)) + 1.0 / 3.0) / n;
+    if a + b >= split {
+        uw = (vec2(f32(split - 1u - a), f32(split - 1u - b)) + 2.0 / 3.0) / n;
+    }
+    return vec3(1.0 - uw.x - uw.y, uw.x, uw.y);
+}
+
+// `ThinBeam`: a thin beam's central ray in grid coordinates, `start + α · per_alpha`,
+// the axis it runs most along and the layers across it that it passes.
+struct ThinBeam {
+    start: vec3<f32>,
+    per_alpha: vec3<f32>,
+    axis: u32,
+    first: i32,
+    count: u32,
+}
+
+// `ThinBeam::new` (`count` 0 for none).
+fn thin_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, split: u32, k: u32) -> ThinBeam {
+    var beam: ThinBeam;
+    beam.count = 0u;
+    let lambda = deposit_barycentric(split, k);
+    let origin = v.origin.xyz + v.axis_x.xyz * dot(lambda, v.vertex_x.xyz) + v.axis_z.xyz * dot(lambda, v.vertex_z.xyz);
+    let ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
+    let cells = vec3<f32>(g.size.xyz);
+    beam.start = ((local_from_world * vec4(origin, 1.0)).xyz + 0.5) * cells - 0.5;
+    beam.per_alpha = (local_from_world * vec4(ray, 0.0)).xyz * cells;
+    let along = abs(beam.per_alpha);
+    beam.axis = select(select(2u, 1u, along.y >= along.z), 0u, along.x >= along.y && along.x >= along.z);
+    let a = beam.start[beam.axis];
+    let b = a + v.origin.w * beam.per_alpha[beam.axis];
+    let lo = min(a, b);
+    let hi = max(a, b);
+    let finite = all(abs(beam.start) <= vec3(3.0e38)) && all(abs(beam.per_alpha) <= vec3(3.0e38));
+    if !(finite && hi > lo) {
+        return beam;
+    }
+    let first = max(floor(lo + 0.5), 0.0);
+    let last = min(floor(hi + 0.5), cells[beam.axis] - 1.0);
+    beam.first = i32(first);
+    beam.count = u32(clamp(last - first + 1.0, 0.0, f32(MAX_DEPOSIT_LAYERS)));
+    return beam;
+}
+
+struct BeamLayer {
+    found: bool,
+    alpha: f32,
+    d_alpha: f32,
+    grid_point: vec3<f32>,
+}
+
+// `ThinBeam::layer`.
+fn beam_layer(beam: ThinBeam, depth: f32, j: u32) -> BeamLayer {
+    var out: BeamLayer;
+    out.found = false;
+    let layer = f32(beam.first + i32(j));
+    let a0 = (layer - 0.5 - beam.start[beam.axis]) / beam.per_alpha[beam.axis];
+    let a1 = (layer + 0.5 - beam.start[beam.axis]) / beam.per_alpha[beam.axis];
+    let whole_lo = min(a0, a1);
+    let whole_hi = max(a0, a1);
+    let lo = max(whole_lo, 0.0);
+    let hi = min(whole_hi, depth);
+    if !(hi > lo) {
+        return out;
+    }
+    out.found = true;
+    out.alpha = 0.5 * (lo + hi);
+    out.d_alpha = hi - lo;
+    out.grid_point = beam.start + out.alpha * beam.per_alpha;
+    if lo == whole_lo && hi == whole_hi {
+        out.grid_point[beam.axis] = layer;
+    }
+    return out;
+}
+
+// The deposit's spread (`BeamGrid::deposit`) over the cells around a grid point (those
+// of weight zero left out), in fixed-point units (where every volume shares one hue,
+// only the source's sum, which `resolve` shares out by the hue), and its direction
+// added to the lowest of them.
+fn spread(g: Grid, grid_point: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
     let light = select(source, vec3(source.x + source.y + source.z, 0.0, 0.0), one_hue);
     for (var corner = 0u; corner < 8u; corner++) {
-        let c = grid_corner(g, local, corner);
+        let c = grid_corner_at(g, grid_point, corner);
+        if c.weight == 0.0 {
+            continue;
+        }
         for (var k = 0u; k < channels; k++) {
             add(c.cell * FIXED_WORDS + 2u * k, c.weight * light[k]);
         }
     }
-    let lowest = grid_corner(g, local, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
+    let lowest = grid_corner_at(g, grid_point, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
     let d = clamp(direction * DIRECTION_UNITS, vec3(-2.1e9), vec3(2.1e9));
     for (var k = 0u; k < 3u; k++) {
         atomicAdd(&fixed[lowest + k], bitcast<u32>(i32(floor(d[k] + 0.5))));
@@ -140,11 +220,11 @@ fn spread(g: Grid, local: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
 }
 
 // Invocations that share one volume's samples: a beam finer than a cell has one a
-// cell it crosses, a few tens, so a workgroup takes four volumes at a time.
+// layer it crosses, a few tens, so a workgroup takes four volumes at a time.
 const VOLUME_LANES: u32 = 16u;
 
 // Four volumes a workgroup at a time (the build's count in `counters[1]`), sixteen
-// invocations sharing each caustic triangle's samples; `BeamGrid::deposit` per medium.
+// invocations sharing each thin beam's layers; `BeamGrid::deposit` per medium.
 // Integer adds: the sums do not depend on the order the GPU runs them in.
 @compute @workgroup_size(64)
 fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
@@ -159,44 +239,33 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
             let g = grids.grids[m];
             let units = fixed_units(g, flux);
             let sigma_t = medium.coefficients.x + medium.coefficients.y;
-            let steps = deposit_steps(v, g.cell.x);
             let split = deposit_split(v, g.cell.x);
-            let n = f32(split);
-            let d_alpha = v.origin.w / f32(steps);
-            // Every sample of the beam's lattice, shared among the invocations.
-            for (var k = lane; k < steps * split * split; k += VOLUME_LANES) {
-                // `deposit_slice` and `deposit_sample`: a sub-triangle's centroid.
-                let alpha = (f32(k / (split * split)) + 0.5) * d_alpha;
-                let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
-                let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
-                let x1 = x.y - x.x;
-                let z1 = z.y - z.x;
-                let x2 = x.z - x.x;
-                let z2 = z.z - z.x;
-                let weight = 0.5 * abs(x1 * z2 - z1 * x2) / (n * n) * d_alpha / g.cell.y;
-                let a = (k % (split * split)) / split;
-                let b = k % split;
-                var uw = (vec2(f32(a), f32(b)) + 1.0 / 3.0) / n;
-                if a + b >= split {
-                    uw = (vec2(f32(split - 1u - a), f32(split - 1u - b)) + 2.0 / 3.0) / n;
+            let cells = vec3<f32>(g.size.xyz);
+            for (var k = 0u; k < split * split; k++) {
+                let beam = thin_beam(v, g, medium.local_from_world, split, k);
+                let lambda = deposit_barycentric(split, k);
+                for (var j = lane; j < beam.count; j += VOLUME_LANES) {
+                    let layer = beam_layer(beam, v.origin.w, j);
+                    let local = (layer.grid_point + 0.5) / cells - 0.5;
+                    if !layer.found || !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
+                        continue;
+                    }
+                    let alpha = layer.alpha;
+                    let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
+                    let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
+                    let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)) / f32(split * split);
+                    let p = v.origin.xyz + v.axis_x.xyz * dot(lambda, x) + v.axis_y.xyz * alpha + v.axis_z.xyz * dot(lambda, z);
+                    let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
+                    if !s.inside {
+                        continue;
+                    }
+                    let beam_length = length(s.ray);
+                    let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * area * layer.d_alpha / g.cell.y * units);
+                    if any(source != source) || any(abs(source) > vec3(3.0e38)) {
+                        continue;
+                    }
+                    spread(g, layer.grid_point, source, s.ray / beam_length * (source.x + source.y + source.z));
                 }
-                let sx = x.x + uw.x * x1 + uw.y * x2;
-                let sz = z.x + uw.x * z1 + uw.y * z2;
-                let p = v.origin.xyz + v.axis_x.xyz * sx + v.axis_y.xyz * alpha + v.axis_z.xyz * sz;
-                let local = (medium.local_from_world * vec4(p, 1.0)).xyz;
-                if !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
-                    continue;
-                }
-                let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
-                if !s.inside {
-                    continue;
-                }
-                let beam_length = length(s.ray);
-                let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * weight * units);
-                if any(source != source) || any(abs(source) > vec3(3.0e38)) {
-                    continue;
-                }
-                spread(g, local, source, s.ray / beam_length * (source.x + source.y + source.z));
             }
         }
     }

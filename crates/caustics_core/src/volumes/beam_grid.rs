@@ -7,10 +7,12 @@
 //! §3.5's radiance is `L = ∫ σₛ p(θ) E_beam(x) e^{−σₜ dₛ(x)} e^{−σₜ dₑ} dt` along the
 //! eye ray. The factor `S(x) = E_beam e^{−σₜ dₛ}` does not depend on the eye: each
 //! cell of the grid holds its mean over the cell, `∫_cell S dV / V_cell`, and the
-//! beams' mean direction there for the phase function. The deposit samples every
-//! volume on a lattice as fine as the cells (its caustic triangles, §3.3, at a
-//! regular series of depths, each split into equal sub-triangles), weighting each
-//! sample by the volume it stands for and spreading it over the eight cells around it:
+//! beams' mean direction there for the phase function. The deposit splits every
+//! volume into thin beams about a cell wide (the sub-triangles of its caustic
+//! triangles, §3.3) and samples each where its central ray crosses the grid's layers
+//! across the axis it runs most along, one sample a layer in the layer's middle plane,
+//! weighting each by the beam volume it stands for and spreading it over the cells
+//! around it (four in the middle plane, eight where the beam ends inside a layer):
 //! `∫ E_beam dV` over a beam is its flux times its length, which the deposit keeps
 //! exactly however thin the beam. A sample's direction, which only aims the phase
 //! function, goes to one cell, the lowest of its eight, and each cell's direction
@@ -21,10 +23,10 @@
 use super::medium::MediumBox;
 use super::{CausticVolume, VolumeSettings};
 use crate::optics::henyey_greenstein;
-use glam::{UVec3, Vec3};
+use glam::{Affine3A, UVec3, Vec3};
 
-/// The most depth steps of one volume's deposit.
-pub const MAX_DEPOSIT_STEPS: u32 = 1024;
+/// The most layers one thin beam of the deposit adds to.
+pub const MAX_DEPOSIT_LAYERS: u32 = 1024;
 /// The most sub-triangles along a caustic triangle's side in the deposit.
 pub const MAX_DEPOSIT_SPLIT: u32 = 64;
 
@@ -47,24 +49,6 @@ pub fn cell_of(medium: &MediumBox, size: UVec3) -> (f32, f32) {
     (edge.min_element(), m.determinant().abs() / (size.x * size.y * size.z) as f32)
 }
 
-/// How many depth steps one volume's deposit takes: enough that samples along its
-/// longest ray lie at most `spacing` apart.
-pub fn deposit_steps(volume: &CausticVolume, spacing: f32) -> u32 {
-    let longest_ray = (0..3)
-        .map(|i| Vec3::new(volume.ray_x[i], 1.0, volume.ray_z[i]).length())
-        .fold(1.0f32, f32::max);
-    let steps = (volume.depth * longest_ray / spacing).ceil();
-    if steps.is_finite() { (steps as u32).clamp(1, MAX_DEPOSIT_STEPS) } else { 1 }
-}
-
-/// The local x and z of the caustic triangle's corners at the middle of depth step
-/// `step` of `steps`, that depth α, and the step's thickness in α.
-pub fn deposit_slice(volume: &CausticVolume, steps: u32, step: u32) -> (Vec3, Vec3, f32, f32) {
-    let d_alpha = volume.depth / steps as f32;
-    let alpha = (step as f32 + 0.5) * d_alpha;
-    (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z, alpha, d_alpha)
-}
-
 /// How many sub-triangles to a side every caustic triangle of one volume's deposit is
 /// split into, so that their centroids lie at most `spacing` apart at the wider end
 /// (the corners move linearly with depth, so the sides are longest at one end). One
@@ -80,9 +64,10 @@ pub fn deposit_split(volume: &CausticVolume, spacing: f32) -> u32 {
     if split.is_finite() { (split as u32).clamp(1, MAX_DEPOSIT_SPLIT) } else { 1 }
 }
 
-/// Sample `k` of the `split²` of a caustic triangle with corners `(x, z)`: the local
-/// x and z of one sub-triangle's centroid, and the sub-triangle's area.
-pub fn deposit_sample(x: Vec3, z: Vec3, split: u32, k: u32) -> (f32, f32, f32) {
+/// Thin beam `k` of the `split²` a volume's deposit splits it into: the barycentric
+/// coordinates of its sub-triangle's centroid in every caustic triangle (the corners
+/// move linearly with depth, so the centroid's ray is the same blend of the volume's).
+pub fn deposit_barycentric(split: u32, k: u32) -> Vec3 {
     let (a, b) = (k / split, k % split);
     let n = split as f32;
     // The split² sub-triangles: those of a square's lower half (a + b < split) and,
@@ -92,9 +77,63 @@ pub fn deposit_sample(x: Vec3, z: Vec3, split: u32, k: u32) -> (f32, f32, f32) {
     } else {
         (((split - 1 - a) as f32 + 2.0 / 3.0) / n, ((split - 1 - b) as f32 + 2.0 / 3.0) / n)
     };
-    let (x1, z1, x2, z2) = (x.y - x.x, z.y - z.x, x.z - x.x, z.z - z.x);
-    let area = 0.5 * (x1 * z2 - z1 * x2).abs();
-    (x.x + u * x1 + w * x2, z.x + u * z1 + w * z2, area / (n * n))
+    Vec3::new(1.0 - u - w, u, w)
+}
+
+/// One thin beam of a volume's deposit, in the coordinates of a grid whose cell
+/// centres lie at whole numbers: its central ray `q(α) = start + α·per_alpha`, the axis
+/// it runs most along, and the layers across that axis it passes, `first` and `count`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThinBeam {
+    pub start: Vec3,
+    pub per_alpha: Vec3,
+    pub axis: usize,
+    pub first: i32,
+    pub count: u32,
+}
+
+impl ThinBeam {
+    /// Thin beam `k` of `split²` through the grid of `size` cells over a box with
+    /// `local_from_world` (the box's unit cube): none where its ray does not move
+    /// across the grid or is not finite.
+    pub fn new(volume: &CausticVolume, split: u32, k: u32, local_from_world: &Affine3A, size: UVec3) -> Option<Self> {
+        let lambda = deposit_barycentric(split, k);
+        let origin = volume.origin + volume.axes[0] * lambda.dot(volume.vertex_x) + volume.axes[2] * lambda.dot(volume.vertex_z);
+        let ray = volume.axes[0] * lambda.dot(volume.ray_x) + volume.axes[1] + volume.axes[2] * lambda.dot(volume.ray_z);
+        let cells = size.as_vec3();
+        let start = (local_from_world.transform_point3(origin) + 0.5) * cells - 0.5;
+        let per_alpha = local_from_world.transform_vector3(ray) * cells;
+        let along = per_alpha.abs();
+        let axis = if along.x >= along.y && along.x >= along.z { 0 } else if along.y >= along.z { 1 } else { 2 };
+        let ends = (start[axis], start[axis] + volume.depth * per_alpha[axis]);
+        let (lo, hi) = (ends.0.min(ends.1), ends.0.max(ends.1));
+        if !(start.is_finite() && per_alpha.is_finite() && hi > lo) {
+            return None;
+        }
+        let first = (lo + 0.5).floor().max(0.0);
+        let last = (hi + 0.5).floor().min(cells[axis] - 1.0);
+        let count = (last - first + 1.0).clamp(0.0, MAX_DEPOSIT_LAYERS as f32);
+        Some(Self { start, per_alpha, axis, first: first as i32, count: count as u32 })
+    }
+
+    /// Layer `j` of [`Self::count`]: the α in the middle of the part of the beam
+    /// inside it, that part's length in α, and its grid point there, on the layer's
+    /// middle plane where the beam crosses the whole layer.
+    pub fn layer(&self, depth: f32, j: u32) -> Option<(f32, f32, Vec3)> {
+        let layer = (self.first + j as i32) as f32;
+        let (a0, a1) = ((layer - 0.5 - self.start[self.axis]) / self.per_alpha[self.axis], (layer + 0.5 - self.start[self.axis]) / self.per_alpha[self.axis]);
+        let (whole_lo, whole_hi) = (a0.min(a1), a0.max(a1));
+        let (lo, hi) = (whole_lo.max(0.0), whole_hi.min(depth));
+        if !(hi > lo) {
+            return None;
+        }
+        let alpha = 0.5 * (lo + hi);
+        let mut q = self.start + alpha * self.per_alpha;
+        if lo == whole_lo && hi == whole_hi {
+            q[self.axis] = layer;
+        }
+        Some((alpha, hi - lo, q))
+    }
 }
 
 /// The steps of a march `length` long through cells whose smallest edge is `cell`:
@@ -159,40 +198,50 @@ impl BeamGrid {
         }
     }
 
-    /// Adds one volume's beam: every sample of its lattice (its caustic triangle at
-    /// [`deposit_steps`] depths, each split into [`deposit_split`]² sub-triangles, the
-    /// samples at most a cell apart, where the eight cells' trilinear weights of a
-    /// sample still sum evenly over a beam) that lies lit inside it
-    /// ([`CausticVolume::sample`]) adds its source times the volume it stands for to
-    /// the eight cells around it ([`Self::corners`]), and its direction to the lowest
-    /// of them. [`Self::gather_directions`] must follow.
+    /// Adds one volume's beam: each of its [`deposit_split`]² thin beams
+    /// ([`ThinBeam`]) at every layer it crosses ([`ThinBeam::layer`]), where that
+    /// sample lies lit inside the volume ([`CausticVolume::sample`]): its source times
+    /// the beam volume it stands for (the thin beam's cross-section in the caustic
+    /// triangle's plane times the α spent in the layer, exact for parallel rays: a
+    /// prism between two parallel planes holds `A·Δα` along any of its rays) to the
+    /// cells around it ([`Self::corners_at`]), and its direction to the lowest of them.
+    /// [`Self::gather_directions`] must follow.
     fn deposit(&mut self, volume: &CausticVolume, settings: &VolumeSettings) {
         let (cell, cell_volume) = self.cell();
-        let (steps, split) = (deposit_steps(volume, cell), deposit_split(volume, cell));
+        let split = deposit_split(volume, cell);
         let sigma_t = self.medium.coefficients.extinction();
         let local_from_world = self.medium.world_from_local.inverse();
-        for k in 0..steps * split * split {
-            let (x, z, alpha, d_alpha) = deposit_slice(volume, steps, k / (split * split));
-            let (sx, sz, area) = deposit_sample(x, z, split, k % (split * split));
-            let p = volume.origin + volume.axes[0] * sx + volume.axes[1] * alpha + volume.axes[2] * sz;
-            let local = local_from_world.transform_point3(p);
-            if !(local.abs().max_element() <= 0.5) {
-                continue;
-            }
-            let Some(s) = volume.sample(p, settings) else {
+        let cells = self.size.as_vec3();
+        for k in 0..split * split {
+            let Some(beam) = ThinBeam::new(volume, split, k, &local_from_world, self.size) else {
                 continue;
             };
-            let beam_length = s.ray.length();
-            let attenuated = s.plane_irradiance * beam_length * (-sigma_t * s.depth * beam_length).exp();
-            let source = volume.color * (attenuated * area * d_alpha / cell_volume);
-            if !source.is_finite() {
-                continue;
+            for j in 0..beam.count {
+                let Some((alpha, d_alpha, q)) = beam.layer(volume.depth, j) else {
+                    continue;
+                };
+                if !(((q + 0.5) / cells - 0.5).abs().max_element() <= 0.5) {
+                    continue;
+                }
+                let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
+                let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs() / (split * split) as f32;
+                let lambda = deposit_barycentric(split, k);
+                let p = volume.origin + volume.axes[0] * lambda.dot(x) + volume.axes[1] * alpha + volume.axes[2] * lambda.dot(z);
+                let Some(s) = volume.sample(p, settings) else {
+                    continue;
+                };
+                let beam_length = s.ray.length();
+                let attenuated = s.plane_irradiance * beam_length * (-sigma_t * s.depth * beam_length).exp();
+                let source = volume.color * (attenuated * area * d_alpha / cell_volume);
+                if !source.is_finite() {
+                    continue;
+                }
+                let corners = self.corners_at(q);
+                for (index, w) in corners {
+                    self.source[index] += w * source;
+                }
+                self.deposited[corners[0].0] += s.ray / beam_length * source.element_sum();
             }
-            let corners = self.corners(local);
-            for (index, w) in corners {
-                self.source[index] += w * source;
-            }
-            self.deposited[corners[0].0] += s.ray / beam_length * source.element_sum();
         }
     }
 
@@ -202,8 +251,14 @@ impl BeamGrid {
     /// is kept whole and a beam finer than a cell leaves no aliasing), the lookup
     /// interpolates from them.
     pub fn corners(&self, local: Vec3) -> [(usize, f32); 8] {
+        self.corners_at((local + 0.5) * self.size.as_vec3() - 0.5)
+    }
+
+    /// [`Self::corners`] of a point in grid coordinates (cell centres at whole numbers):
+    /// a point on a layer's middle plane has four of weight zero.
+    pub fn corners_at(&self, q: Vec3) -> [(usize, f32); 8] {
         let size = self.size.as_vec3();
-        let q = ((local + 0.5) * size - 0.5).clamp(Vec3::ZERO, size - 1.0);
+        let q = q.clamp(Vec3::ZERO, size - 1.0);
         let base = q.floor().min(size - 2.0).max(Vec3::ZERO);
         let f = q - base;
         let base = base.as_uvec3();
