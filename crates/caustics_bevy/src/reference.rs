@@ -296,7 +296,9 @@ fn transform_of(a: &glam::Affine3A) -> Transform {
 /// not rewritten while the water moves on the GPU.
 #[cfg(feature = "convolution")]
 fn pool_meshes(world: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
-    let time = world.resource::<Time>().elapsed_secs();
+    let Some(time) = world.get_resource::<Time>().map(Time::elapsed_secs) else {
+        return Default::default();
+    };
     let mut pools = world.query::<(Entity, &crate::convolution::PoolSurface)>();
     pools.iter(world).filter_map(|(entity, surface)| Some((entity, surface.mesh_at(time).ok()?))).collect()
 }
@@ -312,7 +314,7 @@ fn pool_view(world: &World, entity: Entity, index: usize) -> Option<PoolView> {
     let pool = world.get::<crate::PoolRipples>(entity)?;
     let surface = world.get::<crate::convolution::PoolSurface>(entity)?;
     let transform = world.get::<GlobalTransform>(entity)?;
-    Some(pool.to_view(index, transform, surface, world.resource::<Time>().elapsed_secs()))
+    Some(pool.to_view(index, transform, surface, world.get_resource::<Time>()?.elapsed_secs()))
 }
 
 #[cfg(not(feature = "convolution"))]

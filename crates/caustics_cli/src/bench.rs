@@ -75,7 +75,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub splat_pixels: Option<u32>,
     /// With `--frames`: the families' scenes to run, comma-separated (`ocean`, `ring`,
-    /// `glass ball`, `pool`, `rippled pool`); all when not given.
+    /// `glass ball`, `pool`, `rippled pool`, `moving occluder`); all when not given.
     #[arg(long, value_delimiter = ',')]
     pub frame_scenes: Vec<String>,
 }

@@ -69,10 +69,11 @@ struct Family {
     pass: &'static str,
 }
 
-const FAMILIES: [Family; 7] = [
+const FAMILIES: [Family; 8] = [
     Family { technique: "volumes", scene: "ocean", unit: "water vertices", sizes: &[32, 64, 128, 256, 512], spawn: ocean, pass: "volumes" },
     Family { technique: "volumes", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_volumes, pass: "volumes" },
     Family { technique: "volumes", scene: "rippled pool", unit: "water vertices", sizes: &[32, 64, 128, 256], spawn: rippled_pool, pass: "volumes" },
+    Family { technique: "volumes", scene: "moving occluder", unit: "occluder triangles", sizes: &[32, 64, 128, 256, 512], spawn: moving_occluder, pass: "volumes" },
     Family { technique: "maps", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_maps, pass: "caustic map projection" },
     Family { technique: "maps", scene: "glass ball", unit: "photons", sizes: &[256, 512, 1024, 2048, 4096], spawn: ball_maps, pass: "caustic map projection" },
     Family { technique: "convolution", scene: "pool", unit: "pool texels", sizes: &[128, 256, 512, 1024], spawn: pool, pass: "pool floor" },
@@ -516,6 +517,25 @@ fn ball(world: &mut World, target: RenderTarget, technique: CausticTechnique) {
     let mesh = world.resource_mut::<Assets<Mesh>>().add(Sphere::new(0.5).mesh().ico(4).unwrap_or_else(|_| Sphere::new(0.5).mesh().build()));
     let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(1.0, 1.0, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
     world.spawn((Mesh3d(mesh), MeshMaterial3d(glass), CausticGenerator { technique, ..CausticGenerator::refractive(1.5) }, Transform::from_xyz(0.0, 1.0, 0.0), Turning));
+}
+
+/// Two glass balls under the caustic volumes beside a sphere of `sectors` around and
+/// half as many rows that turns every frame: a shadow caster, not a generator, whose
+/// every move the volumes must see.
+fn moving_occluder(world: &mut World, target: RenderTarget, sectors: u32) -> u64 {
+    stage(world, target, Vec3::new(0.2, -1.0, 0.1), (Vec3::new(0.0, 2.4, 3.2), Vec3::new(0.0, 0.3, 0.0)));
+    let ball = world.resource_mut::<Assets<Mesh>>().add(Sphere::new(0.35).mesh().ico(3).unwrap_or_else(|_| Sphere::new(0.35).mesh().build()));
+    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(1.0, 1.0, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
+    for x in [-0.6, 0.6] {
+        let generator = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
+        world.spawn((Mesh3d(ball.clone()), MeshMaterial3d(glass.clone()), generator, Transform::from_xyz(x, 1.0, 0.0)));
+    }
+    let caster = Sphere::new(0.3).mesh().uv(sectors, (sectors / 2).max(2));
+    let triangles = caster.indices().map_or(0, |i| i.len() / 3) as u64;
+    let caster = world.resource_mut::<Assets<Mesh>>().add(caster);
+    let grey = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
+    world.spawn((Mesh3d(caster), MeshMaterial3d(grey), Transform::from_xyz(0.0, 1.7, 0.3), Turning));
+    triangles
 }
 
 /// The glass ball into caustic maps from a photon buffer `side`² (maps half as fine,

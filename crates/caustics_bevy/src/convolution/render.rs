@@ -28,7 +28,7 @@ use caustics_core::convolution::ripples::mirror_images;
 use std::sync::Arc;
 
 /// `Pool` in `types.wgsl`.
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuPool {
     pub columns: u32,
     pub rows: u32,
@@ -115,6 +115,11 @@ struct PoolBuffers {
     terms: Buffer,
     irradiance: Buffer,
     compute: Option<BindGroup>,
+    /// Whether the compute passes run this frame: not while the water stays still and
+    /// `still` already holds its floor.
+    computes: bool,
+    /// The still pool (its clock left out) whose floor `irradiance` holds, if any.
+    still: Option<GpuPool>,
 }
 
 impl PoolBuffers {
@@ -129,6 +134,8 @@ impl PoolBuffers {
             terms: texel_buffer(device, "caustic_pool_terms", texels, 4),
             irradiance: texel_buffer(device, "caustic_pool_floor_irradiance", texels, 1),
             compute: None,
+            computes: true,
+            still: None,
         }
     }
 }
@@ -323,6 +330,11 @@ fn prepare_buffers(
         if buffers.texels != texels {
             *buffers = PoolBuffers::new(&device, texels);
         }
+        // Still water under the same light and kernels: the floor already computed.
+        let still = (pool.uniform.image_count == 0).then_some(GpuPool { time: 0.0, ..pool.uniform });
+        let same_taps = buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps));
+        buffers.computes = still.is_none() || buffers.still != still || !same_taps;
+        buffers.still = None;
         buffers.uniform.set(pool.uniform);
         buffers.uniform.set_label(Some("caustic_pool_settings"));
         buffers.uniform.write_buffer(&device, &queue);
@@ -352,6 +364,10 @@ fn prepare_buffers(
                 buffers.irradiance.as_entire_binding(),
             )),
         ));
+        // The compute node runs this frame's passes once every kernel is ready.
+        if pipelines.compute.iter().all(|&id| cache.get_compute_pipeline(id).is_some()) {
+            buffers.still = still;
+        }
     }
 }
 
@@ -411,7 +427,8 @@ impl SpecializedRenderPipeline for ConvolutionPipelines {
 }
 
 /// Once per frame: every pool's heights, per-texel terms and floor irradiance, lifted
-/// to non-negative (`lift_negative_irradiance`).
+/// to non-negative (`lift_negative_irradiance`); none for water that stays still
+/// (`PoolBuffers::computes`).
 fn compute_floor_irradiance(
     mut ctx: RenderContext,
     gpu: Res<PoolGpu>,
@@ -423,14 +440,14 @@ fn compute_floor_irradiance(
         return;
     };
     // No pools: no pass (and no span in the GPU timings).
-    if gpu.0.values().all(|buffers| buffers.compute.is_none()) {
+    if gpu.0.values().all(|buffers| buffers.compute.is_none() || !buffers.computes) {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/convolution");
-    for buffers in gpu.0.values() {
+    for buffers in gpu.0.values().filter(|buffers| buffers.computes) {
         let Some(bind_group) = &buffers.compute else { continue };
         let uniform = buffers.uniform.get();
         pass.set_bind_group(0, bind_group, &[]);
