@@ -61,8 +61,8 @@ impl VolumeDraw<'_> {
         let layout = self.cache.get_bind_group_layout(self.layouts.layout(surface.is_none(), pipelines.multisampled));
         let (bind_group, indirect) = match surface {
             Some(surface) => {
-                let (a, b, c, d, e) = entries;
-                let entries = BindGroupEntries::sequential((a, b, c, d, e, surface.large.as_entire_binding()));
+                let (a, b, c, _, e) = entries;
+                let entries = BindGroupEntries::sequential((a, b, c, &surface.centre.default_view, e, surface.large.as_entire_binding()));
                 (ctx.render_device().create_bind_group("caustic_volumes_surface_bind_group", &layout, &entries), &surface.large)
             }
             None => (ctx.render_device().create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries)), counters),
@@ -144,9 +144,10 @@ type VolumeView<'a> =
     (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
 
 /// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer:
-/// `splat` lights the pixels of the volumes that cover a few and lists the others,
-/// its light is added to the buffer, then the listed volumes' prisms are drawn, tested
-/// against a copy of the view's depth prepass.
+/// a copy of the view's depth prepass with each pixel's receiver depth
+/// (`receiver_depth.wgsl`, once a frame), then `splat` lights the pixels of the volumes
+/// that cover a few and lists the others, its light is added to the buffer, then the
+/// listed volumes' prisms are drawn, tested against the copy.
 pub(super) fn surface_pass(
     view: ViewQuery<(&ViewSurfaceTargets, VolumeView<'static>)>,
     draw: VolumeDraw,
@@ -156,12 +157,11 @@ pub(super) fn surface_pass(
 ) {
     let (targets, view) = view.into_inner();
     let multisampled = view.2.multisampled as usize;
-    let (false, Some(copy), Some(splat), Some(resolve), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
+    let (false, Some(copy), Some(splat), Some(resolve), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
         draw.buffers.empty,
         draw.cache.get_render_pipeline(surface.depth_copy[multisampled]),
         draw.cache.get_compute_pipeline(surface.splat[multisampled]),
         draw.cache.get_render_pipeline(surface.resolve),
-        view.3.depth_view(),
         view.3.normal_view(),
         draw.view_uniforms.uniforms.binding(),
         draw.buffers.volumes.as_ref(),
@@ -177,7 +177,7 @@ pub(super) fn surface_pass(
             view_binding,
             volumes.as_entire_binding(),
             settings,
-            depth,
+            &targets.centre.default_view,
             normal,
             counters.as_entire_binding(),
             targets.splatted.as_entire_binding(),
@@ -189,6 +189,12 @@ pub(super) fn surface_pass(
     let encoder = ctx.command_encoder();
     let mut render_pass = encoder.begin_render_pass(&RenderPassDescriptor {
         label: Some("caustic_receiver_depth"),
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: &targets.centre.default_view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: LoadOp::Clear(default()), store: StoreOp::Store },
+        })],
         depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
             view: &targets.depth.default_view,
             depth_ops: Some(Operations { load: LoadOp::Clear(0.0), store: StoreOp::Store }),
@@ -197,9 +203,11 @@ pub(super) fn surface_pass(
         ..default()
     });
     view.0.set_viewport(&mut render_pass);
+    let span = diagnostics.pass_span(&mut render_pass, "caustics/receiver_depth");
     render_pass.set_pipeline(copy);
-    render_pass.set_bind_group(0, &targets.depth_bind_group, &[]);
+    render_pass.set_bind_group(0, &targets.depth_bind_group, &[view.4.offset]);
     render_pass.draw(0..3, 0..1);
+    span.end(&mut render_pass);
     drop(render_pass);
     // One invocation a volume the buffer has room for; those past the build's count return.
     encoder.clear_buffer(&targets.splatted, 0, None);

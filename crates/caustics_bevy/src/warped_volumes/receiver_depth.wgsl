@@ -3,26 +3,40 @@
 // shades nothing there. Multisampled, the nearest of the pixel's samples (reversed z:
 // the greatest): the surface pass shades the receiver where the ray through the
 // pixel's centre meets it, which lies among the samples' depths, and a back face just
-// behind that point must pass.
+// behind that point must pass. And, once for every volume that covers the pixel, the
+// depth of that point itself (`centre_depth`), which both surface paths read.
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
+#import bevy_render::view::View
+#import bevy_caustics::receiver::centre_depth
 
+@group(0) @binding(0) var<uniform> view: View;
 #ifdef MULTISAMPLED
-@group(0) @binding(0) var depth_prepass: texture_depth_multisampled_2d;
+@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
+@group(0) @binding(2) var normal_prepass: texture_multisampled_2d<f32>;
 #else
-@group(0) @binding(0) var depth_prepass: texture_depth_2d;
+@group(0) @binding(1) var depth_prepass: texture_depth_2d;
+@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
 #endif
+
+struct ReceiverDepth {
+    @builtin(frag_depth) test: f32,
+    @location(0) centre: vec4<f32>,
+}
 
 @fragment
-fn copy_depth(in: FullscreenVertexOutput) -> @builtin(frag_depth) f32 {
+fn copy_depth(in: FullscreenVertexOutput) -> ReceiverDepth {
     let pixel = vec2<i32>(in.position.xy);
+    let first = textureLoad(depth_prepass, pixel, 0);
+    var out = ReceiverDepth(first, vec4(0.0));
 #ifdef MULTISAMPLED
-    var depth = 0.0;
-    for (var i = 0; i < i32(textureNumSamples(depth_prepass)); i++) {
-        depth = max(depth, textureLoad(depth_prepass, pixel, i));
+    for (var i = 1; i < i32(textureNumSamples(depth_prepass)); i++) {
+        out.test = max(out.test, textureLoad(depth_prepass, pixel, i));
     }
-    return depth;
-#else
-    return textureLoad(depth_prepass, pixel, 0);
 #endif
+    if first > 0.0 {
+        let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
+        out.centre = vec4(centre_depth(view, depth_prepass, pixel, n), 0.0, 0.0, 0.0);
+    }
+    return out;
 }

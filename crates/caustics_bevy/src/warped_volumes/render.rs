@@ -191,7 +191,10 @@ const SHAFT_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 #[derive(Component)]
 pub(super) struct ViewSurfaceTargets {
     pub depth: CachedTexture,
-    /// Reads the view's depth prepass for the copy.
+    /// The depth of each pixel's receiver point, at the pixel's centre, written by the
+    /// same copy: both surface paths read it instead of rebuilding it for every volume.
+    pub centre: CachedTexture,
+    /// Reads the view and its depth and normal prepasses for the copy.
     pub depth_bind_group: BindGroup,
     /// Three words ([`SPLAT_SCALE`] a unit of exposed irradiance) a pixel of the
     /// camera's viewport.
@@ -228,6 +231,8 @@ fn read_back_surface_work(mut readback: ResMut<SurfaceWorkReadback>, channel: Re
 
 /// The receiver depth's format and the surface pass's depth test.
 const RECEIVER_DEPTH_FORMAT: TextureFormat = TextureFormat::Depth32Float;
+/// [`ViewSurfaceTargets::centre`]'s format.
+const RECEIVER_CENTRE_FORMAT: TextureFormat = TextureFormat::R32Float;
 
 /// The fullscreen pass that fills a view's [`ViewSurfaceTargets::depth`], for a
 /// single-sampled and a multisampled prepass; `splat`, for each; and the fullscreen
@@ -367,14 +372,20 @@ impl VolumesPipeline {
 
 /// What `volumes.wgsl` reads in every entry point (the view, the volumes, the settings
 /// and the prepass), seen from `visibility`, then `more` from binding 5 on.
-fn volumes_layout(label: &'static str, multisampled: bool, visibility: ShaderStages, more: &[BindingType]) -> BindGroupLayoutDescriptor {
+/// The layout of `volumes.wgsl`: binding 3 the depth prepass, or for the surface pass
+/// (`centre`) [`ViewSurfaceTargets::centre`].
+fn volumes_layout(label: &'static str, (multisampled, centre): (bool, bool), visibility: ShaderStages, more: &[BindingType]) -> BindGroupLayoutDescriptor {
     let mut entries = BindGroupLayoutEntries::sequential(
         visibility,
         (
             uniform_buffer::<ViewUniform>(true),
             storage_buffer_read_only::<GpuCausticVolume>(false),
             uniform_buffer::<GpuVolumeSettings>(false),
-            if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+            match (centre, multisampled) {
+                (true, _) => texture_2d(TextureSampleType::Float { filterable: false }),
+                (false, true) => texture_depth_2d_multisampled(),
+                (false, false) => texture_depth_2d(),
+            },
             if multisampled {
                 texture_2d_multisampled(TextureSampleType::Float { filterable: false })
             } else {
@@ -417,15 +428,15 @@ fn init_pipeline(
 ) {
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl");
     let surface_layouts = [false, true].map(|multisampled| {
-        volumes_layout("caustic_volumes_surface_layout", multisampled, ShaderStages::VERTEX_FRAGMENT, &[words(true)])
+        volumes_layout("caustic_volumes_surface_layout", (multisampled, true), ShaderStages::VERTEX_FRAGMENT, &[words(true)])
     });
     let volumetric_layouts =
-        [false, true].map(|multisampled| volumes_layout("caustic_volumes_volumetric_layout", multisampled, ShaderStages::VERTEX_FRAGMENT, &[]));
+        [false, true].map(|multisampled| volumes_layout("caustic_volumes_volumetric_layout", (multisampled, false), ShaderStages::VERTEX_FRAGMENT, &[]));
     let splat_layouts = [false, true].map(|multisampled| {
-        volumes_layout("caustic_volumes_splat_layout", multisampled, ShaderStages::COMPUTE, &[words(true), words(false), words(false)])
+        volumes_layout("caustic_volumes_splat_layout", (multisampled, true), ShaderStages::COMPUTE, &[words(true), words(false), words(false)])
     });
     let splat = [false, true].map(|multisampled| {
-        let mut shader_defs = vec!["SPLAT".into()];
+        let mut shader_defs = vec!["SPLAT".into(), "RECEIVER_CENTRE".into()];
         shader_defs.extend(multisampled.then(|| "MULTISAMPLED".into()));
         shader_defs.extend(splat_defs());
         cache.queue_compute_pipeline(ComputePipelineDescriptor {
@@ -461,9 +472,17 @@ fn init_pipeline(
     let depth_layouts = [false, true].map(|multisampled| {
         BindGroupLayoutDescriptor::new(
             "caustic_receiver_depth_layout",
-            &BindGroupLayoutEntries::single(
+            &BindGroupLayoutEntries::sequential(
                 ShaderStages::FRAGMENT,
-                if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                (
+                    uniform_buffer::<ViewUniform>(true),
+                    if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
+                    if multisampled {
+                        texture_2d_multisampled(TextureSampleType::Float { filterable: false })
+                    } else {
+                        texture_2d(TextureSampleType::Float { filterable: false })
+                    },
+                ),
             ),
         )
     });
@@ -476,7 +495,7 @@ fn init_pipeline(
                 shader: shader.clone(),
                 shader_defs: if multisampled { vec!["MULTISAMPLED".into()] } else { vec![] },
                 entry_point: Some("copy_depth".into()),
-                targets: vec![],
+                targets: vec![Some(ColorTargetState { format: RECEIVER_CENTRE_FORMAT, blend: None, write_mask: ColorWrites::ALL })],
             }),
             depth_stencil: Some(DepthStencilState {
                 format: RECEIVER_DEPTH_FORMAT,
@@ -523,8 +542,9 @@ impl SpecializedRenderPipeline for VolumesPipeline {
             shader_defs.push(ShaderDefVal::UInt("SHAFT_SCALE".into(), key.shaft_scale));
         }
         if !key.volumetric {
-            // Surfaces: each volume cut to the slab around where its rays land.
-            shader_defs.push("SURFACE".into());
+            // Surfaces: each volume cut to the slab around where its rays land, each
+            // pixel's receiver point read from `ViewSurfaceTargets::centre`.
+            shader_defs.extend(["SURFACE".into(), "RECEIVER_CENTRE".into()]);
         }
         let (label, entry) =
             if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
@@ -688,8 +708,8 @@ fn prepare_surface_targets(
         commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
     for (entity, irradiance, prepass, msaa, targets) in &views {
-        let (Some(depth), Some(_), Some(view_binding)) =
-            (prepass.depth_view(), buffers.volumes.as_ref().filter(|_| !buffers.empty), view_uniforms.uniforms.binding())
+        let (Some(depth), Some(normal), Some(_), Some(view_binding)) =
+            (prepass.depth_view(), prepass.normal_view(), buffers.volumes.as_ref().filter(|_| !buffers.empty), view_uniforms.uniforms.binding())
         else {
             commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
@@ -707,10 +727,23 @@ fn prepare_surface_targets(
                 view_formats: &[],
             },
         );
+        let centre = texture_cache.get(
+            &device,
+            TextureDescriptor {
+                label: Some("caustic_receiver_centre"),
+                size: irradiance.texture.texture.size(),
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: TextureDimension::D2,
+                format: RECEIVER_CENTRE_FORMAT,
+                usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+        );
         let depth_bind_group = device.create_bind_group(
             "caustic_receiver_depth_bind_group",
             &cache.get_bind_group_layout(&pipelines.depth_layouts[(msaa.samples() > 1) as usize]),
-            &BindGroupEntries::single(depth),
+            &BindGroupEntries::sequential((view_binding.clone(), depth, normal)),
         );
         let pixels = u64::from(irradiance.region().1.element_product());
         let splatted_size = 3 * 4 * pixels.max(1);
@@ -729,7 +762,7 @@ fn prepare_surface_targets(
             &cache.get_bind_group_layout(&pipelines.resolve_layout),
             &BindGroupEntries::sequential((view_binding, splatted.as_entire_binding())),
         );
-        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, depth_bind_group, splatted, large, resolve_bind_group });
+        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group });
     }
 }
 

@@ -5,21 +5,36 @@
 // one invocation a volume) does it for shapes that cover a few pixels, looping over
 // them, and hands the larger ones to the rasteriser, which draws the back faces of
 // their bounding prisms (§4.3) into `surface`. The volumetric pass draws every prism
-// into `volumetric`, the eye ray's single scattering in media (§3.5).
+// into `volumetric`, the eye ray's single scattering in media (§3.5). Both surface
+// paths read each pixel's receiver depth from `receiver_centre`, which the view's
+// depth copy (`receiver_depth.wgsl`) computes once a frame, not once a volume.
 
 #import bevy_render::view::View
-#import bevy_caustics::receiver::{Medium, centre_depth, clip_medium, exposed, world_at}
+#import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
 #import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, beta, sample_volume, to_local}
 
 
 @group(0) @binding(0) var<uniform> view: View;
 @group(0) @binding(1) var<storage, read> volumes: array<CausticVolume>;
 @group(0) @binding(2) var<uniform> settings: VolumeSettings;
+#ifdef RECEIVER_CENTRE
+// The depth of the receiver point at each pixel's centre (`centre_depth`), 0 where the
+// view sees no surface.
+@group(0) @binding(3) var receiver_centre: texture_2d<f32>;
+#else
 #ifdef MULTISAMPLED
 @group(0) @binding(3) var depth_prepass: texture_depth_multisampled_2d;
-@group(0) @binding(4) var normal_prepass: texture_multisampled_2d<f32>;
 #else
 @group(0) @binding(3) var depth_prepass: texture_depth_2d;
+#endif
+
+fn load_depth(pixel: vec2<i32>) -> f32 {
+    return textureLoad(depth_prepass, pixel, 0);
+}
+#endif
+#ifdef MULTISAMPLED
+@group(0) @binding(4) var normal_prepass: texture_multisampled_2d<f32>;
+#else
 @group(0) @binding(4) var normal_prepass: texture_2d<f32>;
 #endif
 #ifdef SPLAT
@@ -76,19 +91,16 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     return out;
 }
 
-fn load_depth(pixel: vec2<i32>) -> f32 {
-    return textureLoad(depth_prepass, pixel, 0);
-}
-
+#ifdef RECEIVER_CENTRE
 // What volume `v` adds to the irradiance buffer at `pixel`: its light at the receiver
 // point there, exposed; zero outside it. On the ray through the pixel's centre.
 fn surface_light(v: CausticVolume, pixel: vec2<i32>) -> vec3<f32> {
-    let depth = load_depth(pixel);
+    let depth = textureLoad(receiver_centre, pixel, 0).x;
     if depth <= 0.0 {
         return vec3(0.0);
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    let p = world_at(view, vec2<f32>(pixel) + 0.5, centre_depth(view, depth_prepass, pixel, n));
+    let p = world_at(view, vec2<f32>(pixel) + 0.5, depth);
     // `CausticVolume::irradiance`: surfaces in the volume's slab, where it has one.
     let d = dot(v.slab.xyz, p);
     if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
@@ -106,6 +118,7 @@ fn surface_light(v: CausticVolume, pixel: vec2<i32>) -> vec3<f32> {
 fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     return vec4(surface_light(volumes[in.volume], vec2<i32>(in.position.xy)), 0.0);
 }
+#endif
 
 #ifdef SPLAT
 // One volume of the surface pass: where its surface bounding shape projects within a
@@ -202,6 +215,7 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
 }
 #endif
 
+#ifndef RECEIVER_CENTRE
 // `caustics_core::volumes::mean_attenuation`: the mean of e^{−σt d} over σt d ∈ [m − x, m + x].
 fn mean_attenuation(m: f32, x: f32) -> f32 {
     let h = abs(x);
@@ -347,3 +361,4 @@ fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
     }
     return exposed(radiance, view.exposure);
 }
+#endif
