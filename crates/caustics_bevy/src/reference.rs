@@ -222,10 +222,10 @@ pub fn scene_from_world(world: &mut World) -> WorldScene {
     let mut generators = world.query_filtered::<(Entity, &CausticGenerator, MeshComponents), Without<crate::InvalidCausticParams>>();
     let mut meshes_of = world.query_filtered::<(Entity, OccluderComponents, Option<&MeshMaterial3d<StandardMaterial>>), Without<CausticGenerator>>();
     let mut lights = world.query_filtered::<LightComponents, AnyLight>();
-    let water = pool_meshes(world);
+    let moving = moving_meshes(world);
     let meshes = world.resource::<Assets<Mesh>>();
     let materials = world.resource::<Assets<StandardMaterial>>();
-    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match water.get(&entity).or_else(|| meshes.get(&mesh.0)).map(|m| core_mesh(m, transform)) {
+    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match moving.get(&entity).or_else(|| meshes.get(&mesh.0)).map(|m| core_mesh(m, transform)) {
         Some(Ok(mesh)) => Some(mesh),
         Some(Err(e)) => {
             skipped.push(format!("{entity}: {e}"));
@@ -292,20 +292,29 @@ fn transform_of(a: &glam::Affine3A) -> Transform {
     Transform::from_matrix(Mat4::from_cols_array(&glam::Mat4::from(*a).to_cols_array()))
 }
 
-/// Each rippling pool's water as of now (`PoolSurface::mesh_at`): its mesh asset is
-/// not rewritten while the water moves on the GPU.
-#[cfg(feature = "convolution")]
-fn pool_meshes(world: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
+/// The meshes the GPU moves, as of now: each rippling pool's water
+/// (`PoolSurface::mesh_at`) and each ocean whose waves the GPU evaluates. Their mesh
+/// assets are not rewritten while they move.
+fn moving_meshes(world: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
+    let mut meshes = bevy::platform::collections::HashMap::default();
     let Some(time) = world.get_resource::<Time>().map(Time::elapsed_secs) else {
-        return Default::default();
+        return meshes;
     };
-    let mut pools = world.query::<(Entity, &crate::convolution::PoolSurface)>();
-    pools.iter(world).filter_map(|(entity, surface)| Some((entity, surface.mesh_at(time).ok()?))).collect()
-}
-
-#[cfg(not(feature = "convolution"))]
-fn pool_meshes(_: &mut World) -> bevy::platform::collections::HashMap<Entity, Mesh> {
-    Default::default()
+    #[cfg(feature = "convolution")]
+    {
+        let mut pools = world.query::<(Entity, &crate::convolution::PoolSurface)>();
+        meshes.extend(pools.iter(world).filter_map(|(entity, surface)| Some((entity, surface.mesh_at(time).ok()?))));
+    }
+    #[cfg(feature = "ocean")]
+    {
+        let mut oceans = world.query_filtered::<(Entity, &crate::Ocean), With<crate::mesh_vertices::MovesOnGpu>>();
+        let seas = oceans.iter(world).filter_map(|(entity, ocean)| {
+            let spectrum = caustics_core::ocean::OceanSpectrum::new(&ocean.settings()).ok()?;
+            Some((entity, bevy_mesh(&spectrum.evaluate(time * ocean.time_scale).mesh())))
+        });
+        meshes.extend(seas);
+    }
+    meshes
 }
 
 /// The pool on `entity` with water, as the frame's generator `index`.

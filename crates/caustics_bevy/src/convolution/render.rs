@@ -304,6 +304,21 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
     }
 }
 
+/// Writes a pool's uniform and its impulses' images ([`ripple_images`]) to the GPU.
+pub(super) fn write_waves(
+    uniform: &mut UniformBuffer<GpuPool>,
+    images: &mut StorageBuffer<Vec<Vec4>>,
+    (pool, list): (GpuPool, Vec<Vec4>),
+    (device, queue): (&RenderDevice, &RenderQueue),
+) {
+    uniform.set(pool);
+    uniform.set_label(Some("caustic_pool_settings"));
+    uniform.write_buffer(device, queue);
+    images.set(list);
+    images.set_label(Some("caustic_pool_images"));
+    images.write_buffer(device, queue);
+}
+
 /// A storage buffer of `floats_per_texel` floats per texel, written by the compute
 /// passes (and copyable, so that applications and tests can read it back).
 pub(super) fn texel_buffer(device: &RenderDevice, label: &'static str, count: u32, floats_per_texel: u64) -> Buffer {
@@ -335,12 +350,7 @@ fn prepare_buffers(
         let same_taps = buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps));
         buffers.computes = still.is_none() || buffers.still != still || !same_taps;
         buffers.still = None;
-        buffers.uniform.set(pool.uniform);
-        buffers.uniform.set_label(Some("caustic_pool_settings"));
-        buffers.uniform.write_buffer(&device, &queue);
-        buffers.images.set(std::mem::take(&mut pool.images));
-        buffers.images.set_label(Some("caustic_pool_images"));
-        buffers.images.write_buffer(&device, &queue);
+        write_waves(&mut buffers.uniform, &mut buffers.images, (pool.uniform, std::mem::take(&mut pool.images)), (&device, &queue));
         if !buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps)) {
             buffers.taps.set(pool.taps.as_ref().clone());
             buffers.taps.set_label(Some("caustic_pool_kernel_taps"));

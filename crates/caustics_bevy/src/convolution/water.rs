@@ -7,7 +7,7 @@
 //! uniform a frame; it evaluates no height and uploads no mesh.
 
 use super::PoolSurface;
-use super::render::{GpuPool, ripple_images};
+use super::render::{GpuPool, ripple_images, write_waves};
 use crate::cpu_time::timed;
 use crate::mesh_vertices::{MeshVertices, MovesOnGpu, WriteMeshVertices};
 use crate::report::PassRecorder;
@@ -134,12 +134,7 @@ fn prepare_waters(
             buffers.heights = super::render::texel_buffer(&device, "caustic_pool_water_heights", texels, 1);
         }
         water.uniform.vertex = vertices.layout;
-        buffers.uniform.set(water.uniform);
-        buffers.uniform.set_label(Some("caustic_pool_water"));
-        buffers.uniform.write_buffer(&device, &queue);
-        buffers.images.set(std::mem::take(&mut water.images));
-        buffers.images.set_label(Some("caustic_pool_water_images"));
-        buffers.images.write_buffer(&device, &queue);
+        write_waves(&mut buffers.uniform, &mut buffers.images, (water.uniform, std::mem::take(&mut water.images)), (&device, &queue));
         let (Some(uniform), Some(images)) = (buffers.uniform.binding(), buffers.images.binding()) else {
             continue;
         };

@@ -714,32 +714,13 @@ fn prepare_surface_targets(
             commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
         };
-        let texture = texture_cache.get(
-            &device,
-            TextureDescriptor {
-                label: Some("caustic_receiver_depth"),
-                size: irradiance.texture.texture.size(),
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: RECEIVER_DEPTH_FORMAT,
-                usage: TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            },
-        );
-        let centre = texture_cache.get(
-            &device,
-            TextureDescriptor {
-                label: Some("caustic_receiver_centre"),
-                size: irradiance.texture.texture.size(),
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: RECEIVER_CENTRE_FORMAT,
-                usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-        );
+        let mut target = |label, format, usage| {
+            let size = irradiance.texture.texture.size();
+            let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
+            texture_cache.get(&device, descriptor)
+        };
+        let texture = target("caustic_receiver_depth", RECEIVER_DEPTH_FORMAT, TextureUsages::RENDER_ATTACHMENT);
+        let centre = target("caustic_receiver_centre", RECEIVER_CENTRE_FORMAT, TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING);
         let depth_bind_group = device.create_bind_group(
             "caustic_receiver_depth_bind_group",
             &cache.get_bind_group_layout(&pipelines.depth_layouts[(msaa.samples() > 1) as usize]),
