@@ -351,7 +351,7 @@ fn prepare_buffers(
         buffers.computes = still.is_none() || buffers.still != still || !same_taps;
         buffers.still = None;
         write_waves(&mut buffers.uniform, &mut buffers.images, (pool.uniform, std::mem::take(&mut pool.images)), (&device, &queue));
-        if !buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps)) {
+        if !same_taps {
             buffers.taps.set(pool.taps.as_ref().clone());
             buffers.taps.set_label(Some("caustic_pool_kernel_taps"));
             buffers.taps.write_buffer(&device, &queue);

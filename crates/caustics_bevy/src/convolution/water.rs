@@ -123,15 +123,15 @@ fn prepare_waters(
         let Some(vertices) = MeshVertices::of(water.mesh, &meshes, &allocator, &device).filter(|v| v.count == texels) else {
             continue;
         };
-        let buffers = waters.buffers.entry(water.entity).or_insert_with(|| WaterBuffers {
-            texels: 0,
+        let new = || WaterBuffers {
+            texels,
             uniform: UniformBuffer::default(),
             images: StorageBuffer::default(),
             heights: super::render::texel_buffer(&device, "caustic_pool_water_heights", texels, 1),
-        });
+        };
+        let buffers = waters.buffers.entry(water.entity).or_insert_with(new);
         if buffers.texels != texels {
-            buffers.texels = texels;
-            buffers.heights = super::render::texel_buffer(&device, "caustic_pool_water_heights", texels, 1);
+            *buffers = new();
         }
         water.uniform.vertex = vertices.layout;
         write_waves(&mut buffers.uniform, &mut buffers.images, (water.uniform, std::mem::take(&mut water.images)), (&device, &queue));

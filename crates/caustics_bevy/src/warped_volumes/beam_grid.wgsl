@@ -127,9 +127,11 @@ fn deposit_barycentric(split: u32, k: u32) -> vec3<f32> {
     return vec3(1.0 - uw.x - uw.y, uw.x, uw.y);
 }
 
-// `ThinBeam`: a thin beam's central ray in grid coordinates, `start + α · per_alpha`,
-// the axis it runs most along and the layers across it that it passes.
+// `ThinBeam`: the blend of the volume's rays that is a thin beam's central ray, that
+// ray in grid coordinates, `start + α · per_alpha`, the axis it runs most along and the
+// layers across it that it passes.
 struct ThinBeam {
+    lambda: vec3<f32>,
     start: vec3<f32>,
     per_alpha: vec3<f32>,
     axis: u32,
@@ -141,7 +143,8 @@ struct ThinBeam {
 fn thin_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, split: u32, k: u32) -> ThinBeam {
     var beam: ThinBeam;
     beam.count = 0u;
-    let lambda = deposit_barycentric(split, k);
+    beam.lambda = deposit_barycentric(split, k);
+    let lambda = beam.lambda;
     let origin = v.origin.xyz + v.axis_x.xyz * dot(lambda, v.vertex_x.xyz) + v.axis_z.xyz * dot(lambda, v.vertex_z.xyz);
     let ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
     let cells = vec3<f32>(g.size.xyz);
@@ -243,7 +246,6 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
             let cells = vec3<f32>(g.size.xyz);
             for (var k = 0u; k < split * split; k++) {
                 let beam = thin_beam(v, g, medium.local_from_world, split, k);
-                let lambda = deposit_barycentric(split, k);
                 for (var j = lane; j < beam.count; j += VOLUME_LANES) {
                     let layer = beam_layer(beam, v.origin.w, j);
                     let local = (layer.grid_point + 0.5) / cells - 0.5;
@@ -254,7 +256,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                     let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
                     let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
                     let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)) / f32(split * split);
-                    let p = v.origin.xyz + v.axis_x.xyz * dot(lambda, x) + v.axis_y.xyz * alpha + v.axis_z.xyz * dot(lambda, z);
+                    let p = v.origin.xyz + v.axis_x.xyz * dot(beam.lambda, x) + v.axis_y.xyz * alpha + v.axis_z.xyz * dot(beam.lambda, z);
                     let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
                     if !s.inside {
                         continue;

@@ -7,17 +7,8 @@
 // depth of that point itself (`centre_depth`), which both surface paths read.
 
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
-#import bevy_render::view::View
 #import bevy_caustics::receiver::centre_depth
-
-@group(0) @binding(0) var<uniform> view: View;
-#ifdef MULTISAMPLED
-@group(0) @binding(1) var depth_prepass: texture_depth_multisampled_2d;
-@group(0) @binding(2) var normal_prepass: texture_multisampled_2d<f32>;
-#else
-@group(0) @binding(1) var depth_prepass: texture_depth_2d;
-@group(0) @binding(2) var normal_prepass: texture_2d<f32>;
-#endif
+#import bevy_caustics::receiver_view::{view, depth_prepass, normal_prepass}
 
 struct ReceiverDepth {
     @builtin(frag_depth) test: f32,

@@ -81,10 +81,13 @@ pub fn deposit_barycentric(split: u32, k: u32) -> Vec3 {
 }
 
 /// One thin beam of a volume's deposit, in the coordinates of a grid whose cell
-/// centres lie at whole numbers: its central ray `q(α) = start + α·per_alpha`, the axis
-/// it runs most along, and the layers across that axis it passes, `first` and `count`.
+/// centres lie at whole numbers: the barycentric blend of the volume's rays that is its
+/// central ray ([`deposit_barycentric`]), that ray `q(α) = start + α·per_alpha`, the
+/// axis it runs most along, and the layers across that axis it passes, `first` and
+/// `count`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThinBeam {
+    pub lambda: Vec3,
     pub start: Vec3,
     pub per_alpha: Vec3,
     pub axis: usize,
@@ -113,7 +116,7 @@ impl ThinBeam {
         let first = (lo + 0.5).floor().max(0.0);
         let last = (hi + 0.5).floor().min(cells[axis] - 1.0);
         let count = (last - first + 1.0).clamp(0.0, MAX_DEPOSIT_LAYERS as f32);
-        Some(Self { start, per_alpha, axis, first: first as i32, count: count as u32 })
+        Some(Self { lambda, start, per_alpha, axis, first: first as i32, count: count as u32 })
     }
 
     /// Layer `j` of [`Self::count`]: the α in the middle of the part of the beam
@@ -225,8 +228,7 @@ impl BeamGrid {
                 }
                 let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
                 let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs() / (split * split) as f32;
-                let lambda = deposit_barycentric(split, k);
-                let p = volume.origin + volume.axes[0] * lambda.dot(x) + volume.axes[1] * alpha + volume.axes[2] * lambda.dot(z);
+                let p = volume.origin + volume.axes[0] * beam.lambda.dot(x) + volume.axes[1] * alpha + volume.axes[2] * beam.lambda.dot(z);
                 let Some(s) = volume.sample(p, settings) else {
                     continue;
                 };
