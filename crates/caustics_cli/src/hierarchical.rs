@@ -13,7 +13,7 @@ use crate::plot::{Axes, Series, plot_log_log};
 use caustics_core::hierarchical::caustic_map::{self, CausticMap};
 use caustics_core::hierarchical::hierarchy;
 use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
+    CausticMapSettings, Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
     PhotonPaths, Splats, StageTimes, gather_into, light_intensity, trace_buffers,
 };
 use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
@@ -304,7 +304,7 @@ fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn F
     }
     let maps_seconds = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
-    let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
+    let bvh = (settings.paths == PhotonPaths::Traced).then(|| caustics_core::triangle_bvh::InstancedBvh::of_scene(scene));
     let traced = views
         .into_iter()
         .map(|(view, light, intensity, maps)| {

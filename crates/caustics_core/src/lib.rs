@@ -20,6 +20,7 @@ pub mod scene;
 pub mod scenes;
 pub mod technique;
 pub mod tracer;
+pub mod triangle_bvh;
 pub mod view;
 pub mod volumes;
 

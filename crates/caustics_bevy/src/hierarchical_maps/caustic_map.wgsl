@@ -65,7 +65,7 @@ const WORKGROUP: u32 = 64u;
 @group(0) @binding(11) var<storage, read_write> counters: array<atomic<u32>>;
 @group(0) @binding(12) var<storage, read_write> levels: array<atomic<u32>>; // two words a texel, low first
 @group(0) @binding(13) var<storage, read_write> resolved: array<f32>;
-// Binding 14: the generators' `GeneratorBvh` (`bevy_caustics::triangle_bvh`).
+// Binding 14: the generators' `InstancedBvh` (`bevy_caustics::triangle_bvh`).
 // Only `write_args` binds the indirect arguments: a dispatch may not read the buffer it
 // is dispatched from as storage.
 @group(1) @binding(0) var<storage, read_write> args: array<u32>;
@@ -339,7 +339,7 @@ fn traced_path(p1: vec3<f32>, first_material: u32, first_normal: vec3<f32>, dir_
             side = ng;
         }
         let origin = p + side * view.path_epsilon;
-        let next = intersect_triangles(view.bvh_triangles, NO_MESH, origin, dir, 0.0, 3.4028235e38);
+        let next = intersect_triangles(view.bvh_instances, NO_MESH, origin, dir, 0.0, 3.4028235e38);
         var reach = 3.4028235e38;
         if next.t >= 0.0 {
             reach = next.t;

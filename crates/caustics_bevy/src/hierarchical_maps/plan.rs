@@ -12,8 +12,9 @@ use crate::reference::{
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::bvh::SceneBvh;
-use caustics_core::hierarchical::{CausticMapSettings, GeneratorBvh, LightView, PhotonPaths, light_intensity};
-use caustics_core::mesh::TriMesh;
+use crate::irradiance::mesh_bvhs::MeshBvhs;
+use caustics_core::hierarchical::{CausticMapSettings, LightView, PhotonPaths, light_intensity};
+use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::scene::{Light, Receiver, Scene, Sides};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::technique::Technique;
@@ -64,9 +65,10 @@ pub struct CausticMapPlan {
     /// every light: a generator in full shadow costs no map work.
     pub shadowed: usize,
     pub settings: Option<CausticMapSettings>,
-    /// The generators' triangles in world space, in the order of `generators`, where
-    /// photons are traced through them; built when the plan changes.
-    pub bvh: Option<Arc<GeneratorBvh>>,
+    /// The generators placed over their meshes' BVHs, each with its index in
+    /// `generators`, where photons are traced through them; placed again when the plan
+    /// changes, the meshes' BVHs built only when a mesh does.
+    pub bvh: Option<Arc<InstancedBvh>>,
     pub generation: u64,
 }
 
@@ -87,36 +89,32 @@ fn occluder_bvh(occluders: &[CausticMapInstance], meshes: &Assets<Mesh>) -> Scen
 }
 
 /// Leaves out the generators whose every vertex the occluders hide from every light
-/// (the CPU rays the volumes use, `SceneBvh::hides`), counting them in `shadowed`, and
-/// their meshes from `world` (each generator's mesh in world space, `None` where it
-/// is not loaded); the photon kernel still drops the shadowed photons of the rest. A
-/// generator with every vertex hidden but light through a gap between them would be
-/// lost: an occluder with holes smaller than the generator's triangles.
-fn leave_out_shadowed(plan: &mut CausticMapPlan, world: &mut Vec<Option<TriMesh>>, lights: &[Light], meshes: &Assets<Mesh>) {
+/// (the CPU rays the volumes use, `SceneBvh::hides`), counting them in `shadowed`; the
+/// photon kernel still drops the shadowed photons of the rest. A generator with every
+/// vertex hidden but light through a gap between them would be lost: an occluder with
+/// holes smaller than the generator's triangles. Returns whether any was left out.
+fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Assets<Mesh>) -> bool {
     if plan.generators.is_empty() || plan.occluders.is_empty() {
-        return;
+        return false;
     }
     let occluders = occluder_bvh(&plan.occluders, meshes);
-    let lit = |mesh: &Option<TriMesh>| {
-        mesh.as_ref().is_none_or(|mesh| lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p))))
+    let lit = |g: &CausticMapInstance| {
+        !g.drawn
+            || meshes.get(g.mesh).and_then(|m| core_mesh(m, &GlobalTransform::from(g.world_from_local)).ok()).is_none_or(|mesh| {
+                lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p)))
+            })
     };
-    let keep: Vec<bool> = plan.generators.iter().zip(world.iter()).map(|(g, mesh)| !g.drawn || lit(mesh)).collect();
     let before = plan.generators.len();
-    let mut flags = keep.iter();
-    plan.generators.retain(|_| *flags.next().unwrap_or(&true));
-    let mut flags = keep.iter();
-    world.retain(|_| *flags.next().unwrap_or(&true));
+    plan.generators.retain(lit);
     plan.shadowed = before - plan.generators.len();
-}
-
-/// Each planned generator's mesh in world space, `None` where it is not loaded.
-fn world_meshes(generators: &[CausticMapInstance], meshes: &Assets<Mesh>) -> Vec<Option<TriMesh>> {
-    generators.iter().map(|g| core_mesh(meshes.get(g.mesh)?, &GlobalTransform::from(g.world_from_local)).ok()).collect()
+    plan.shadowed > 0
 }
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the
-/// generation when the plan, or a mesh it draws, changed. The shadow test runs only
-/// then: an unchanged scene casts no rays.
+/// generation when the plan, or a mesh it draws, changed. The shadow test that leaves
+/// out generators in full shadow casts a ray from every generator vertex, so it runs
+/// once the plan has held still for a frame, never while anything moves: a moving
+/// scene keeps every generator, and the photon kernel drops what the occluders hide.
 #[allow(clippy::too_many_arguments)]
 fn plan_caustic_maps(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
@@ -127,6 +125,8 @@ fn plan_caustic_maps(
     meshes: Res<Assets<Mesh>>,
     mut plan: ResMut<CausticMapPlan>,
     mut planned: Local<CausticMapPlan>,
+    mut shadows_tested: Local<bool>,
+    mut bvhs: ResMut<MeshBvhs>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut warned: Local<bool>,
     mut warned_generators: Local<HashSet<Entity>>,
@@ -209,28 +209,35 @@ fn plan_caustic_maps(
         AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
         _ => false,
     });
-    if mesh_changed || next != *planned {
+    let changed = mesh_changed || next != *planned;
+    if changed {
         *planned = next.clone();
-        // Each mesh in world space once, for the shadow test and the BVH.
-        let mut world = if traced || !next.occluders.is_empty() { world_meshes(&next.generators, &meshes) } else { Vec::new() };
-        leave_out_shadowed(&mut next, &mut world, &core_lights, &meshes);
-        if !next.generators.iter().any(|g| g.drawn) {
-            next.views.clear();
-        }
-        if next.views.is_empty() {
-            next.generators.clear();
-            next.occluders.clear();
-        }
-        if traced && !next.views.is_empty() {
-            // A light that moved, or a new occluder, leaves the generators' BVH as it
-            // was (a generator whose mesh is not loaded is left out of it).
-            next.bvh = match &plan.bvh {
-                Some(bvh) if !mesh_changed && next.generators == plan.generators => Some(bvh.clone()),
-                _ => Some(Arc::new(GeneratorBvh::of_meshes(world.iter().enumerate().filter_map(|(k, m)| Some((k as u32, m.as_ref()?)))))),
-            };
-        }
-        next.generation = plan.generation + 1;
-        *plan = next;
+        *shadows_tested = false;
+    } else if *shadows_tested {
+        active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
+        return;
     }
+    *shadows_tested = !changed;
+    // A plan that held still since the last frame's: only its shadow test is new.
+    if !changed && !leave_out_shadowed(&mut next, &core_lights, &meshes) {
+        return;
+    }
+    if !next.generators.iter().any(|g| g.drawn) {
+        next.views.clear();
+    }
+    if next.views.is_empty() {
+        next.generators.clear();
+        next.occluders.clear();
+    }
+    if traced && !next.views.is_empty() {
+        // A light that moved, or a new occluder, leaves the generators' BVH as it was
+        // (a generator whose mesh is not loaded is left out of it).
+        next.bvh = match &plan.bvh {
+            Some(bvh) if !mesh_changed && next.generators == plan.generators => Some(bvh.clone()),
+            _ => Some(Arc::new(bvhs.place(next.generators.iter().enumerate().map(|(k, g)| (g.mesh, g.world_from_local, k as u32)), &meshes))),
+        };
+    }
+    next.generation = plan.generation + 1;
+    *plan = next;
     active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
 }

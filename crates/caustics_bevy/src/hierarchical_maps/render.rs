@@ -4,6 +4,8 @@
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
+use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
+use caustics_core::triangle_bvh::InstancedBvh;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::material::specialize::SpecializedMeshPipelineError;
@@ -25,7 +27,7 @@ use bevy::render::{
 };
 use caustics_core::hierarchical::hierarchy::start_level;
 use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, GeneratorBvh, LevelOverflow, PhotonPaths, Projection, Splats,
+    CausticMapSettings, Clustering, Gather, LevelOverflow, PhotonPaths, Projection, Splats,
 };
 
 /// `LightView` in `types.wgsl`.
@@ -60,8 +62,8 @@ pub(super) struct GpuLightView {
     inverse_range_squared: f32,
     traced_paths: u32,
     path_epsilon: f32,
-    /// Where the BVH's triangles start in its buffer (vec4s), 0 without a BVH.
-    bvh_triangles: u32,
+    /// Where the BVH's instances start in its buffer (vec4s), 0 without a BVH.
+    bvh_instances: u32,
     emission: f32,
 }
 
@@ -129,7 +131,7 @@ fn top_level(settings: &CausticMapSettings) -> u32 {
 }
 
 impl GpuLightView {
-    fn new(planned: &PlannedLightView, settings: &CausticMapSettings, generators: &[CausticMapInstance], bvh: Option<&GeneratorBvh>) -> (Self, u32, u32) {
+    fn new(planned: &PlannedLightView, settings: &CausticMapSettings, generators: &[CausticMapInstance], bvh: Option<&InstancedBvh>) -> (Self, u32, u32) {
         let v = &planned.view;
         let half = v.half_extent();
         let p = settings.photon_resolution;
@@ -189,8 +191,8 @@ impl GpuLightView {
             material_count: generators.len().min(MAX_GENERATORS) as u32,
             inverse_range_squared: planned.inverse_range_squared,
             traced_paths: bvh.is_some() as u32,
-            path_epsilon: bvh.map_or(0.0, GeneratorBvh::ray_offset),
-            bvh_triangles: bvh.map_or(0, GeneratorBvh::gpu_triangle_offset),
+            path_epsilon: bvh.map_or(0.0, InstancedBvh::ray_offset),
+            bvh_instances: bvh.map_or(0, InstancedBvh::gpu_instance_offset),
             emission: v.emission,
         };
         (gpu, pyramid_nodes, map_texels)
@@ -434,8 +436,9 @@ pub struct CausticMapsGpu {
     pub(super) views: Vec<ViewMaps>,
     generators: StorageBuffer<Vec<GpuInstance>>,
     occluders: StorageBuffer<Vec<GpuInstance>>,
-    /// `generator_bvh` in `caustic_map.wgsl` (one zero vector without a BVH).
-    bvh: Option<Buffer>,
+    /// `triangle_bvh` in `caustic_map.wgsl`: the generators' `InstancedBvh` (one zero
+    /// vector without one).
+    bvh: InstancedBvhBuffer,
     steps: DynamicUniformBuffer<GpuStep>,
     pub(super) generator_draws: Vec<MeshDraw>,
     pub(super) occluder_draws: Vec<MeshDraw>,
@@ -478,7 +481,7 @@ impl CausticMapsGpu {
     /// Bytes of GPU memory the caustic maps hold.
     pub fn bytes(&self) -> u64 {
         self.scratch.as_ref().map_or(0, |s| s.bytes)
-            + self.bvh.as_ref().map_or(0, |b| b.size())
+            + self.bvh.size()
             + self.views.iter().map(|v| v.resolved.size() + 8 * v.receivers.0.width() as u64 * v.receivers.0.height() as u64).sum::<u64>()
     }
 
@@ -778,11 +781,7 @@ fn prepare_maps(
     let mut generators: Vec<GpuInstance> = plan.generators.iter().enumerate().map(|(k, i)| instance(i, k as u32)).collect();
     let mut occluders: Vec<GpuInstance> = plan.occluders.iter().map(|i| instance(i, 0)).collect();
     let bvh = plan.bvh.as_deref().filter(|_| settings.paths == PhotonPaths::Traced);
-    gpu.bvh = Some(device.create_buffer_with_data(&BufferInitDescriptor {
-        label: Some("caustic_map_generator_bvh"),
-        contents: &bvh.map_or(vec![0; 16], GeneratorBvh::gpu_bytes),
-        usage: BufferUsages::STORAGE,
-    }));
+    let bvh_buffer = gpu.bvh.write(bvh.unwrap_or(&InstancedBvh::default()), "caustic_map_generator_bvh", &device, &queue);
     // A binding may not be empty.
     for list in [&mut generators, &mut occluders] {
         if list.is_empty() {
@@ -832,9 +831,7 @@ fn prepare_maps(
         gpu.scratch = Some(scratch);
         gpu.views.clear();
     }
-    let (Some(generators), Some(occluders), Some(steps), Some(bvh)) =
-        (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding(), gpu.bvh.clone())
-    else {
+    let (Some(generators), Some(occluders), Some(steps)) = (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding()) else {
         return;
     };
     let Some(scratch) = gpu.scratch.as_ref() else { return };
@@ -881,7 +878,7 @@ fn prepare_maps(
                 scratch.counters.as_entire_binding(),
                 scratch.levels.as_entire_binding(),
                 resolved.as_entire_binding(),
-                bvh.as_entire_binding(),
+                bvh_buffer.as_entire_binding(),
             )),
         );
         let view_maps = ViewMaps {

@@ -58,8 +58,8 @@ struct LightView {
     traced_paths: u32,
     // How far a traced ray starts off the surface it leaves (`PathTracer::Traced`).
     path_epsilon: f32,
-    // Where the BVH's triangles start in `generator_bvh` (vec4s); 0: no BVH.
-    bvh_triangles: u32,
+    // Where the BVH's instances start in `triangle_bvh` (vec4s); 0: no BVH.
+    bvh_instances: u32,
     // `LightView::emission`: the central fraction of the image the photons cover.
     emission: f32,
 }

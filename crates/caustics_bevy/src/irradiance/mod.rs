@@ -19,6 +19,7 @@
 //! before tonemapping) and the prepasses the techniques read receiver points from.
 
 mod composite;
+pub mod mesh_bvhs;
 pub mod reference_view;
 
 use crate::cpu_time::timed;
@@ -344,7 +345,11 @@ pub(crate) fn build(app: &mut App) {
     let cpu = crate::CausticsCpuTime::of(app);
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
-        .add_systems(PostUpdate, timed(&cpu.main, warn_receivers_with_unread_material))
+        .init_resource::<mesh_bvhs::MeshBvhs>()
+        .add_systems(
+            PostUpdate,
+            (timed(&cpu.main, warn_receivers_with_unread_material), timed(&cpu.main, mesh_bvhs::forget_changed_meshes).before(crate::CausticsSystems::ReadScene)),
+        )
         .add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default())
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {

@@ -9,14 +9,15 @@ use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, CausticReceiver, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
 use bevy::camera::primitives::Aabb;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::glam;
-use caustics_core::hierarchical::GeneratorBvh;
+use crate::irradiance::mesh_bvhs::MeshBvhs;
+use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::Light;
@@ -64,12 +65,10 @@ pub(super) struct Topology {
     pub owned_sides: Vec<u32>,
 }
 
-/// The mesh index of an occluder that is no generator (`BvhTriangle::generator`):
+/// The mesh index of an occluder that is no generator (`GeneratorHit::generator`):
 /// no generator's build passes through it.
 pub(super) const SHADOW_CASTER: u32 = u32::MAX - 1;
 
-/// A mesh index no triangle has (`triangle_bvh.wgsl`'s `NO_MESH`).
-pub(super) const NO_MESH: u32 = u32::MAX;
 
 /// One generator the volumes draw, as its build reads it.
 #[derive(Clone)]
@@ -92,8 +91,9 @@ pub(super) struct VolumeGenerator {
 pub(super) struct VolumeSources {
     pub generators: Vec<(Entity, VolumeGenerator)>,
     pub lights: Vec<Light>,
-    /// Receivers, shadow casters and, with two or more generators, every generator.
-    pub occluders: Arc<GeneratorBvh>,
+    /// Receivers, shadow casters and, with two or more generators, every generator,
+    /// placed over their meshes' BVHs.
+    pub occluders: Arc<InstancedBvh>,
     /// The receivers' world bounds: every volume ends beyond them.
     pub bounds: Option<(glam::Vec3, glam::Vec3)>,
     pub settings: VolumeSettings,
@@ -146,8 +146,8 @@ type Generators<'w, 's> = Query<
 /// What the gathering keeps across frames.
 #[derive(Default)]
 struct GatherState {
-    /// Topology by generator, with the indices it was made from.
-    topologies: HashMap<Entity, Arc<Topology>>,
+    /// Topology by generator, with the mesh it was made from and checked for.
+    topologies: HashMap<Entity, (AssetId<Mesh>, Arc<Topology>)>,
     /// The meshes of occluders and of generators at the last gathering, to notice
     /// their changes.
     occluder_meshes: HashSet<AssetId<Mesh>>,
@@ -223,10 +223,11 @@ impl Topology {
 }
 
 /// Gathers the build's sources again when a generator, light, receiver, shadow caster
-/// or the settings changed, or a generator's or occluder's mesh asset was modified (an
-/// animated ocean: every frame). Receivers, shadow casters and the other generators
-/// hide generator vertices from the light and end their rays: their BVH is rebuilt
-/// only when one of them changed.
+/// or the settings changed, or a generator's or occluder's mesh asset was modified.
+/// Receivers, shadow casters and the other generators hide generator vertices from
+/// the light and end their rays: they are placed again only when one of them changed,
+/// over their meshes' BVHs ([`MeshBvhs`]), which are built again only when a mesh
+/// is. A generator's topology is read again only when its mesh changed.
 #[allow(clippy::too_many_arguments)]
 fn gather_sources(
     generators: Generators<'_, '_>,
@@ -241,16 +242,18 @@ fn gather_sources(
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
-    mut sources: ResMut<VolumeSources>,
+    (mut sources, mut bvhs): (ResMut<VolumeSources>, ResMut<MeshBvhs>),
     mut volumes: ResMut<CausticVolumes>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<GatherState>,
 ) {
     let (mut occluder_mesh_changed, mut generator_mesh_changed) = (false, false);
+    let mut changed_meshes = HashSet::new();
     for event in mesh_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } = event {
             occluder_mesh_changed |= state.occluder_meshes.contains(id);
             generator_mesh_changed |= state.generator_meshes.contains(id);
+            changed_meshes.insert(*id);
         }
     }
     let several_generators = generators.iter().filter(|(.., visible, _)| visible.get()).count() > 1;
@@ -286,7 +289,7 @@ fn gather_sources(
     // Every generator shadows the others (`occluders_of`): the volumes' own, and the
     // ones other techniques draw; each passes through its own mesh.
     let mut volume_generators = Vec::new();
-    let mut occluder_meshes: Vec<(u32, TriMesh)> = Vec::new();
+    let mut occluder_meshes: Vec<(AssetId<Mesh>, Mat4, u32)> = Vec::new();
     state.generator_meshes.clear();
     let mut index = 0;
     for (entity, generator, choice, mesh3d, transform, visible, moves_on_gpu) in &generators {
@@ -296,24 +299,27 @@ fn gather_sources(
         };
         index += 1;
         // A malformed mesh shadows nothing; the warning below says why it is skipped.
-        if several_generators && occluders_changed && let Ok(world) = core_mesh(mesh, transform) {
-            occluder_meshes.push((index, world));
+        if several_generators && occluders_changed {
+            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), index));
         }
         if choice.technique() != Technique::WarpedVolumes {
             continue;
         }
         let topology = match state.topologies.get(&entity) {
-            Some(known) if known.fits(mesh) => Ok(known.clone()),
-            _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
-        }
-        .and_then(|topology| match unusable_vertex(mesh) {
-            Some(problem) => Err(problem),
-            None => Ok(topology),
-        });
+            Some((id, known)) if *id == mesh3d.id() && !changed_meshes.contains(id) => Ok(known.clone()),
+            known => match known {
+                Some((_, known)) if known.fits(mesh) => Ok(known.clone()),
+                _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
+            }
+            .and_then(|topology| match unusable_vertex(mesh) {
+                Some(problem) => Err(problem),
+                None => Ok(topology),
+            }),
+        };
         match topology {
             Ok(topology) => {
                 state.warned.remove(&entity);
-                state.topologies.insert(entity, topology.clone());
+                state.topologies.insert(entity, (mesh3d.id(), topology.clone()));
                 let interaction = generator.specular_interaction();
                 volume_generators.push((
                     entity,
@@ -323,7 +329,7 @@ fn gather_sources(
                         two_sided: choice.facts.sides.lit_from_behind(&interaction),
                         interaction,
                         topology,
-                        occluder_index: if several_generators { index } else { NO_MESH },
+                        occluder_index: if several_generators { index } else { caustics_core::triangle_bvh::NO_MESH },
                         moves_on_gpu,
                     },
                 ));
@@ -344,11 +350,9 @@ fn gather_sources(
                 continue;
             }
             state.occluder_meshes.insert(mesh3d.id());
-            if let Some(Ok(mesh)) = meshes.get(&mesh3d.0).map(|m| core_mesh(m, transform)) {
-                occluder_meshes.push((SHADOW_CASTER, mesh));
-            }
+            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), SHADOW_CASTER));
         }
-        sources.occluders = Arc::new(GeneratorBvh::of_meshes(occluder_meshes.iter().map(|(i, m)| (*i, m))));
+        sources.occluders = Arc::new(bvhs.place(occluder_meshes, &meshes));
     }
     active.warped_volumes = !volume_generators.is_empty() && !sources.lights.is_empty() && sources.bounds.is_some();
     sources.generators = volume_generators;

@@ -29,7 +29,7 @@ struct BuildJob {
     color: vec4<f32>,       // the channel's flux colour; w the index of refraction (0: a mirror)
     bounds_lo: vec4<f32>,   // the receivers' bounds; w the smallest ray cosine
     bounds_hi: vec4<f32>,   // w 1: lit from behind too
-    counts: vec4<u32>,      // vertices, triangles, the occluders' BVH triangle offset (0: none), the generator's own mesh there
+    counts: vec4<u32>,      // vertices, triangles, the occluders' BVH instance offset (0: none), the generator's own mesh there
     vertex: vec4<u32>,      // in `vertices`: the first vertex's word, the vertex stride, the position's and the normal's word in a vertex
 }
 

@@ -27,7 +27,8 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue},
 };
 use caustics_core::glam;
-use caustics_core::hierarchical::GeneratorBvh;
+use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
+use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::scene::{Light, LightKind};
 use caustics_core::volumes::{BuildStats, channels};
@@ -70,7 +71,7 @@ fn v4(v: glam::Vec3, w: f32) -> Vec4 {
 impl GpuBuildJob {
     /// The job of `generator` under `light` in one channel (its index of refraction,
     /// `None` for a mirror, and its flux colour), against the occluders' BVH whose
-    /// triangles start at `occluders`, its vertices read through `vertex`
+    /// instances start at `occluders`, its vertices read through `vertex`
     /// ([`MeshVertices::layout`]).
     fn new(generator: &VolumeGenerator, light: &Light, (ior, color): (Option<f32>, glam::Vec3), sources: &VolumeSources, (occluders, vertex): (u32, UVec4)) -> Self {
         let (light_vec, spot, power, spot_scale) = match light.kind {
@@ -187,7 +188,8 @@ struct Dispatch {
 #[derive(Resource, Default)]
 pub(super) struct VolumeBuild {
     generators: HashMap<Entity, GeneratorBuffers>,
-    occluders: Option<(Arc<GeneratorBvh>, Buffer)>,
+    /// The occluders' `InstancedBvh` as last uploaded, with the one it holds.
+    occluders: Option<(Arc<InstancedBvh>, InstancedBvhBuffer, Buffer)>,
     jobs: DynamicUniformBuffer<GpuBuildJob>,
     dispatches: Vec<Dispatch>,
     /// A generator's vertices were not uploaded yet at the last build: build again.
@@ -341,7 +343,7 @@ pub(super) fn prepare_build(
         for light in &sources.lights {
             for channel in channels(&generator.interaction, light.color) {
                 hues.push(channel.1);
-                let job = GpuBuildJob::new(generator, light, channel, sources, (sources.occluders.gpu_triangle_offset(), layout));
+                let job = GpuBuildJob::new(generator, light, channel, sources, (sources.occluders.gpu_instance_offset(), layout));
                 planned.push((*entity, build.jobs.push(&job), job.counts));
                 capacity += u64::from(job.counts.y);
             }
@@ -358,11 +360,12 @@ pub(super) fn prepare_build(
         build.jobs = DynamicUniformBuffer::default();
         return;
     }
-    let occluders = match &build.occluders {
-        Some((bvh, buffer)) if Arc::ptr_eq(bvh, &sources.occluders) => buffer.clone(),
-        _ => {
-            let buffer = storage(&device, "caustic_volume_occluders", &sources.occluders.gpu_bytes());
-            build.occluders = Some((sources.occluders.clone(), buffer.clone()));
+    let occluders = match &mut build.occluders {
+        Some((bvh, _, buffer)) if Arc::ptr_eq(bvh, &sources.occluders) => buffer.clone(),
+        uploaded => {
+            let mut gpu = uploaded.take().map(|(_, gpu, _)| gpu).unwrap_or_default();
+            let buffer = gpu.write(&sources.occluders, "caustic_volume_occluders", &device, &queue);
+            *uploaded = Some((sources.occluders.clone(), gpu, buffer.clone()));
             buffer
         }
     };

@@ -20,14 +20,12 @@
 //! each.
 
 pub mod caustic_map;
-pub mod generator_bvh;
 pub mod hierarchy;
 pub mod light_maps;
 pub mod light_view;
 pub mod photons;
 
 pub use caustic_map::{CausticMap, SplatStats};
-pub use generator_bvh::GeneratorBvh;
 pub use hierarchy::{GatherEntry, GatherStats, PhotonPyramid};
 pub use light_maps::LightMaps;
 pub use light_view::{LightView, Projection};
@@ -35,6 +33,7 @@ pub use photons::{PathTracer, Photon, PhotonBuffer, PhotonMaterial, PhotonStats}
 
 use crate::params::ParamError;
 use crate::scene::{Light, LightKind, Scene};
+use crate::triangle_bvh::InstancedBvh;
 use glam::Vec3;
 use std::time::Instant;
 
@@ -145,9 +144,9 @@ impl Default for CausticMapSettings {
 
 impl CausticMapSettings {
     /// How [`PhotonBuffer::trace`] follows the photons of `branch` under these
-    /// settings: through `bvh` (the scene's [`GeneratorBvh`]) when they are traced and
+    /// settings: through `bvh` (the scene's [`InstancedBvh`]) when they are traced and
     /// it is given.
-    pub fn path_tracer<'a>(&self, bvh: Option<&'a GeneratorBvh>, branch: u32) -> PathTracer<'a> {
+    pub fn path_tracer<'a>(&self, bvh: Option<&'a InstancedBvh>, branch: u32) -> PathTracer<'a> {
         match (self.paths, bvh) {
             (PhotonPaths::Traced, Some(bvh)) => PathTracer::traced(bvh, branch),
             _ => PathTracer::ImageSpace { exit_iterations: self.exit_iterations },
@@ -245,7 +244,7 @@ impl ViewCaustics {
         let light_maps = clock.elapsed().as_secs_f64();
         let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
         let clock = Instant::now();
-        let bvh = (settings.paths == PhotonPaths::Traced).then(|| GeneratorBvh::build(scene));
+        let bvh = (settings.paths == PhotonPaths::Traced).then(|| InstancedBvh::of_scene(scene));
         let mut buffers = trace_buffers(&maps, view, &materials, light, settings, bvh.as_ref()).into_iter();
         let mut times = StageTimes { light_maps, photons: clock.elapsed().as_secs_f64(), ..StageTimes::default() };
         let photons = buffers.next().expect("a view traces at least one photon buffer");
@@ -278,7 +277,7 @@ pub fn trace_buffers(
     materials: &[PhotonMaterial],
     light: &Light,
     settings: &CausticMapSettings,
-    bvh: Option<&GeneratorBvh>,
+    bvh: Option<&InstancedBvh>,
 ) -> Vec<PhotonBuffer> {
     (0..settings.photon_buffers()).map(|branch| PhotonBuffer::trace(maps, view, materials, light, settings.path_tracer(bvh, branch))).collect()
 }

@@ -16,14 +16,14 @@
 //! there. [`trace_photon`] is the CPU twin of the GPU's photon kernel.
 //!
 //! Past the paper, [`PhotonPaths::Traced`] follows each photon from its front-map
-//! surface through the generators' triangles ([`GeneratorBvh`]) instead: every
+//! surface through the generators' triangles ([`InstancedBvh`]) instead: every
 //! interface it meets, in and out of a concave body as often as it crosses one,
 //! reflected inside past the critical angle, and on through other generators — a
 //! mirror that the light of a glass body falls on, a glass ball behind a window —
 //! until it reaches a receiver in the receiver map. The image-space pair sees one
 //! entry and the farthest exit, which is exact for a convex refractor alone.
 
-use super::generator_bvh::GeneratorBvh;
+use crate::triangle_bvh::{InstancedBvh, NO_MESH};
 use super::light_maps::{LightMaps, NO_SURFACE};
 use super::light_view::{LightView, Projection};
 use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_transmittance, reflect, refract};
@@ -199,13 +199,13 @@ pub enum PathTracer<'a> {
     /// surface it leaves. `branch` 0 follows the light each refracting interface
     /// transmits; branch `k ≥ 1` the light the `k`-th reflects (its Fresnel
     /// reflectance), transmitted at the others.
-    Traced { bvh: &'a GeneratorBvh, epsilon: f32, branch: u32 },
+    Traced { bvh: &'a InstancedBvh, epsilon: f32, branch: u32 },
 }
 
 impl<'a> PathTracer<'a> {
     /// Branch `branch` of a traced path through `bvh`, lifted off surfaces by
-    /// [`GeneratorBvh::ray_offset`].
-    pub fn traced(bvh: &'a GeneratorBvh, branch: u32) -> Self {
+    /// [`InstancedBvh::ray_offset`].
+    pub fn traced(bvh: &'a InstancedBvh, branch: u32) -> Self {
         Self::Traced { bvh, epsilon: bvh.ray_offset(), branch }
     }
 }
@@ -380,7 +380,7 @@ fn traced_path(
     maps: &LightMaps,
     view: &LightView,
     materials: &[PhotonMaterial],
-    (bvh, epsilon, branch): (&GeneratorBvh, f32, u32),
+    (bvh, epsilon, branch): (&InstancedBvh, f32, u32),
     (p1, material, normal): (Vec3, u32, Vec3),
     mut dir: Vec3,
     mut flux: f32,
@@ -416,7 +416,7 @@ fn traced_path(
         // Leave the surface on the side the new direction goes.
         let side = if dir.dot(ng) >= 0.0 { ng } else { -ng };
         let origin = p + side * epsilon;
-        let next = bvh.intersect(origin, dir, 0.0, f32::INFINITY);
+        let next = bvh.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH);
         let landed = march_receivers(maps, view, origin, dir, next.map_or(f32::INFINITY, |h| h.t));
         if refractions < branch && (landed.is_some() || next.is_none()) {
             return Err((PhotonFate::NoBranch, 0.0));
