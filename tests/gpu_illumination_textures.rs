@@ -24,7 +24,7 @@ use caustics_core::illumination_textures::{Cosine, IlluminationTextures};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::optics::{fresnel_transmittance, refract};
-use support::render;
+use support::{read_buffer, render};
 
 const SIZE: u32 = 96;
 /// The view is `VIEW` metres across, centred on the origin, looking down.
@@ -102,11 +102,35 @@ fn read_textures(renderer: &mut HeadlessRenderer, index: usize) -> Vec<Vec<V4>> 
     texels.chunks_exact((texture.width() * texture.height()) as usize).map(<[V4]>::to_vec).collect()
 }
 
-/// The main world's first frame, drawn on the CPU: the twin.
+/// The main world's first frame, seen and drawn on the CPU: the twin.
 fn twin(renderer: &mut HeadlessRenderer) -> IlluminationTextures {
-    let mut frame = renderer.world_mut().resource::<IlluminationFrames>().frames[0].clone();
+    let frames = renderer.world_mut().resource::<IlluminationFrames>().clone();
+    let mut frame = frames.frames[0].clone();
+    assert!(frame.see(&frames.receivers), "the virtual camera sees the floor");
     frame.draw();
     frame
+}
+
+/// The GPU's depth map of frame 0 against the twin's, texel by texel: how many texels
+/// see another surface (depth or normal) or other solid spans, of how many.
+fn depth_map_against_twin(renderer: &mut HeadlessRenderer, twin: &IlluminationTextures) -> (usize, usize) {
+    let (surface, _) = gpu(renderer).depth_map(0).expect("the depth map is on the GPU");
+    let surface = surface.clone();
+    let floats: Vec<f32> = read_buffer(renderer, &surface).chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+    let near = |a: f32, b: f32| (a - b).abs() <= 1e-5 * (1.0 + b.abs());
+    let differ = twin
+        .surface
+        .iter()
+        .zip(floats.chunks_exact(12))
+        .filter(|(cpu, gpu)| match cpu {
+            None => gpu[3] < 1e30,
+            Some(s) => {
+                let spans = s.solid.iter().flat_map(|&(a, b)| [a.min(1e30), b.min(1e30)]);
+                !(near(gpu[3], s.depth) && V3::new(gpu[0], gpu[1], gpu[2]).dot(s.normal) > 0.9999 && gpu[4..].iter().zip(spans).all(|(&g, c)| near(g, c)))
+            }
+        })
+        .count();
+    (differ, twin.surface.len())
 }
 
 /// The floor's caustic irradiance in the view (the block's top left out: it is no
@@ -138,8 +162,16 @@ fn illumination_textures_match_their_cpu_twin_on_a_real_adapter() {
     assert_eq!((drawn, report.views("illumination textures projection")), (0, 1), "{report:?}");
     assert_eq!(gpu(&mut renderer).frame_count(), 1);
 
-    // The GPU's textures against the twin's, plane by plane: the light vector and eq. 3.
+    // What the virtual camera saw on the GPU against the twin: the floor, and the
+    // block's solid spans.
     let twin = twin(&mut renderer);
+    let (differ, texels) = depth_map_against_twin(&mut renderer, &twin);
+    let solid = twin.surface.iter().flatten().filter(|s| s.solid[0].1 < f32::INFINITY).count();
+    eprintln!("depth map: {differ} of {texels} texels differ from the twin's; {solid} see a solid span with a far side");
+    assert!(solid > 100, "the block's spans are in the depth map");
+    assert!(differ * 1000 <= texels, "{differ} of {texels} texels of the depth map differ");
+
+    // The GPU's textures against the twin's, plane by plane: the light vector and eq. 3.
     let textures = read_textures(&mut renderer, 0);
     let format = gpu(&mut renderer).format().unwrap();
     eprintln!("illumination textures in {format:?}");

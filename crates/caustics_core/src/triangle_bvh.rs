@@ -252,10 +252,21 @@ impl InstancedBvh {
         Self { meshes, top, instances, instance_meshes }
     }
 
-    /// Each generator of `scene` (in world space) as its own instance, its index its
-    /// mesh index: the CPU twin of the caustic maps' traced paths.
+    /// Meshes in world space, each its own instance with its place in the list as
+    /// its mesh index.
+    pub fn of_world_meshes<'a>(meshes: impl IntoIterator<Item = &'a TriMesh>) -> Self {
+        Self::new(meshes.into_iter().enumerate().map(|(k, mesh)| (Arc::new(MeshBvh::of_mesh(mesh)), Mat4::IDENTITY, k as u32)))
+    }
+
+    /// Each generator of `scene` as its own instance, its index its mesh index: the CPU
+    /// twin of the caustic maps' traced paths.
     pub fn of_scene(scene: &Scene) -> Self {
-        Self::new(scene.generators.iter().enumerate().map(|(g, generator)| (Arc::new(MeshBvh::of_mesh(&generator.mesh)), Mat4::IDENTITY, g as u32)))
+        Self::of_world_meshes(scene.generators.iter().map(|g| &g.mesh))
+    }
+
+    /// Each instance's world box (the top level's leaves).
+    pub fn instance_bounds(&self) -> impl Iterator<Item = (Vec3, Vec3)> + '_ {
+        self.top.iter().filter(|n| n.count > 0).map(|n| (Vec3::from_array(n.min), Vec3::from_array(n.max)))
     }
 
     /// The top level and the instances as `triangle_bvh.wgsl` reads them, which change

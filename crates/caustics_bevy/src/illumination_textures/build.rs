@@ -6,6 +6,7 @@ use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
+use crate::irradiance::mesh_bvhs::MeshBvhs;
 use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
@@ -17,8 +18,9 @@ use caustics_core::illumination_textures::{
     CacheOutcome, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild,
 };
 use caustics_core::mesh::TriMesh;
-use caustics_core::scene::{Light, Receiver};
+use caustics_core::scene::Light;
 use caustics_core::technique::Technique;
+use caustics_core::triangle_bvh::InstancedBvh;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -60,11 +62,14 @@ struct TableKey {
     directions: u32,
 }
 
-/// Each light's virtual planes through each generator, not drawn (the render world
-/// draws them), shared with the render world. A new `generation` means new contents.
+/// Each light's virtual camera through each generator, placed but not seen nor drawn
+/// (the render world sees and draws them: `IlluminationTextures::see` and `draw` are
+/// the twins), and the receivers they see, shared with the render world. A new
+/// `generation` means new contents.
 #[derive(Resource, Clone, Default)]
 pub struct IlluminationFrames {
     pub frames: Arc<Vec<IlluminationTextures>>,
+    pub receivers: Arc<InstancedBvh>,
     pub generation: u64,
 }
 
@@ -80,7 +85,7 @@ struct GeneratorInput {
     entity: Entity,
     key: TableKey,
     /// The mesh in the object's frame, scaled.
-    mesh: TriMesh,
+    mesh: Arc<TriMesh>,
     world_from_object: Affine3A,
     table: Option<Arc<LightTransportTable>>,
 }
@@ -90,6 +95,7 @@ struct GeneratorInput {
 #[derive(Default)]
 struct BuildOutput {
     frames: Vec<IlluminationTextures>,
+    receivers: Arc<InstancedBvh>,
     tables: Vec<(TableKey, Arc<LightTransportTable>, CacheOutcome)>,
     problems: Vec<(Entity, String)>,
 }
@@ -116,6 +122,8 @@ struct BuildState {
     warned_settings: bool,
     /// The settings last asked for that did not fit (warned once).
     lowered: Option<IlluminationSettings>,
+    /// Each table's mesh in the object's frame, scaled, read from its asset once.
+    local_meshes: HashMap<TableKey, Arc<TriMesh>>,
 }
 
 /// Sets up the virtual planes again when a generator, light, receiver, shadow caster,
@@ -133,7 +141,7 @@ fn set_up_planes(
     mut frames: ResMut<IlluminationFrames>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<BuildState>,
-    (cpu, device, budget): (Res<crate::CausticsCpuTime>, Option<Res<RenderDevice>>, Res<CausticsGpuBudget>),
+    (cpu, device, budget, mut bvhs): (Res<crate::CausticsCpuTime>, Option<Res<RenderDevice>>, Res<CausticsGpuBudget>, ResMut<MeshBvhs>),
 ) {
     let core_settings = match settings.core() {
         Ok(s) => {
@@ -172,10 +180,13 @@ fn set_up_planes(
             .filter(|l| l.validate().is_ok())
             .collect();
     }
-    let mesh_changed = mesh_events.read().any(|e| match e {
-        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
-        _ => false,
-    });
+    let mut mesh_changed = false;
+    for event in mesh_events.read() {
+        if let AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } = event {
+            mesh_changed |= used.contains(id);
+            state.local_meshes.retain(|key, _| key.mesh != *id);
+        }
+    }
     if mesh_changed || next != state.last {
         state.pending = true;
         state.last = next.clone();
@@ -214,7 +225,7 @@ fn set_up_planes(
             }
         }
         active.set_if_neq(ActiveCausticTechniques { illumination_textures: !output.frames.is_empty(), ..*active });
-        *frames = IlluminationFrames { frames: Arc::new(output.frames), generation: frames.generation + 1 };
+        *frames = IlluminationFrames { frames: Arc::new(output.frames), receivers: output.receivers, generation: frames.generation + 1 };
     }
     if !state.pending || state.running.is_some() {
         return;
@@ -223,7 +234,7 @@ fn set_up_planes(
     let Some(core_settings) = core_settings else {
         if !frames.frames.is_empty() {
             active.set_if_neq(ActiveCausticTechniques { illumination_textures: false, ..*active });
-            *frames = IlluminationFrames { frames: Arc::default(), generation: frames.generation + 1 };
+            *frames = IlluminationFrames { frames: Arc::default(), receivers: Arc::default(), generation: frames.generation + 1 };
         }
         return;
     };
@@ -237,16 +248,23 @@ fn set_up_planes(
         // A turning object's scale comes back from its matrix a rounding off: to five
         // digits, it keeps its table.
         let scale = (scale * 1e5).round() / 1e5;
-        let local = match core_mesh(mesh, &GlobalTransform::from_scale(scale)) {
-            Ok(local) => local,
-            Err(e) => {
-                if state.warned.insert(entity) {
-                    warn!("bevy_caustics: the mesh of CausticGenerator {entity} is skipped: it {e}");
-                }
-                continue;
-            }
-        };
         let key = TableKey { mesh: mesh_id, scale: scale.to_array().map(f32::to_bits), ior: ior.to_bits(), directions: settings.table_directions };
+        let local = match state.local_meshes.get(&key) {
+            Some(local) => local.clone(),
+            None => match core_mesh(mesh, &GlobalTransform::from_scale(scale)) {
+                Ok(local) => {
+                    let local = Arc::new(local);
+                    state.local_meshes.insert(key, local.clone());
+                    local
+                }
+                Err(e) => {
+                    if state.warned.insert(entity) {
+                        warn!("bevy_caustics: the mesh of CausticGenerator {entity} is skipped: it {e}");
+                    }
+                    continue;
+                }
+            },
+        };
         keys.insert(key);
         let world_from_object = Affine3A::from_rotation_translation(
             caustics_core::glam::Quat::from_array(rotation.to_array()),
@@ -254,14 +272,10 @@ fn set_up_planes(
         );
         inputs.push(GeneratorInput { entity, key, mesh: local, world_from_object, table: tables.tables.get(&key).cloned() });
     }
-    // Tables no generator uses any more are let go.
+    // Tables and meshes no generator uses any more are let go.
     tables.tables.retain(|key, _| keys.contains(key));
-    let receivers: Vec<Receiver> = next
-        .occluders
-        .iter()
-        .filter_map(|(mesh, transform)| meshes.get(*mesh).and_then(|m| core_mesh(m, transform).ok()))
-        .map(|mesh| Receiver { mesh, albedo: caustics_core::glam::Vec3::ONE })
-        .collect();
+    state.local_meshes.retain(|key, _| keys.contains(key));
+    let receivers = Arc::new(bvhs.place(next.occluders.iter().enumerate().map(|(k, (mesh, transform))| (*mesh, transform.to_matrix(), k as u32)), &meshes));
     let lights = next.lights;
     let fitted = fitting(core_settings, lights.len(), device.as_deref(), budget.bytes);
     let builds = !inputs.is_empty() && !lights.is_empty();
@@ -281,13 +295,13 @@ fn set_up_planes(
     let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
     let clock = cpu.main.clone();
     state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
-        clock.time(|| make_frames(inputs, &lights, &receivers, &core_settings, (directions, max_bytes, cache_dir)))
+        clock.time(|| make_frames(inputs, &lights, receivers, &core_settings, (directions, max_bytes, cache_dir)))
     }));
 }
 
 /// `settings` with the planes and texture size that the device's limits and the budget
 /// allow for `frames` lights' textures (at most 16 bytes a texel and plane: 32-bit
-/// floats) and depth maps (16 bytes a texel, one storage binding): the size halves until
+/// floats) and depth maps (48 bytes a texel, one storage binding): the size halves until
 /// they fit, or reaches 16. Without a render device only the budget bounds them.
 fn fitting(settings: IlluminationSettings, frames: usize, device: Option<&RenderDevice>, budget: u64) -> IlluminationSettings {
     let (largest, widest, layers) = device.map_or((u64::MAX, u32::MAX, u32::MAX), |d| {
@@ -295,22 +309,24 @@ fn fitting(settings: IlluminationSettings, frames: usize, device: Option<&Render
     });
     let mut fitted = IlluminationSettings { planes: settings.planes.min(layers), ..settings };
     let texels = |s: &IlluminationSettings| u64::from(s.texture_size).pow(2);
-    let bytes = |s: &IlluminationSettings| texels(s) * (16 * u64::from(s.planes) + 16) * frames as u64;
-    while fitted.texture_size > 16 && (bytes(&fitted) > budget || texels(&fitted) * 16 > largest || fitted.texture_size > widest) {
+    let depth_map = super::SURFACE_TEXEL_BYTES;
+    let bytes = |s: &IlluminationSettings| texels(s) * (16 * u64::from(s.planes) + depth_map) * frames as u64;
+    while fitted.texture_size > 16 && (bytes(&fitted) > budget || texels(&fitted) * depth_map > largest || fitted.texture_size > widest) {
         fitted.texture_size /= 2;
     }
     fitted
 }
 
-/// The build: each generator's table (made once per key), then each light's frame.
+/// The build: each generator's table (made once per key), then each light's frame,
+/// placed over `receivers`.
 fn make_frames(
     inputs: Vec<GeneratorInput>,
     lights: &[Light],
-    receivers: &[Receiver],
+    receivers: Arc<InstancedBvh>,
     settings: &IlluminationSettings,
     (directions, max_bytes, cache_dir): (u32, usize, Option<PathBuf>),
 ) -> BuildOutput {
-    let mut output = BuildOutput::default();
+    let mut output = BuildOutput { receivers, ..default() };
     let mut made: HashMap<TableKey, Arc<LightTransportTable>> = HashMap::new();
     for input in inputs {
         let table = match input.table.or_else(|| made.get(&input.key).cloned()) {
@@ -345,7 +361,7 @@ fn make_frames(
             }
         };
         for light in lights {
-            if let Some(frame) = IlluminationTextures::frame(&table, &input.mesh, &input.world_from_object, light, receivers, settings) {
+            if let Some(frame) = IlluminationTextures::placed(&table, &input.mesh, &input.world_from_object, light, &output.receivers, settings) {
                 output.frames.push(frame);
             }
         }

@@ -5,12 +5,13 @@
 // light vector). The twin of `IlluminationVolume::draw` in the core crate.
 
 #import bevy_caustics::illumination_textures::{
-    IlluminationFrame, IlluminationVolume, FAR, plane_depth, texel_size, surface_index,
+    IlluminationFrame, IlluminationVolume, FAR, plane_depth, seen_depths, texel_size, surface_index,
 }
 
 @group(0) @binding(0) var<uniform> frame: IlluminationFrame;
 @group(0) @binding(1) var<storage, read> volumes: array<IlluminationVolume>;
 @group(0) @binding(2) var<storage, read> surface: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> seen: array<u32, 2>;
 
 struct Crossing {
     @builtin(position) position: vec4<f32>,
@@ -36,7 +37,12 @@ fn draw_vertex(@builtin(vertex_index) index: u32, @builtin(instance_index) plane
     // Outside the clip volume: the quad is dropped.
     out.position = vec4(2.0, 2.0, 2.0, 1.0);
     let v = index / 6u;
-    let depth = plane_depth(frame, plane);
+    let depths = seen_depths(vec2(seen[0], seen[1]));
+    // The virtual camera saw no receiver: nothing to light.
+    if depths.x > depths.y {
+        return out;
+    }
+    let depth = plane_depth(frame, depths, plane);
     let texel = texel_size(frame);
     let axis = frame.axis.xyz;
     var q: array<vec2<f32>, 3>;

@@ -7,16 +7,18 @@
 //! on the async compute pool, or read from the disk cache, and never again while the
 //! object moves or turns or the light moves — [`LightTransportTables`] counts the
 //! builds. When the object, a light or a receiver changed, the main world looks each
-//! lit vertex up in its table and sets up each light's virtual planes (§4.2,
-//! `IlluminationTextures::frame`): the illumination volumes, the planes, and what the
-//! virtual camera sees of the receivers — every visible [`crate::CausticReceiver`] and
-//! shadow-casting mesh that is not a generator — as a depth map of solid spans. Then the
-//! render world:
+//! lit vertex up in its table and places each light's virtual camera (§4.2,
+//! `IlluminationTextures::placed`): the illumination volumes, the camera's axis and
+//! texture rectangle over the receivers — every visible [`crate::CausticReceiver`] and
+//! shadow-casting mesh that is not a generator, placed over their meshes' BVHs
+//! (`crate::irradiance::mesh_bvhs`). Then the render world:
 //!
-//! 1. **illumination textures** (once per change): each volume's crossing with each
-//!    plane is drawn into that plane's layer of an `Rgba16Float` texture array, with
-//!    additive blending and each fragment's exact share of its texel (eq. 3 in `w`,
-//!    the light vector in `xyz`);
+//! 1. **illumination textures** (once per change): the virtual camera casts a ray a
+//!    texel through the receivers (`seen.wgsl`) into a depth map of solid spans, and
+//!    the planes span the depths it saw; each volume's crossing with each plane is
+//!    drawn into that plane's layer of an `Rgba16Float` texture array, with additive
+//!    blending and each fragment's exact share of its texel (eq. 3 in `w`, the light
+//!    vector in `xyz`);
 //! 2. **projection** (every frame, between the prepass and the main pass): each view's
 //!    receiver points take the two planes around their depth (§4.3), the cosine at
 //!    their own normal from the view's normal prepass, and no light where the light,
@@ -27,9 +29,8 @@
 //! The shaders are the twins of `caustics_core::illumination_textures`;
 //! `tests/gpu_illumination_textures.rs` holds them together. Limits: a dispersive
 //! generator is drawn at its green index of refraction; light reflected inside the
-//! object is left out (as the paper leaves it); the depth map is traced on the CPU
-//! when the scene changes (a moving object costs one trace of `texture_size²` rays
-//! there, off the frame).
+//! object is left out (as the paper leaves it); a moving object costs the CPU the
+//! lookup of its lit vertices in its table, a few operations a vertex.
 
 mod build;
 mod pass;
@@ -44,6 +45,10 @@ use std::path::PathBuf;
 
 /// The most virtual planes a light's textures have.
 pub const MAX_PLANES: u32 = 16;
+
+/// Bytes a texel of the virtual camera's depth map takes (`seen.wgsl`): three `vec4`s,
+/// (normal, depth) then the solid spans' (in, out) pairs.
+const SURFACE_TEXEL_BYTES: u64 = 48;
 
 /// How the illumination textures are made: a resource, shared by every generator.
 #[derive(Resource, Clone, Debug, PartialEq, Reflect)]
@@ -120,6 +125,7 @@ impl IlluminationCosine {
 
 pub(crate) fn build(app: &mut App) {
     bevy::shader::load_shader_library!(app, "types.wgsl");
+    bevy::asset::embedded_asset!(app, "seen.wgsl");
     bevy::asset::embedded_asset!(app, "draw.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     app.register_type::<IlluminationTexturesSettings>().init_resource::<IlluminationTexturesSettings>();

@@ -13,9 +13,11 @@ use bevy::render::{
     view::{ViewUniformOffset, ViewUniforms},
 };
 
-/// Once per frame in which the frames changed: every plane of every light's frame,
-/// cleared, then every illumination volume's crossing drawn into it (a quad over the
-/// crossing's texels, six vertices a volume; the plane is the instance).
+/// Once per frame in which the frames changed: what each light's virtual camera sees
+/// (its depth map and the depths of its planes, a ray a texel), then every plane of
+/// every light's frame, cleared, and every illumination volume's crossing drawn into
+/// it (a quad over the crossing's texels, six vertices a volume; the plane is the
+/// instance).
 pub(super) fn draw_illumination_textures(
     mut ctx: RenderContext,
     mut gpu: ResMut<IlluminationTexturesGpu>,
@@ -26,11 +28,21 @@ pub(super) fn draw_illumination_textures(
     if !gpu.dirty || gpu.frames.is_empty() {
         return;
     }
-    // The pipeline still compiling: draw next frame.
-    let Some(pipeline) = cache.get_render_pipeline(pipelines.draw) else { return };
+    // The pipelines still compiling: draw next frame.
+    let (Some(see), Some(pipeline)) = (cache.get_compute_pipeline(pipelines.see), cache.get_render_pipeline(pipelines.draw)) else { return };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
+    for frame in &gpu.frames {
+        encoder.clear_buffer(&frame.seen, 0, None);
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("illumination_see"), timestamp_writes: None });
+        let span = diagnostics.pass_span(&mut pass, "illumination_textures/see");
+        pass.set_pipeline(see);
+        pass.set_bind_group(0, &frame.see_bind_group, &[]);
+        let groups = frame.textures.width().div_ceil(8);
+        pass.dispatch_workgroups(groups, groups, 1);
+        span.end(&mut pass);
+    }
     for frame in &gpu.frames {
         for (plane, layer) in frame.layers.iter().enumerate() {
             let mut pass = encoder.begin_render_pass(&RenderPassDescriptor {
@@ -78,7 +90,15 @@ pub(super) fn project_illumination_textures(
             Some(ctx.render_device().create_bind_group(
                 "illumination_project_bind_group",
                 &inputs.layout,
-                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, f.uniform.binding()?, &f.array, f.surface.binding()?)),
+                &BindGroupEntries::sequential((
+                    inputs.view.clone(),
+                    inputs.depth,
+                    normal,
+                    f.uniform.binding()?,
+                    &f.array,
+                    f.surface.as_entire_binding(),
+                    f.seen.as_entire_binding(),
+                )),
             ))
         })
         .collect();

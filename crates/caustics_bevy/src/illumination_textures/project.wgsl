@@ -7,11 +7,16 @@
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::receiver::exposed
 #import bevy_caustics::receiver_view::{view, receiver_point}
-#import bevy_caustics::illumination_textures::{IlluminationFrame, FAR, plane_depth, texel_size, texel_coords, surface_index}
+#import bevy_caustics::illumination_textures::{IlluminationFrame, FAR, plane_depth, seen_depths, texel_size, texel_coords, surface_index}
 
 @group(0) @binding(3) var<uniform> frame: IlluminationFrame;
 @group(0) @binding(4) var textures: texture_2d_array<f32>;
 @group(0) @binding(5) var<storage, read> surface: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> seen: array<u32, 2>;
+
+fn depth_of_plane(k: u32) -> f32 {
+    return plane_depth(frame, seen_depths(vec2(seen[0], seen[1])), k);
+}
 
 fn texel_at(index: u32, plane: u32) -> vec4<f32> {
     return textureLoad(textures, vec2(index % frame.size, index / frame.size), plane, 0);
@@ -22,7 +27,7 @@ fn texel_at(index: u32, plane: u32) -> vec4<f32> {
 fn interpolated(index: u32, z: f32) -> vec4<f32> {
     var k = 0u;
     for (var i = 0u; i < frame.planes; i++) {
-        if plane_depth(frame, i) <= z {
+        if depth_of_plane(i) <= z {
             k = i + 1u;
         }
     }
@@ -33,8 +38,8 @@ fn interpolated(index: u32, z: f32) -> vec4<f32> {
     if k > last {
         return texel_at(index, last);
     }
-    let a = plane_depth(frame, k - 1u);
-    let b = plane_depth(frame, k);
+    let a = depth_of_plane(k - 1u);
+    let b = depth_of_plane(k);
     let f = clamp((z - a) / max(b - a, 1e-12), 0.0, 1.0);
     let ta = texel_at(index, k - 1u);
     return ta + (texel_at(index, k) - ta) * f;
@@ -53,7 +58,7 @@ fn shadowed(q: vec2<f32>, z: f32, r: vec3<f32>, n: vec3<f32>) -> bool {
     let unit = max(texel.x, texel.y);
     let size = f32(frame.size);
     let across = vec2(-dot(r, frame.u.xyz), -dot(r, frame.v.xyz)) / (along * texel);
-    let to_top = z - plane_depth(frame, 0u);
+    let to_top = z - depth_of_plane(0u);
     var cell = floor(q);
     var climbed = 0.0;
     for (var step = 0u; step < 2u * frame.size + 2u; step++) {
@@ -107,7 +112,8 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let n = receiver.normal;
     let q = texel_coords(frame, p);
     let size = f32(frame.size);
-    if !(q.x >= 0.0 && q.y >= 0.0 && q.x < size && q.y < size) {
+    let depths = seen_depths(vec2(seen[0], seen[1]));
+    if depths.x > depths.y || !(q.x >= 0.0 && q.y >= 0.0 && q.x < size && q.y < size) {
         discard;
     }
     let index = u32(q.y) * frame.size + u32(q.x);

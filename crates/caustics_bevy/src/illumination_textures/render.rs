@@ -2,7 +2,7 @@
 //! bind groups the passes (`pass.rs`) draw with.
 
 use crate::cpu_time::timed;
-use super::{IlluminationFrames, IlluminationTexturesSettings, MAX_PLANES, pass};
+use super::{IlluminationFrames, IlluminationTexturesSettings, MAX_PLANES, SURFACE_TEXEL_BYTES, pass};
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::prelude::*;
@@ -10,7 +10,7 @@ use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     render_resource::{
         binding_types::{
-            storage_buffer_read_only, texture_2d_array, texture_2d_multisampled, texture_depth_2d, texture_depth_2d_multisampled,
+            storage_buffer_read_only, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d_array, texture_2d_multisampled, texture_depth_2d, texture_depth_2d_multisampled,
             uniform_buffer,
         },
         *,
@@ -18,9 +18,9 @@ use bevy::render::{
     renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
-use caustics_core::illumination_textures::{
-    Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS, SeenSurface,
-};
+use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
+use caustics_core::illumination_textures::{Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS};
+use caustics_core::triangle_bvh::InstancedBvh;
 use std::sync::Arc;
 
 /// The format of the illumination textures: 32-bit floats where the GPU blends them
@@ -31,9 +31,6 @@ fn texture_format(device: &RenderDevice) -> TextureFormat {
     if device.features().contains(WgpuFeatures::FLOAT32_BLENDABLE) { TextureFormat::Rgba32Float } else { TextureFormat::Rgba16Float }
 }
 
-/// "No receiver here, nothing solid": the shaders' infinity.
-const FAR: f32 = 1.0e30;
-
 /// `IlluminationFrame` in `types.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
 pub(super) struct GpuIlluminationFrame {
@@ -43,12 +40,15 @@ pub(super) struct GpuIlluminationFrame {
     /// The texture rectangle: corner (xy) and extent (zw), in (u, v) metres.
     rectangle: Vec4,
     light_color: Vec4,
-    depths: [Vec4; 4],
     size: u32,
     planes: u32,
     cosine: u32,
     shadow_slack: f32,
     max_magnification: f32,
+    /// Where the virtual camera's rays start, in depth along the axis.
+    start: f32,
+    /// Where the receivers' instances start in their `InstancedBvh` buffer (vec4s).
+    receivers: u32,
 }
 
 /// `IlluminationVolume` in `types.wgsl`: the three exits and directions, then
@@ -70,51 +70,38 @@ impl From<&IlluminationVolume> for GpuVolume {
     }
 }
 
-/// A texel of the virtual camera's depth map as `types.wgsl` reads it: three `vec4`s,
-/// (normal, depth) then the solid spans' (in, out) pairs, [`FAR`] for none.
-fn surface_texel(seen: &Option<SeenSurface>) -> [Vec4; 3] {
-    match seen {
-        None => [Vec4::new(0.0, 0.0, 0.0, FAR), Vec4::splat(FAR), Vec4::splat(FAR)],
-        Some(s) => {
-            // `SOLID_SPANS` is the four spans `types.wgsl` reads, two to a `vec4`.
-            let [(a0, b0), (a1, b1), (a2, b2), (a3, b3)] = s.solid.map(|(a, b)| (a.min(FAR), b.min(FAR)));
-            [to_vec4(s.normal).with_w(s.depth), Vec4::new(a0, b0, a1, b1), Vec4::new(a2, b2, a3, b3)]
-        }
-    }
-}
-
 impl GpuIlluminationFrame {
-    fn new(t: &IlluminationTextures, cosine: Cosine) -> Self {
-        let mut depths = [0.0; MAX_PLANES as usize];
-        for (d, plane) in depths.iter_mut().zip(&t.planes) {
-            *d = plane.depth;
-        }
+    fn new(t: &IlluminationTextures, cosine: Cosine, receivers: &InstancedBvh) -> Self {
         Self {
             axis: to_vec4(t.axis),
             u: to_vec4(t.u),
             v: to_vec4(t.v),
             rectangle: Vec4::new(t.corner.x, t.corner.y, t.extent.x, t.extent.y),
             light_color: to_vec4(t.light_color),
-            depths: std::array::from_fn(|i| Vec4::from_slice(&depths[4 * i..4 * i + 4])),
             size: t.size,
             planes: t.planes.len().min(MAX_PLANES as usize) as u32,
             cosine: (cosine == Cosine::VirtualCamera) as u32,
             shadow_slack: SHADOW_SLACK_TEXELS,
             max_magnification: MAX_MAGNIFICATION,
+            start: t.start,
+            receivers: receivers.gpu_instance_offset(),
         }
     }
 }
 
-/// Render world: the frames of the main world, by generation, and the cosine.
+/// Render world: the frames of the main world, by generation, the receivers they see
+/// and the cosine.
 #[derive(Resource, Default)]
 struct ExtractedFrames {
     generation: u64,
     frames: Arc<Vec<IlluminationTextures>>,
+    receivers: Arc<InstancedBvh>,
     cosine: Cosine,
 }
 
-/// One light's frame on the GPU: its uniform, volumes, depth map, texture array (a
-/// view per plane to draw into, one of the array to read) and the draw bind group.
+/// One light's frame on the GPU: its uniform, volumes, the virtual camera's depth map
+/// and the depths it saw, texture array (a view per plane to draw into, one of the
+/// array to read) and the bind groups that see and draw.
 pub(super) struct FrameGpu {
     pub(super) uniform: UniformBuffer<GpuIlluminationFrame>,
     volumes: StorageBuffer<Vec<GpuVolume>>,
@@ -122,7 +109,9 @@ pub(super) struct FrameGpu {
     pub(super) textures: Texture,
     pub(super) layers: Vec<TextureView>,
     pub(super) array: TextureView,
-    pub(super) surface: StorageBuffer<Vec<Vec4>>,
+    pub(super) surface: Buffer,
+    pub(super) seen: Buffer,
+    pub(super) see_bind_group: BindGroup,
     pub(super) draw_bind_group: BindGroup,
 }
 
@@ -133,6 +122,8 @@ pub struct IlluminationTexturesGpu {
     /// The textures must be drawn this frame.
     pub(super) dirty: bool,
     pub(super) frames: Vec<FrameGpu>,
+    /// The receivers the virtual cameras see (`triangle_bvh`).
+    receivers: InstancedBvhBuffer,
 }
 
 impl IlluminationTexturesGpu {
@@ -152,6 +143,13 @@ impl IlluminationTexturesGpu {
         self.frames.get(index).map(|f| &f.textures)
     }
 
+    /// Frame `index`'s virtual camera: its depth map (three `vec4`s a texel, row-major:
+    /// (normal, depth), then the solid spans' (in, out) pairs, `1e30` for none) and the
+    /// two words of the depths it saw (`seen.wgsl`), copyable.
+    pub fn depth_map(&self, index: usize) -> Option<(&Buffer, &Buffer)> {
+        self.frames.get(index).map(|f| (&f.surface, &f.seen))
+    }
+
     /// Bytes of GPU memory the illumination textures hold.
     pub fn bytes(&self) -> u64 {
         self.frames
@@ -159,15 +157,19 @@ impl IlluminationTexturesGpu {
             .map(|f| {
                 let texels = f.textures.width() as u64 * f.textures.height() as u64 * f.layers.len() as u64;
                 let texel_bytes = f.textures.format().block_copy_size(None).unwrap_or(16) as u64;
-                [f.surface.buffer(), f.volumes.buffer()].iter().flatten().map(|b| b.size()).sum::<u64>() + texels * texel_bytes
+                f.surface.size() + f.seen.size() + f.volumes.buffer().map_or(0, |b| b.size()) + texels * texel_bytes
             })
-            .sum()
+            .sum::<u64>()
+            + self.receivers.size()
     }
 }
 
-/// The draw pipeline and the projection's layouts and shader.
+/// The virtual camera's and the draw's pipelines and the projection's layouts and
+/// shader.
 #[derive(Resource)]
 pub(super) struct IlluminationPipelines {
+    see_layout: BindGroupLayoutDescriptor,
+    pub(super) see: CachedComputePipelineId,
     pub(super) draw_layout: BindGroupLayoutDescriptor,
     pub(super) draw: CachedRenderPipelineId,
     format: TextureFormat,
@@ -210,6 +212,7 @@ fn extract_frames(mut extracted: ResMut<ExtractedFrames>, frames: Extract<Res<Il
     if extracted.generation != frames.generation {
         extracted.generation = frames.generation;
         extracted.frames = frames.frames.clone();
+        extracted.receivers = frames.receivers.clone();
     }
     extracted.cosine = settings.cosine.core();
 }
@@ -223,6 +226,20 @@ fn init_pipelines(
 ) {
     let format = texture_format(&device);
     let float = TextureSampleType::Float { filterable: false };
+    let see_layout = BindGroupLayoutDescriptor::new(
+        "illumination_see_layout",
+        &BindGroupLayoutEntries::with_indices(
+            ShaderStages::COMPUTE,
+            (
+                (0, uniform_buffer::<GpuIlluminationFrame>(false)),
+                (1, storage_buffer_sized(false, None)),
+                (2, storage_buffer_sized(false, None)),
+                (14, storage_buffer_read_only_sized(false, None)),
+            ),
+        ),
+    );
+    let see_shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "seen.wgsl");
+    let [see] = crate::irradiance::compute_pipelines(&cache, "illumination", &see_layout, &see_shader, ["see"]);
     let draw_layout = BindGroupLayoutDescriptor::new(
         "illumination_draw_layout",
         &BindGroupLayoutEntries::sequential(
@@ -231,6 +248,7 @@ fn init_pipelines(
                 uniform_buffer::<GpuIlluminationFrame>(false),
                 storage_buffer_read_only::<GpuVolume>(false),
                 storage_buffer_read_only::<Vec4>(false),
+                storage_buffer_read_only_sized(false, None),
             ),
         ),
     );
@@ -264,11 +282,14 @@ fn init_pipelines(
                     uniform_buffer::<GpuIlluminationFrame>(false),
                     texture_2d_array(float),
                     storage_buffer_read_only::<Vec4>(false),
+                    storage_buffer_read_only_sized(false, None),
                 ),
             ),
         )
     };
     commands.insert_resource(IlluminationPipelines {
+        see_layout,
+        see,
         draw_layout,
         draw,
         format,
@@ -287,8 +308,9 @@ impl SpecializedRenderPipeline for IlluminationPipelines {
     }
 }
 
-/// Uploads each frame of a new generation: its uniform, volumes and depth map, and a
-/// texture array for its planes (kept while its size and plane count stay).
+/// Uploads each frame of a new generation: its uniform and volumes, with room for the
+/// virtual camera's depth map and a texture array for its planes (both kept while its
+/// size and plane count stay), and the receivers' BVH.
 fn prepare_frames(
     extracted: Res<ExtractedFrames>,
     mut gpu: ResMut<IlluminationTexturesGpu>,
@@ -300,12 +322,15 @@ fn prepare_frames(
     if gpu.generation == Some(extracted.generation) {
         return;
     }
+    let gpu = gpu.as_mut();
     gpu.generation = Some(extracted.generation);
     gpu.dirty = true;
-    let layout = cache.get_bind_group_layout(&pipelines.draw_layout);
+    let receivers = gpu.receivers.write(&extracted.receivers, "caustic_illumination_receivers", &device, &queue);
+    let draw_layout = cache.get_bind_group_layout(&pipelines.draw_layout);
+    let see_layout = cache.get_bind_group_layout(&pipelines.see_layout);
     let old = std::mem::take(&mut gpu.frames);
     for (k, t) in extracted.frames.iter().enumerate() {
-        let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine));
+        let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine, &extracted.receivers));
         uniform.set_label(Some("caustic_illumination_frame"));
         uniform.write_buffer(&device, &queue);
         let mut volumes: Vec<GpuVolume> = t.volumes.iter().map(GpuVolume::from).collect();
@@ -317,12 +342,9 @@ fn prepare_frames(
         let mut volume_buffer = StorageBuffer::from(volumes);
         volume_buffer.set_label(Some("caustic_illumination_volumes"));
         volume_buffer.write_buffer(&device, &queue);
-        let mut surface = StorageBuffer::from(t.surface.iter().flat_map(surface_texel).collect::<Vec<Vec4>>());
-        surface.set_label(Some("caustic_illumination_depth_map"));
-        surface.write_buffer(&device, &queue);
         let layers = t.planes.len() as u32;
-        let reuse = old.get(k).filter(|f| f.textures.width() == t.size && f.layers.len() as u32 == layers).map(|f| f.textures.clone());
-        let textures = reuse.unwrap_or_else(|| {
+        let reuse = old.get(k).filter(|f| f.textures.width() == t.size && f.layers.len() as u32 == layers);
+        let textures = reuse.map(|f| f.textures.clone()).unwrap_or_else(|| {
             device.create_texture(&TextureDescriptor {
                 label: Some("caustic_illumination_textures"),
                 size: Extent3d { width: t.size, height: t.size, depth_or_array_layers: layers },
@@ -334,17 +356,33 @@ fn prepare_frames(
                 view_formats: &[],
             })
         });
+        let buffer = |label, size| device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC, mapped_at_creation: false });
+        let (surface, seen) = reuse.map(|f| (f.surface.clone(), f.seen.clone())).unwrap_or_else(|| {
+            (buffer("caustic_illumination_depth_map", u64::from(t.size).pow(2) * SURFACE_TEXEL_BYTES), buffer("caustic_illumination_seen_depths", 8))
+        });
         let view = |dimension, base_array_layer, array_layer_count| {
             textures.create_view(&TextureViewDescriptor { dimension: Some(dimension), base_array_layer, array_layer_count, ..default() })
         };
         let layer_views = (0..layers).map(|l| view(TextureViewDimension::D2, l, Some(1))).collect();
         let array = view(TextureViewDimension::D2Array, 0, Some(layers));
-        let (Some(frame_binding), Some(volume_binding), Some(surface_binding)) = (uniform.binding(), volume_buffer.binding(), surface.binding())
-        else {
+        let (Some(frame_binding), Some(volume_binding)) = (uniform.binding(), volume_buffer.binding()) else {
             continue;
         };
-        let draw_bind_group =
-            device.create_bind_group("illumination_draw_bind_group", &layout, &BindGroupEntries::sequential((frame_binding, volume_binding, surface_binding)));
-        gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, draw_bind_group });
+        let see_bind_group = device.create_bind_group(
+            "illumination_see_bind_group",
+            &see_layout,
+            &BindGroupEntries::with_indices((
+                (0, frame_binding.clone()),
+                (1, surface.as_entire_binding()),
+                (2, seen.as_entire_binding()),
+                (14, receivers.as_entire_binding()),
+            )),
+        );
+        let draw_bind_group = device.create_bind_group(
+            "illumination_draw_bind_group",
+            &draw_layout,
+            &BindGroupEntries::sequential((frame_binding, volume_binding, surface.as_entire_binding(), seen.as_entire_binding())),
+        );
+        gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group });
     }
 }

@@ -32,9 +32,9 @@
 //!   volume crossing a plane at its focus stays finite.
 
 use super::transport::{LightTransportTable, Transported};
-use crate::bvh::SceneBvh;
 use crate::mesh::TriMesh;
-use crate::scene::{Light, Receiver, Scene};
+use crate::scene::{Light, Receiver};
+use crate::triangle_bvh::{InstancedBvh, NO_MESH};
 use glam::{Affine3A, Vec2, Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -78,7 +78,9 @@ pub struct IlluminationPlane {
 ///
 /// [`Self::frame`] sets everything up but the textures, which [`Self::draw`] fills:
 /// the GPU pass draws the same volumes into the same frame (`caustics_bevy`'s
-/// `illumination_textures`), and this is its twin.
+/// `illumination_textures`), and this is its twin. A game's frame is [`Self::placed`]
+/// on the CPU and seen by the virtual camera on the GPU; [`Self::see`] is that pass's
+/// twin.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IlluminationTextures {
     /// The virtual camera: looks along `axis`; `u`, `v` span the texture plane.
@@ -89,10 +91,14 @@ pub struct IlluminationTextures {
     pub corner: Vec2,
     pub extent: Vec2,
     pub size: u32,
-    /// Depth along `axis`, and after [`Self::draw`] the texture (empty before).
+    /// Where the virtual camera's rays start, in depth along `axis`: just before the
+    /// receivers.
+    pub start: f32,
+    /// Depth along `axis` (after [`Self::see`]), and after [`Self::draw`] the texture
+    /// (empty before).
     pub planes: Vec<IlluminationPlane>,
-    /// What the virtual camera sees through each texel: the nearest receiver, its
-    /// normal and the solid spans behind it.
+    /// What the virtual camera sees through each texel (after [`Self::see`]): the
+    /// nearest receiver, its normal and the solid spans behind it.
     pub surface: Vec<Option<SeenSurface>>,
     /// One per lit triangle of the object, with the flux it carries in units of
     /// `light_color`'s irradiance.
@@ -120,11 +126,26 @@ impl IlluminationTextures {
         receivers: &[Receiver],
         settings: &IlluminationSettings,
     ) -> Option<Self> {
+        let receivers = InstancedBvh::of_world_meshes(receivers.iter().map(|r| &r.mesh));
+        let mut frame = Self::placed(table, mesh, world_from_object, light, &receivers, settings)?;
+        frame.see(&receivers).then_some(frame)
+    }
+
+    /// The frame without what the virtual camera sees: the volumes, the camera and the
+    /// texture rectangle, over the boxes of `receivers` (placed meshes); `settings`'
+    /// planes, their depths left to [`Self::see`].
+    pub fn placed(
+        table: &LightTransportTable,
+        mesh: &TriMesh,
+        world_from_object: &Affine3A,
+        light: &Light,
+        receivers: &InstancedBvh,
+        settings: &IlluminationSettings,
+    ) -> Option<Self> {
         let (volumes, scale) = lit_triangles(table, mesh, world_from_object, light);
         let axis = volumes.iter().map(|b| b.flux * b.mean_direction()).sum::<Vec3>().try_normalize()?;
         let (u, v) = axis.any_orthonormal_pair();
-        let corners = receivers.iter().flat_map(|r| {
-            let (lo, hi) = r.mesh.bounds();
+        let corners = receivers.instance_bounds().flat_map(|(lo, hi)| {
             (0..8).map(move |i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
         });
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
@@ -161,34 +182,35 @@ impl IlluminationTextures {
         let smallest = size as f32 * 1e-5 * (1.0 + lo.truncate().abs().max(hi.truncate().abs()).max_element());
         let grow = ((Vec2::splat(smallest) - (hi - lo).truncate()) * 0.5).max(Vec2::ZERO);
         let (corner, extent) = (lo.truncate() - grow, (hi - lo).truncate() + 2.0 * grow);
-        let texel = extent / size as f32;
-        let bvh = SceneBvh::build(&Scene { lights: Vec::new(), generators: Vec::new(), receivers: receivers.to_vec() });
-        // The virtual camera's depth and normal map of the receivers.
         let start = lo.z - 1e-3 * (1.0 + (hi.z - lo.z));
-        let surface: Vec<Option<SeenSurface>> = (0..size * size)
-            .into_par_iter()
-            .map(|i| {
-                let q = corner + (Vec2::new((i % size) as f32, (i / size) as f32) + 0.5) * texel;
-                SeenSurface::along(&bvh, receivers, u * q.x + v * q.y + axis * start, axis)
-            })
-            .collect();
-        // The planes span the depths the virtual camera sees, evenly (§4.2): the
-        // receivers' surfaces where the beams cross them, not their whole bounds (a
-        // wide floor under a tilted axis would spread the planes over depths no
-        // caustic reaches).
-        let (near, far) = surface.iter().flatten().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), s| (a.min(s.depth), b.max(s.depth)));
-        if near > far {
-            return None;
-        }
-        let n = settings.planes.max(1);
-        let planes = (0..n)
-            .map(|i| if n == 1 { 0.5 * (near + far) } else { near + (far - near) * i as f32 / (n - 1) as f32 })
-            .map(|depth| IlluminationPlane { depth, texture: Vec::new() })
-            .collect();
+        let planes = (0..settings.planes.max(1)).map(|_| IlluminationPlane { depth: 0.0, texture: Vec::new() }).collect();
         let colour = light.color.element_sum() / 3.0;
         let flux_out = volumes.iter().map(|b| b.flux as f64).sum::<f64>() * (scale * colour) as f64;
         let light_color = light.color * scale;
-        Some(Self { axis, u, v, corner, extent, size, planes, surface, volumes, light_color, flux_out })
+        Some(Self { axis, u, v, corner, extent, size, start, planes, surface: Vec::new(), volumes, light_color, flux_out })
+    }
+
+    /// What the virtual camera sees of `receivers` (the frame's, as [`Self::placed`]
+    /// took them) through each texel, and the planes' depths: evenly across the depths
+    /// it sees (§4.2) — the receivers' surfaces where the beams cross them, not their
+    /// whole bounds (a wide floor under a tilted axis would spread the planes over
+    /// depths no caustic reaches). `false` where it sees none. The twin of `seen.wgsl`.
+    pub fn see(&mut self, receivers: &InstancedBvh) -> bool {
+        let (size, texel) = (self.size, self.extent / self.size as f32);
+        let (u, v, axis, corner, start) = (self.u, self.v, self.axis, self.corner, self.start);
+        self.surface = (0..size * size)
+            .into_par_iter()
+            .map(|i| {
+                let q = corner + (Vec2::new((i % size) as f32, (i / size) as f32) + 0.5) * texel;
+                SeenSurface::along(receivers, u * q.x + v * q.y + axis * start, axis)
+            })
+            .collect();
+        let (near, far) = self.surface.iter().flatten().fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), s| (a.min(s.depth), b.max(s.depth)));
+        let n = self.planes.len();
+        for (i, plane) in self.planes.iter_mut().enumerate() {
+            plane.depth = plane_depth(near, far, i as u32, n as u32);
+        }
+        near <= far
     }
 
     /// The frame with its textures drawn.
@@ -329,19 +351,16 @@ pub struct SeenSurface {
 }
 
 impl SeenSurface {
-    /// The nearest receiver along `axis` from `origin` (receivers in `bvh`).
-    fn along(bvh: &SceneBvh, receivers: &[Receiver], origin: Vec3, axis: Vec3) -> Option<Self> {
+    /// The nearest receiver along `axis` from `origin`.
+    fn along(receivers: &InstancedBvh, origin: Vec3, axis: Vec3) -> Option<Self> {
         let depth0 = origin.dot(axis);
         let mut solid = [(f32::INFINITY, f32::INFINITY); SOLID_SPANS];
         let mut first: Option<(f32, Vec3)> = None;
         let (mut span, mut inside, mut t) = (0, false, 0.0f32);
         for _ in 0..4 * SOLID_SPANS {
-            let Some(hit) = bvh.intersect(origin, axis, t, f32::INFINITY) else { break };
-            let crate::bvh::Surface::Receiver(r) = hit.surface else { unreachable!("only receivers in this BVH") };
-            let mesh = &receivers[r as usize].mesh;
-            let [a, b, c] = mesh.corners(hit.triangle as usize);
-            let towards = (b - a).cross(c - a).dot(axis) < 0.0;
-            first.get_or_insert_with(|| (hit.t, mesh.shading_normal(hit.triangle as usize, hit.uv)));
+            let Some(hit) = receivers.intersect(origin, axis, t, f32::INFINITY, NO_MESH) else { break };
+            let towards = hit.geometric_normal.dot(axis) < 0.0;
+            first.get_or_insert((hit.t, hit.normal));
             match (inside, towards) {
                 (false, _) => {
                     solid[span].0 = depth0 + hit.t;
@@ -365,6 +384,11 @@ impl SeenSurface {
         let (t, normal) = first?;
         Some(Self { depth: depth0 + t, normal, solid })
     }
+}
+
+/// Plane `i` of `n`'s depth, evenly from `near` to `far` (one plane: halfway).
+fn plane_depth(near: f32, far: f32, i: u32, n: u32) -> f32 {
+    if n == 1 { 0.5 * (near + far) } else { near + (far - near) * i as f32 / (n - 1) as f32 }
 }
 
 /// Which cosine turns the light crossing a texel into irradiance on a receiver.
