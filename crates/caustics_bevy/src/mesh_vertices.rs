@@ -85,6 +85,11 @@ impl MeshVertices {
         })
     }
 
+    /// What the binding binds, for a kept bind group.
+    pub fn bound(&self) -> crate::irradiance::kept_bind_group::Bound {
+        crate::irradiance::kept_bind_group::Bound::Slice(self.buffer.id(), self.offset, self.size.get())
+    }
+
     /// The storage binding of the vertices.
     pub fn binding(&self) -> BufferBinding<'_> {
         BufferBinding { buffer: &self.buffer, offset: self.offset, size: Some(self.size) }

@@ -84,9 +84,10 @@ pub(super) fn ripple_images(surface: &PoolSurface) -> (Vec<Vec4>, u32) {
         .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
         .collect();
     let count = images.len() as u32;
-    if images.is_empty() {
-        images.push(Vec4::ZERO);
-    }
+    // Room to the next power of two (one image at least, as a binding may not be empty),
+    // so that a pool's buffer grows a few times as the live impulses add up, not at
+    // every new one.
+    images.resize(images.len().max(1).next_power_of_two(), Vec4::ZERO);
     (images, count)
 }
 
@@ -314,9 +315,12 @@ pub(super) fn write_waves(
     uniform.set(pool);
     uniform.set_label(Some("caustic_pool_settings"));
     uniform.write_buffer(device, queue);
-    images.set(list);
-    images.set_label(Some("caustic_pool_images"));
-    images.write_buffer(device, queue);
+    // The images change only when an impulse comes or goes.
+    if images.buffer().is_none() || *images.get() != list {
+        images.set(list);
+        images.set_label(Some("caustic_pool_images"));
+        images.write_buffer(device, queue);
+    }
 }
 
 /// A storage buffer of `floats_per_texel` floats per texel, written by the compute

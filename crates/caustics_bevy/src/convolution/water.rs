@@ -9,6 +9,7 @@
 use super::PoolSurface;
 use super::render::{GpuPool, ripple_images, write_waves};
 use crate::cpu_time::timed;
+use crate::irradiance::kept_bind_group::KeptBindGroup;
 use crate::mesh_vertices::{MeshVertices, MovesOnGpu, WriteMeshVertices};
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -36,12 +37,13 @@ struct ExtractedWater {
 #[derive(Resource, Default)]
 struct ExtractedWaters(Vec<ExtractedWater>);
 
-/// A pool's buffers, kept while it moves on the GPU.
+/// A pool's buffers and bind group, kept while it moves on the GPU.
 struct WaterBuffers {
     texels: u32,
     uniform: UniformBuffer<GpuPool>,
     images: StorageBuffer<Vec<Vec4>>,
     heights: Buffer,
+    bind_group: KeptBindGroup,
 }
 
 /// This frame's pools: their buffers, and a bind group and texel grid per dispatch.
@@ -128,6 +130,7 @@ fn prepare_waters(
             uniform: UniformBuffer::default(),
             images: StorageBuffer::default(),
             heights: super::render::texel_buffer(&device, "caustic_pool_water_heights", texels, 1),
+            bind_group: KeptBindGroup::default(),
         };
         let buffers = waters.buffers.entry(water.entity).or_insert_with(new);
         if buffers.texels != texels {
@@ -135,14 +138,22 @@ fn prepare_waters(
         }
         water.uniform.vertex = vertices.layout;
         write_waves(&mut buffers.uniform, &mut buffers.images, (water.uniform, std::mem::take(&mut water.images)), (&device, &queue));
-        let (Some(uniform), Some(images)) = (buffers.uniform.binding(), buffers.images.binding()) else {
+        let (Some(uniform), Some(images)) = (buffers.uniform.buffer(), buffers.images.buffer()) else {
             continue;
         };
-        let bind_group = device.create_bind_group(
-            "pool_water_bind_group",
-            &layout,
-            &BindGroupEntries::with_indices(((0, uniform), (1, images), (3, buffers.heights.as_entire_binding()), (6, BindingResource::Buffer(vertices.binding())))),
-        );
+        let bound = [(&layout).into(), uniform.into(), images.into(), (&buffers.heights).into(), vertices.bound()];
+        let bind_group = buffers.bind_group.get(&bound, || {
+            device.create_bind_group(
+                "pool_water_bind_group",
+                &layout,
+                &BindGroupEntries::with_indices((
+                    (0, uniform.as_entire_binding()),
+                    (1, images.as_entire_binding()),
+                    (3, buffers.heights.as_entire_binding()),
+                    (6, BindingResource::Buffer(vertices.binding())),
+                )),
+            )
+        });
         waters.dispatches.push((bind_group, UVec2::new(water.uniform.columns, water.uniform.rows)));
     }
 }

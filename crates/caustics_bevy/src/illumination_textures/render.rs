@@ -325,6 +325,11 @@ fn prepare_frames(
     let gpu = gpu.as_mut();
     gpu.generation = Some(extracted.generation);
     gpu.dirty = true;
+    if extracted.frames.is_empty() {
+        // Nothing to draw: the GPU memory goes back.
+        (gpu.frames, gpu.receivers) = (Vec::new(), InstancedBvhBuffer::default());
+        return;
+    }
     let receivers = gpu.receivers.write(&extracted.receivers, "caustic_illumination_receivers", &device, &queue);
     let draw_layout = cache.get_bind_group_layout(&pipelines.draw_layout);
     let see_layout = cache.get_bind_group_layout(&pipelines.see_layout);

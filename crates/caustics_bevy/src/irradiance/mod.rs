@@ -19,6 +19,7 @@
 //! before tonemapping) and the prepasses the techniques read receiver points from.
 
 mod composite;
+pub mod kept_bind_group;
 pub mod mesh_bvhs;
 pub mod reference_view;
 

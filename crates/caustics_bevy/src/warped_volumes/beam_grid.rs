@@ -11,6 +11,7 @@ use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
 use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
+use crate::irradiance::kept_bind_group::KeptBindGroup;
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
 use bevy::prelude::*;
@@ -64,6 +65,8 @@ pub(super) struct BeamGridBuffers {
     /// The media and their cells the grid was laid out for.
     layout: Vec<(Mat4, Vec4, UVec4)>,
     deposit: bool,
+    /// The deposit's and the resolve's bind groups, kept while they bind the same.
+    kept: [KeptBindGroup; 2],
 }
 
 /// The deposit's and the resolve's compute pipelines and the march's render pipelines.
@@ -273,6 +276,7 @@ pub(super) fn deposit_beams(
     cache: Res<PipelineCache>,
     recorder: Res<PassRecorder>,
 ) {
+    let grids = &mut *grids;
     let (true, Some(deposit), Some(resolve), Some(cells), Some(fixed), Some(buffer), Some(counters), Some(settings), Some(uniform)) = (
         grids.deposit,
         cache.get_compute_pipeline(pipelines.deposit),
@@ -281,22 +285,36 @@ pub(super) fn deposit_beams(
         grids.fixed.as_ref(),
         volumes.volumes.as_ref(),
         volumes.counters.as_ref(),
-        volumes.settings.binding(),
-        grids.grids.binding(),
+        volumes.settings.buffer(),
+        grids.grids.buffer(),
     ) else {
         return;
     };
     let device = ctx.render_device();
-    let deposit_group = device.create_bind_group(
-        "caustic_shaft_deposit_bind_group",
-        &cache.get_bind_group_layout(&pipelines.deposit_layout),
-        &BindGroupEntries::sequential((buffer.as_entire_binding(), counters.as_entire_binding(), settings, uniform.clone(), fixed.as_entire_binding())),
-    );
-    let resolve_group = device.create_bind_group(
-        "caustic_shaft_resolve_bind_group",
-        &cache.get_bind_group_layout(&pipelines.resolve_layout),
-        &BindGroupEntries::sequential((counters.as_entire_binding(), uniform, fixed.as_entire_binding(), cells.as_entire_binding())),
-    );
+    let layout = cache.get_bind_group_layout(&pipelines.deposit_layout);
+    let bound = [(&layout).into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into()];
+    let deposit_group = grids.kept[0].get(&bound, || {
+        device.create_bind_group(
+            "caustic_shaft_deposit_bind_group",
+            &layout,
+            &BindGroupEntries::sequential((
+                buffer.as_entire_binding(),
+                counters.as_entire_binding(),
+                settings.as_entire_binding(),
+                uniform.as_entire_binding(),
+                fixed.as_entire_binding(),
+            )),
+        )
+    });
+    let layout = cache.get_bind_group_layout(&pipelines.resolve_layout);
+    let bound = [(&layout).into(), counters.into(), uniform.into(), fixed.into(), cells.into()];
+    let resolve_group = grids.kept[1].get(&bound, || {
+        device.create_bind_group(
+            "caustic_shaft_resolve_bind_group",
+            &layout,
+            &BindGroupEntries::sequential((counters.as_entire_binding(), uniform.as_entire_binding(), fixed.as_entire_binding(), cells.as_entire_binding())),
+        )
+    });
     // At most one workgroup for four volumes the buffer holds (`VOLUME_LANES`), and 64
     // cells a workgroup; each strides over the rest.
     let deposit_groups = volumes.capacity().div_ceil(4).clamp(1, 65535) as u32;

@@ -27,6 +27,7 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue},
 };
 use caustics_core::glam;
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
@@ -173,6 +174,7 @@ struct GeneratorBuffers {
     indices: [Buffer; 4],
     copy: Option<Buffer>,
     rays: Buffer,
+    bind_group: KeptBindGroup,
 }
 
 /// A job's dispatch: its generator's bind group, its uniform offset, its vertices and
@@ -270,6 +272,7 @@ impl GeneratorBuffers {
                 usage: BufferUsages::STORAGE,
                 mapped_at_creation: false,
             }),
+            bind_group: KeptBindGroup::default(),
         }
     }
 
@@ -408,24 +411,30 @@ pub(super) fn prepare_build(
         return;
     };
     let layout = cache.get_bind_group_layout(&pipelines.layout);
+    let Some(jobs_buffer) = build.jobs.buffer().cloned() else { return };
     for (entity, offset, counts) in planned {
-        let (Some(g), Some(vertices)) = (build.generators.get(&entity), vertex_bindings.get(&entity)) else { continue };
-        let bind_group = device.create_bind_group(
-            "caustic_volume_build_bind_group",
-            &layout,
-            &BindGroupEntries::with_indices((
-                (0, jobs.clone()),
-                (1, BindingResource::Buffer(vertices.binding())),
-                (3, g.indices[0].as_entire_binding()),
-                (4, g.indices[1].as_entire_binding()),
-                (5, g.indices[2].as_entire_binding()),
-                (6, g.indices[3].as_entire_binding()),
-                (7, g.rays.as_entire_binding()),
-                (8, volumes.as_entire_binding()),
-                (9, counters.as_entire_binding()),
-                (14, occluders.as_entire_binding()),
-            )),
-        );
+        let (Some(g), Some(vertices)) = (build.generators.get_mut(&entity), vertex_bindings.get(&entity)) else { continue };
+        let [a, b, c, d] = g.indices.each_ref().map(Bound::from);
+        let bound = [(&layout).into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
+        let (indices, rays) = (&g.indices, &g.rays);
+        let bind_group = g.bind_group.get(&bound, || {
+            device.create_bind_group(
+                "caustic_volume_build_bind_group",
+                &layout,
+                &BindGroupEntries::with_indices((
+                    (0, jobs.clone()),
+                    (1, BindingResource::Buffer(vertices.binding())),
+                    (3, indices[0].as_entire_binding()),
+                    (4, indices[1].as_entire_binding()),
+                    (5, indices[2].as_entire_binding()),
+                    (6, indices[3].as_entire_binding()),
+                    (7, rays.as_entire_binding()),
+                    (8, volumes.as_entire_binding()),
+                    (9, counters.as_entire_binding()),
+                    (14, occluders.as_entire_binding()),
+                )),
+            )
+        });
         build.dispatches.push(Dispatch { bind_group, offset, vertices: counts.x, triangles: counts.y });
     }
 }

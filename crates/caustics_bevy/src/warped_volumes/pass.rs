@@ -157,33 +157,14 @@ pub(super) fn surface_pass(
 ) {
     let (targets, view) = view.into_inner();
     let multisampled = view.2.multisampled as usize;
-    let (false, Some(copy), Some(splat), Some(resolve), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
+    let (false, Some(copy), Some(splat), Some(resolve)) = (
         draw.buffers.empty,
         draw.cache.get_render_pipeline(surface.depth_copy[multisampled]),
         draw.cache.get_compute_pipeline(surface.splat[multisampled]),
         draw.cache.get_render_pipeline(surface.resolve),
-        view.3.normal_view(),
-        draw.view_uniforms.uniforms.binding(),
-        draw.buffers.volumes.as_ref(),
-        draw.buffers.counters.as_ref(),
-        draw.buffers.settings.binding(),
     ) else {
         return;
     };
-    let splat_group = ctx.render_device().create_bind_group(
-        "caustic_volumes_splat_bind_group",
-        &draw.cache.get_bind_group_layout(&surface.splat_layouts[multisampled]),
-        &BindGroupEntries::sequential((
-            view_binding,
-            volumes.as_entire_binding(),
-            settings,
-            &targets.centre.default_view,
-            normal,
-            counters.as_entire_binding(),
-            targets.splatted.as_entire_binding(),
-            targets.large.as_entire_binding(),
-        )),
-    );
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
@@ -217,7 +198,7 @@ pub(super) fn surface_pass(
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volumes_splat"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volumes_splat");
     pass.set_pipeline(splat);
-    pass.set_bind_group(0, &splat_group, &[view.4.offset]);
+    pass.set_bind_group(0, &targets.splat_bind_group, &[view.4.offset]);
     pass.dispatch_workgroups(across as u32, groups.div_ceil(across) as u32, 1);
     span.end(&mut pass);
     drop(pass);

@@ -8,6 +8,7 @@ use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
+use crate::irradiance::kept_bind_group::KeptBindGroup;
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
 use bevy::prelude::*;
@@ -105,7 +106,13 @@ pub(super) struct WordsReadback {
     staging: Option<Buffer>,
     reading: Arc<AtomicBool>,
     copied: bool,
+    /// Frames since the last copy with none being read.
+    idle: u8,
 }
+
+/// Frames without a copy after which the staging buffer goes: a source copied every
+/// other frame (while the last copy is read) keeps it.
+const IDLE_FRAMES: u8 = 4;
 
 impl WordsReadback {
     /// Copies the first `words` of `source` for reading after this frame, unless a copy
@@ -119,16 +126,20 @@ impl WordsReadback {
             device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false })
         });
         encoder.copy_buffer_to_buffer(source, 0, staging, 0, size);
-        self.copied = true;
+        (self.copied, self.idle) = (true, 0);
         true
     }
 
     /// After this frame's commands went in: hands the words copied this frame to `read`
-    /// once mapped. With none copied and none being read, the staging buffer goes.
+    /// once mapped. After [`IDLE_FRAMES`] frames with none copied and none being read,
+    /// the staging buffer goes.
     pub fn read_back(&mut self, read: impl FnOnce(&[u32]) + Send + 'static) {
         let (true, Some(staging)) = (std::mem::take(&mut self.copied), self.staging.clone()) else {
             if !self.reading.load(Ordering::Acquire) {
-                self.staging = None;
+                self.idle = self.idle.saturating_add(1);
+                if self.idle >= IDLE_FRAMES {
+                    self.staging = None;
+                }
             }
             return;
         };
@@ -204,6 +215,11 @@ pub(super) struct ViewSurfaceTargets {
     pub large: Buffer,
     /// Reads `splatted` into the irradiance buffer.
     pub resolve_bind_group: BindGroup,
+    /// `splat`'s: the view, the volumes and settings, `centre`, the normal prepass,
+    /// the counters, `splatted` and `large`.
+    pub splat_bind_group: BindGroup,
+    /// The three bind groups above, kept while they bind the same.
+    kept: [KeptBindGroup; 3],
 }
 
 /// Fixed-point units of `splat`'s light per unit of exposed irradiance: a pixel holds
@@ -649,7 +665,7 @@ fn warm_pipelines(
 #[expect(clippy::too_many_arguments)]
 fn prepare_shaft_textures(
     mut commands: Commands,
-    views: Query<(Entity, &ExtractedCamera), With<ViewSeesMedium>>,
+    views: Query<(Entity, &ExtractedCamera, Option<&ViewShafts>), With<ViewSeesMedium>>,
     others: Query<Entity, (With<ViewShafts>, Without<ViewSeesMedium>)>,
     extracted: Res<ExtractedVolumeSettings>,
     upsample: Res<ShaftUpsamplePipeline>,
@@ -661,7 +677,7 @@ fn prepare_shaft_textures(
         commands.entity(entity).remove::<ViewShafts>();
     }
     let scale = extracted.0.shaft_scale();
-    for (entity, camera) in &views {
+    for (entity, camera, shafts) in &views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0 && scale > 1) else {
             commands.entity(entity).remove::<ViewShafts>();
             continue;
@@ -679,11 +695,15 @@ fn prepare_shaft_textures(
                 view_formats: &[],
             },
         );
-        let bind_group = device.create_bind_group(
-            "caustic_shafts_bind_group",
-            &cache.get_bind_group_layout(&upsample.layout),
-            &BindGroupEntries::sequential((&texture.default_view, &upsample.sampler)),
-        );
+        // Kept while the texture cache hands the view the same texture.
+        let bind_group = match shafts.filter(|s| s.texture.default_view.id() == texture.default_view.id()) {
+            Some(shafts) => shafts.bind_group.clone(),
+            None => device.create_bind_group(
+                "caustic_shafts_bind_group",
+                &cache.get_bind_group_layout(&upsample.layout),
+                &BindGroupEntries::sequential((&texture.default_view, &upsample.sampler)),
+            ),
+        };
         commands.entity(entity).insert(ViewShafts { texture, scale, bind_group });
     }
 }
@@ -708,12 +728,18 @@ fn prepare_surface_targets(
         commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
     for (entity, irradiance, prepass, msaa, targets) in &views {
-        let (Some(depth), Some(normal), Some(_), Some(view_binding)) =
-            (prepass.depth_view(), prepass.normal_view(), buffers.volumes.as_ref().filter(|_| !buffers.empty), view_uniforms.uniforms.binding())
-        else {
+        let (Some(depth), Some(normal), Some(volumes), Some(counters), Some(settings), Some(view_buffer)) = (
+            prepass.depth_view(),
+            prepass.normal_view(),
+            buffers.volumes.as_ref().filter(|_| !buffers.empty),
+            buffers.counters.as_ref(),
+            buffers.settings.buffer(),
+            view_uniforms.uniforms.buffer(),
+        ) else {
             commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
         };
+        let view_binding = || BindingResource::Buffer(BufferBinding { buffer: view_buffer, offset: 0, size: Some(ViewUniform::min_size()) });
         let mut target = |label, format, usage| {
             let size = irradiance.texture.texture.size();
             let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
@@ -721,11 +747,12 @@ fn prepare_surface_targets(
         };
         let texture = target("caustic_receiver_depth", RECEIVER_DEPTH_FORMAT, TextureUsages::RENDER_ATTACHMENT);
         let centre = target("caustic_receiver_centre", RECEIVER_CENTRE_FORMAT, TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING);
-        let depth_bind_group = device.create_bind_group(
-            "caustic_receiver_depth_bind_group",
-            &cache.get_bind_group_layout(&pipelines.depth_layouts[(msaa.samples() > 1) as usize]),
-            &BindGroupEntries::sequential((view_binding.clone(), depth, normal)),
-        );
+        let multisampled = (msaa.samples() > 1) as usize;
+        let [mut kept_depth, mut kept_resolve, mut kept_splat] = targets.map(|t| t.kept.clone()).unwrap_or_default();
+        let layout = cache.get_bind_group_layout(&pipelines.depth_layouts[multisampled]);
+        let depth_bind_group = kept_depth.get(&[(&layout).into(), view_buffer.into(), depth.into(), normal.into()], || {
+            device.create_bind_group("caustic_receiver_depth_bind_group", &layout, &BindGroupEntries::sequential((view_binding(), depth, normal)))
+        });
         let pixels = u64::from(irradiance.region().1.element_product());
         let splatted_size = 3 * 4 * pixels.max(1);
         let large_size = 4 * (FIRST_LARGE + buffers.capacity());
@@ -738,12 +765,40 @@ fn prepare_surface_targets(
             Some(t) => t.large.clone(),
             None => buffer("caustic_volumes_large", large_size, BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC),
         };
-        let resolve_bind_group = device.create_bind_group(
-            "caustic_volumes_resolve_bind_group",
-            &cache.get_bind_group_layout(&pipelines.resolve_layout),
-            &BindGroupEntries::sequential((view_binding, splatted.as_entire_binding())),
-        );
-        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group });
+        let layout = cache.get_bind_group_layout(&pipelines.resolve_layout);
+        let resolve_bind_group = kept_resolve.get(&[(&layout).into(), view_buffer.into(), (&splatted).into()], || {
+            device.create_bind_group("caustic_volumes_resolve_bind_group", &layout, &BindGroupEntries::sequential((view_binding(), splatted.as_entire_binding())))
+        });
+        let layout = cache.get_bind_group_layout(&pipelines.splat_layouts[multisampled]);
+        let bound = [
+            (&layout).into(),
+            view_buffer.into(),
+            volumes.into(),
+            settings.into(),
+            (&centre.default_view).into(),
+            normal.into(),
+            counters.into(),
+            (&splatted).into(),
+            (&large).into(),
+        ];
+        let splat_bind_group = kept_splat.get(&bound, || {
+            device.create_bind_group(
+                "caustic_volumes_splat_bind_group",
+                &layout,
+                &BindGroupEntries::sequential((
+                    view_binding(),
+                    volumes.as_entire_binding(),
+                    settings.as_entire_binding(),
+                    &centre.default_view,
+                    normal,
+                    counters.as_entire_binding(),
+                    splatted.as_entire_binding(),
+                    large.as_entire_binding(),
+                )),
+            )
+        });
+        let kept = [kept_depth, kept_resolve, kept_splat];
+        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, kept });
     }
 }
 

@@ -1,0 +1,57 @@
+//! Bind groups kept across frames. A pass that binds the same buffers and views frame
+//! after frame (their contents rewritten in place) makes its bind group once, and again
+//! only when one of them is replaced: creating a bind group is a driver call and
+//! validation on the render thread, every frame, for every pass.
+
+use bevy::render::render_resource::{BindGroup, BindGroupLayout, BindGroupLayoutId, Buffer, BufferId, TextureView, TextureViewId};
+
+/// What a bind group binds, by identity.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bound {
+    Layout(BindGroupLayoutId),
+    Buffer(BufferId),
+    /// Part of a buffer: its offset and size in bytes.
+    Slice(BufferId, u64, u64),
+    View(TextureViewId),
+}
+
+impl From<&BindGroupLayout> for Bound {
+    fn from(layout: &BindGroupLayout) -> Self {
+        Self::Layout(layout.id())
+    }
+}
+
+impl From<&Buffer> for Bound {
+    fn from(buffer: &Buffer) -> Self {
+        Self::Buffer(buffer.id())
+    }
+}
+
+impl From<&TextureView> for Bound {
+    fn from(view: &TextureView) -> Self {
+        Self::View(view.id())
+    }
+}
+
+/// A bind group and what it was made from.
+#[derive(Clone, Default)]
+pub struct KeptBindGroup {
+    bound: Vec<Bound>,
+    bind_group: Option<BindGroup>,
+}
+
+impl KeptBindGroup {
+    /// The bind group of `bound` (its layout and every buffer and view, in any fixed
+    /// order): the one kept if it binds the same, else `make`'s.
+    pub fn get(&mut self, bound: &[Bound], make: impl FnOnce() -> BindGroup) -> BindGroup {
+        match &self.bind_group {
+            Some(bind_group) if self.bound == bound => bind_group.clone(),
+            _ => {
+                let bind_group = make();
+                self.bound = bound.to_vec();
+                self.bind_group = Some(bind_group.clone());
+                bind_group
+            }
+        }
+    }
+}
