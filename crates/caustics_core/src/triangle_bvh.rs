@@ -97,33 +97,13 @@ impl MeshBvh {
     /// The closest triangle along `origin + t·dir` with `t` in `(t_min, t_max)`: `(t,
     /// triangle, (u, v))`.
     fn closest(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, usize, Vec2)> {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let inv = dir.recip();
         let mut closest = None;
-        let mut t_far = t_max;
-        let mut stack = [0u32; STACK_DEPTH];
-        let mut len = 1;
-        while len > 0 {
-            len -= 1;
-            let node = self.nodes[stack[len] as usize];
-            if !slab(origin, inv, &node, t_min, t_far) {
-                continue;
+        walk(&self.nodes, origin, dir, t_min, t_max, |i, t_far| {
+            if let Some((t, uv)) = möller_trumbore(&self.triangles[i as usize], origin, dir, t_min, *t_far) {
+                *t_far = t;
+                closest = Some((t, i as usize, uv));
             }
-            if node.count > 0 {
-                for i in node.first..node.first + node.count {
-                    if let Some((t, uv)) = möller_trumbore(&self.triangles[i as usize], origin, dir, t_min, t_far) {
-                        t_far = t;
-                        closest = Some((t, i as usize, uv));
-                    }
-                }
-            } else if len + 2 <= STACK_DEPTH {
-                stack[len] = node.first;
-                stack[len + 1] = node.first + 1;
-                len += 2;
-            }
-        }
+        });
         closest
     }
 
@@ -301,43 +281,52 @@ impl InstancedBvh {
     /// The closest hit along `origin + t·dir` with `t` in `(t_min, t_max)`, passing
     /// through the instances of mesh index `skip` ([`NO_MESH`]: none).
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, skip: u32) -> Option<GeneratorHit> {
-        if self.instances.is_empty() {
-            return None;
-        }
-        let inv = dir.recip();
         let mut closest: Option<(f32, usize, usize, Vec2)> = None;
-        let mut t_far = t_max;
-        let mut stack = [0u32; STACK_DEPTH];
-        let mut len = 1;
-        while len > 0 {
-            len -= 1;
-            let node = self.top[stack[len] as usize];
-            if !slab(origin, inv, &node, t_min, t_far) {
-                continue;
+        walk(&self.top, origin, dir, t_min, t_max, |k, t_far| {
+            let instance = &self.instances[k as usize];
+            if instance.ids[2] == skip {
+                return;
             }
-            if node.count > 0 {
-                for k in node.first..node.first + node.count {
-                    let instance = &self.instances[k as usize];
-                    if instance.ids[2] == skip {
-                        continue;
-                    }
-                    let mesh = &self.meshes[self.instance_meshes[k as usize]];
-                    if let Some((t, i, uv)) = mesh.closest(instance.point(origin), instance.direction(dir), t_min, t_far) {
-                        t_far = t;
-                        closest = Some((t, k as usize, i, uv));
-                    }
-                }
-            } else if len + 2 <= STACK_DEPTH {
-                stack[len] = node.first;
-                stack[len + 1] = node.first + 1;
-                len += 2;
+            let mesh = &self.meshes[self.instance_meshes[k as usize]];
+            if let Some((t, i, uv)) = mesh.closest(instance.point(origin), instance.direction(dir), t_min, *t_far) {
+                *t_far = t;
+                closest = Some((t, k as usize, i, uv));
             }
-        }
+        });
         let (t, k, i, uv) = closest?;
         let instance = &self.instances[k];
         let (normal, geometric) = self.meshes[self.instance_meshes[k]].normals_at(i, uv);
         let geometric = instance.normal(geometric) * if instance.ids[3] & MIRRORED != 0 { -1.0 } else { 1.0 };
         Some(GeneratorHit::new(t, instance.ids[2], instance.normal(normal), geometric))
+    }
+}
+
+/// Walks `nodes` (a BVH laid out by [`build_nodes`]) with a stack, as
+/// `triangle_bvh.wgsl` does at either level: each item of each leaf whose box the ray
+/// meets within `(t_min, t_far)` goes to `item`, which may shorten `t_far` to its hit.
+fn walk(nodes: &[BvhNode], origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, mut item: impl FnMut(u32, &mut f32)) {
+    if nodes.is_empty() {
+        return;
+    }
+    let inv = dir.recip();
+    let mut t_far = t_max;
+    let mut stack = [0u32; STACK_DEPTH];
+    let mut len = 1;
+    while len > 0 {
+        len -= 1;
+        let node = nodes[stack[len] as usize];
+        if !slab(origin, inv, &node, t_min, t_far) {
+            continue;
+        }
+        if node.count > 0 {
+            for i in node.first..node.first + node.count {
+                item(i, &mut t_far);
+            }
+        } else if len + 2 <= STACK_DEPTH {
+            stack[len] = node.first;
+            stack[len + 1] = node.first + 1;
+            len += 2;
+        }
     }
 }
 

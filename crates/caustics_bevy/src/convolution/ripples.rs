@@ -25,6 +25,8 @@ pub struct PoolSurface {
     settings: PoolRipples,
     ripples: Ripples,
     heightfield: Heightfield,
+    /// `heightfield` is flat: evaluated with no live impulse.
+    flat: bool,
     kernels: PoolKernels,
 }
 
@@ -110,7 +112,7 @@ impl PoolSurface {
         let (columns, rows) = (pool.columns as usize, pool.rows as usize);
         let ripples = Ripples::new(columns, rows, pool.cell_size, pool.waves()).map_err(|e| e.to_string())?;
         let heightfield = Heightfield::flat(columns, rows, pool.cell_size).map_err(|e| e.to_string())?;
-        Ok(Self { settings: pool.clone(), ripples, heightfield, kernels: PoolKernels::new(pool, 1.333, Vec3::NEG_Y)? })
+        Ok(Self { settings: pool.clone(), ripples, heightfield, flat: true, kernels: PoolKernels::new(pool, 1.333, Vec3::NEG_Y)? })
     }
 }
 
@@ -287,12 +289,14 @@ fn animate_pools(mut commands: Commands, time: Res<Time>, gpu: Option<Res<WaterO
         if was_on_gpu {
             commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();
         }
-        let was_still = surface.heightfield.heights().iter().all(|&h| h == 0.0);
-        if !moving && was_still && has_grid && !was_on_gpu {
+        if !moving && surface.flat && has_grid && !was_on_gpu {
             continue;
         }
         surface.heightfield = match surface.ripples.heightfield(now) {
-            Ok(heightfield) => heightfield,
+            Ok(heightfield) => {
+                surface.flat = !moving;
+                heightfield
+            }
             Err(e) => {
                 warn!("bevy_caustics: the water of the pool {entity} is stilled: {e}");
                 if let Ok(still) = PoolSurface::new(&surface.settings.clone()) {
