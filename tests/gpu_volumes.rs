@@ -395,6 +395,15 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert_eq!(renderer.world_mut().resource::<CausticVolumes>().stats.volumes, 2 * 16 * 16);
     assert_eq!(renderer.pass_report().views("volumes"), 1, "{:?}", renderer.pass_report());
 
+    // The sun despawned: no light, no volumes.
+    let world = renderer.world_mut();
+    let suns: Vec<Entity> = world.query_filtered::<Entity, With<DirectionalLight>>().iter(world).collect();
+    for sun in suns {
+        renderer.world_mut().despawn(sun);
+    }
+    render(&mut renderer, 3);
+    assert_eq!(renderer.pass_report().views("volumes"), 0, "a despawned light casts no caustics: {:?}", renderer.pass_report());
+
     // No generators at all: no volume pass.
     renderer.world_mut().entity_mut(generator).remove::<CausticGenerator>();
     render(&mut renderer, 3);

@@ -223,7 +223,8 @@ impl Topology {
 }
 
 /// Gathers the build's sources again when a generator, light, receiver, shadow caster
-/// or the settings changed, or a generator's or occluder's mesh asset was modified.
+/// or the settings changed or went away, or a generator's or occluder's mesh asset was
+/// modified.
 /// Receivers, shadow casters and the other generators hide generator vertices from
 /// the light and end their rays: they are placed again only when one of them changed,
 /// over their meshes' BVHs ([`MeshBvhs`]), which are built again only when a mesh
@@ -238,7 +239,12 @@ fn gather_sources(
     changed_occluders: Query<(), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
     mut removed: RemovedComponents<CausticTechniqueChoice>,
     mut removed_invalid: RemovedComponents<InvalidCausticParams>,
-    (mut removed_meshes, mut removed_receivers, mut removed_moving): (RemovedComponents<Mesh3d>, RemovedComponents<CausticReceiver>, RemovedComponents<MovesOnGpu>),
+    (mut removed_meshes, mut removed_receivers, mut removed_moving, mut removed_lights): (
+        RemovedComponents<Mesh3d>,
+        RemovedComponents<CausticReceiver>,
+        RemovedComponents<MovesOnGpu>,
+        (RemovedComponents<DirectionalLight>, RemovedComponents<PointLight>, RemovedComponents<SpotLight>),
+    ),
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
@@ -269,7 +275,9 @@ fn gather_sources(
         || removed_meshes.read().count() > 0
         || removed_receivers.read().count() > 0
         || (several_generators && generators_changed);
-    if !(occluders_changed || generators_changed || settings.is_changed() || !changed_lights.is_empty()) {
+    // A light despawned (or its light component taken off) shines no more.
+    let lights_removed = removed_lights.0.read().count() + removed_lights.1.read().count() + removed_lights.2.read().count() > 0;
+    if !(occluders_changed || generators_changed || settings.is_changed() || lights_removed || !changed_lights.is_empty()) {
         return;
     }
     sources.settings = settings.core();
