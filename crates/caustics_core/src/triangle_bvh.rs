@@ -188,11 +188,13 @@ impl InstancedBvh {
     /// shared by [`Arc`] are laid out once.
     pub fn new(placed: impl IntoIterator<Item = (Arc<MeshBvh>, Mat4, u32)>) -> Self {
         let mut meshes: Vec<Arc<MeshBvh>> = Vec::new();
+        // Each distinct mesh's place in `meshes`, by its allocation.
+        let mut laid_out: std::collections::HashMap<*const MeshBvh, usize> = std::collections::HashMap::new();
         let mut placed: Vec<(BvhInstance, (Vec3, Vec3))> = placed
             .into_iter()
             .filter(|(bvh, world_from_local, _)| !bvh.nodes.is_empty() && world_from_local.is_finite() && world_from_local.determinant() != 0.0)
             .map(|(bvh, world_from_local, index)| {
-                let mesh = meshes.iter().position(|m| Arc::ptr_eq(m, &bvh)).unwrap_or_else(|| {
+                let mesh = *laid_out.entry(Arc::as_ptr(&bvh)).or_insert_with(|| {
                     meshes.push(bvh.clone());
                     meshes.len() - 1
                 });

@@ -69,7 +69,6 @@ pub(super) struct Topology {
 /// no generator's build passes through it.
 pub(super) const SHADOW_CASTER: u32 = u32::MAX - 1;
 
-
 /// One generator the volumes draw, as its build reads it.
 #[derive(Clone)]
 pub(super) struct VolumeGenerator {

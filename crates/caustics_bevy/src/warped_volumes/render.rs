@@ -728,18 +728,18 @@ fn prepare_surface_targets(
         commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
     for (entity, irradiance, prepass, msaa, targets) in &views {
-        let (Some(depth), Some(normal), Some(volumes), Some(counters), Some(settings), Some(view_buffer)) = (
+        let (Some(depth), Some(normal), Some(volumes), Some(counters), Some(settings), Some(view_buffer), Some(view_binding)) = (
             prepass.depth_view(),
             prepass.normal_view(),
             buffers.volumes.as_ref().filter(|_| !buffers.empty),
             buffers.counters.as_ref(),
             buffers.settings.buffer(),
             view_uniforms.uniforms.buffer(),
+            view_uniforms.uniforms.binding(),
         ) else {
             commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
         };
-        let view_binding = || BindingResource::Buffer(BufferBinding { buffer: view_buffer, offset: 0, size: Some(ViewUniform::min_size()) });
         let mut target = |label, format, usage| {
             let size = irradiance.texture.texture.size();
             let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
@@ -751,7 +751,7 @@ fn prepare_surface_targets(
         let [mut kept_depth, mut kept_resolve, mut kept_splat] = targets.map(|t| t.kept.clone()).unwrap_or_default();
         let layout = cache.get_bind_group_layout(&pipelines.depth_layouts[multisampled]);
         let depth_bind_group = kept_depth.get(&[(&layout).into(), view_buffer.into(), depth.into(), normal.into()], || {
-            device.create_bind_group("caustic_receiver_depth_bind_group", &layout, &BindGroupEntries::sequential((view_binding(), depth, normal)))
+            device.create_bind_group("caustic_receiver_depth_bind_group", &layout, &BindGroupEntries::sequential((view_binding.clone(), depth, normal)))
         });
         let pixels = u64::from(irradiance.region().1.element_product());
         let splatted_size = 3 * 4 * pixels.max(1);
@@ -767,7 +767,7 @@ fn prepare_surface_targets(
         };
         let layout = cache.get_bind_group_layout(&pipelines.resolve_layout);
         let resolve_bind_group = kept_resolve.get(&[(&layout).into(), view_buffer.into(), (&splatted).into()], || {
-            device.create_bind_group("caustic_volumes_resolve_bind_group", &layout, &BindGroupEntries::sequential((view_binding(), splatted.as_entire_binding())))
+            device.create_bind_group("caustic_volumes_resolve_bind_group", &layout, &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())))
         });
         let layout = cache.get_bind_group_layout(&pipelines.splat_layouts[multisampled]);
         let bound = [
@@ -786,7 +786,7 @@ fn prepare_surface_targets(
                 "caustic_volumes_splat_bind_group",
                 &layout,
                 &BindGroupEntries::sequential((
-                    view_binding(),
+                    view_binding.clone(),
                     volumes.as_entire_binding(),
                     settings.as_entire_binding(),
                     &centre.default_view,
