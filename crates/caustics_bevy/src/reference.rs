@@ -3,7 +3,10 @@
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
-use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance, ParticipatingMedium};
+use crate::mesh_vertices::MovesOnGpu;
+use crate::technique::CausticTechniqueChoice;
+use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium};
+use bevy::ecs::system::SystemParam;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Aabb;
 use bevy::camera::{Exposure, RenderTarget};
@@ -53,6 +56,85 @@ pub fn blocks_caustic_light(visible: &InheritedVisibility, receiver: bool, no_sh
 
 /// Any of Bevy's lights.
 pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
+
+type LightChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<DirectionalLight>,
+    Changed<PointLight>,
+    Changed<SpotLight>,
+    Changed<InheritedVisibility>,
+)>;
+type OccluderChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<Aabb>,
+    Changed<Mesh3d>,
+    Changed<InheritedVisibility>,
+    Added<CausticReceiver>,
+    Added<bevy::light::NotShadowCaster>,
+)>;
+type GeneratorChanged = Or<(
+    Changed<GlobalTransform>,
+    Changed<Mesh3d>,
+    Changed<CausticGenerator>,
+    Changed<CausticTechniqueChoice>,
+    Changed<InheritedVisibility>,
+    Added<MovesOnGpu>,
+)>;
+
+/// What changed in the scene the techniques read since the system holding this last
+/// ran, from Bevy's change detection and removals: generators, meshes that receive or
+/// block caustic light, lights. A technique gathers its inputs again only when one did,
+/// instead of walking every caster each frame to compare.
+#[derive(SystemParam)]
+pub struct SceneChanges<'w, 's> {
+    generators: Query<'w, 's, (), (With<CausticGenerator>, GeneratorChanged)>,
+    generator_bounds: Query<'w, 's, (), (With<CausticGenerator>, Changed<Aabb>)>,
+    occluders: Query<'w, 's, (), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
+    lights: Query<'w, 's, (), (AnyLight, LightChanged)>,
+    removed_generators: (RemovedComponents<'w, 's, CausticTechniqueChoice>, RemovedComponents<'w, 's, InvalidCausticParams>, RemovedComponents<'w, 's, MovesOnGpu>),
+    removed_occluders: (RemovedComponents<'w, 's, Mesh3d>, RemovedComponents<'w, 's, CausticReceiver>, RemovedComponents<'w, 's, bevy::light::NotShadowCaster>),
+    removed_lights: (RemovedComponents<'w, 's, DirectionalLight>, RemovedComponents<'w, 's, PointLight>, RemovedComponents<'w, 's, SpotLight>),
+}
+
+/// Which parts of the scene [`SceneChanges::read`] found changed.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ChangedParts {
+    /// A generator moved, changed, was added or went away (or its choice or validity).
+    pub generators: bool,
+    /// A generator's bounds changed: its mesh loaded, or a surface moved on the GPU
+    /// (`Ocean`, `PoolRipples`) was given bounds for its new waves.
+    pub generator_bounds: bool,
+    /// A mesh that is not a generator moved, changed, came, went, or began or stopped
+    /// receiving caustics or casting shadows.
+    pub occluders: bool,
+    /// A light moved, changed, came or went.
+    pub lights: bool,
+}
+
+impl ChangedParts {
+    /// Whether anything changed.
+    pub fn any(self) -> bool {
+        self.generators || self.generator_bounds || self.occluders || self.lights
+    }
+}
+
+impl SceneChanges<'_, '_> {
+    /// What changed since the last call, consuming the removals seen so far.
+    pub fn read(&mut self) -> ChangedParts {
+        let (a, b, c) = &mut self.removed_generators;
+        let removed_generators = a.read().count() + b.read().count() + c.read().count() > 0;
+        let (a, b, c) = &mut self.removed_occluders;
+        let removed_occluders = a.read().count() + b.read().count() + c.read().count() > 0;
+        let (a, b, c) = &mut self.removed_lights;
+        let removed_lights = a.read().count() + b.read().count() + c.read().count() > 0;
+        ChangedParts {
+            generators: removed_generators || !self.generators.is_empty(),
+            generator_bounds: !self.generator_bounds.is_empty(),
+            occluders: removed_occluders || !self.occluders.is_empty(),
+            lights: removed_lights || !self.lights.is_empty(),
+        }
+    }
+}
 
 /// The direction an entity faces (its −Z) under `transform`, zero when the transform
 /// has none (a zero scale): `GlobalTransform::forward` would panic there.

@@ -7,7 +7,7 @@ use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::reference::{
-    AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb,
+    AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb,
 };
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
@@ -111,7 +111,8 @@ fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Asse
 }
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the
-/// generation when the plan, or a mesh it draws, changed. The shadow test that leaves
+/// generation when the plan, or a mesh it draws, changed. The plan is made again only
+/// when change detection says a generator, occluder, light, mesh or the settings did. The shadow test that leaves
 /// out generators in full shadow casts a ray from every generator vertex, so it runs
 /// once the plan has held still for a frame, never while anything moves: a moving
 /// scene keeps every generator, and the photon kernel drops what the occluders hide.
@@ -120,6 +121,7 @@ fn plan_caustic_maps(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     lights: Query<LightComponents, AnyLight>,
+    mut changes: SceneChanges,
     settings: Res<HierarchicalMapsSettings>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
@@ -146,6 +148,15 @@ fn plan_caustic_maps(
         }
     };
     // Generation 0 until it is planned: `planned` keeps what the last plan was made of.
+    let used: HashSet<AssetId<Mesh>> = planned.generators.iter().chain(&planned.occluders).map(|i| i.mesh).collect();
+    let mesh_changed = mesh_events.read().any(|e| match e {
+        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
+        _ => false,
+    });
+    if !(changes.read().any() || mesh_changed || settings.is_changed()) && *shadows_tested {
+        active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
+        return;
+    }
     let mut next = CausticMapPlan { settings: Some(core_settings), ..default() };
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
     let traced = core_settings.paths == PhotonPaths::Traced;
@@ -204,11 +215,6 @@ fn plan_caustic_maps(
             core_lights.push(light);
         }
     }
-    let used: HashSet<AssetId<Mesh>> = next.generators.iter().chain(&next.occluders).map(|i| i.mesh).collect();
-    let mesh_changed = mesh_events.read().any(|e| match e {
-        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
-        _ => false,
-    });
     let changed = mesh_changed || next != *planned;
     if changed {
         *planned = next.clone();

@@ -7,7 +7,7 @@ use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh};
+use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, core_mesh};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -134,6 +134,7 @@ fn set_up_planes(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     lights: Query<LightComponents, AnyLight>,
+    mut changes: SceneChanges,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<IlluminationTexturesSettings>,
@@ -156,30 +157,7 @@ fn set_up_planes(
             None
         }
     };
-    let mut next = Inputs { settings: core_settings.map(|_| settings.clone()), ..default() };
-    let mut used = HashSet::new();
-    for (entity, generator, choice, (mesh, transform, visible, _)) in &generators {
-        if choice.technique() != Technique::IlluminationTextures || !visible.get() || core_settings.is_none() {
-            continue;
-        }
-        let Some(ior) = photon_ior(&generator.specular_interaction()) else { continue };
-        used.insert(mesh.id());
-        next.generators.push((entity, mesh.id(), *transform, ior));
-    }
-    if !next.generators.is_empty() {
-        for ((mesh, transform, visible, _), receiver, no_shadows) in &occluders {
-            if blocks_caustic_light(visible, receiver, no_shadows) {
-                used.insert(mesh.id());
-                next.occluders.push((mesh.id(), *transform));
-            }
-        }
-        next.lights = lights
-            .iter()
-            .filter(|(.., visible)| visible.get())
-            .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
-            .filter(|l| l.validate().is_ok())
-            .collect();
-    }
+    let used: HashSet<AssetId<Mesh>> = state.last.generators.iter().map(|g| g.1).chain(state.last.occluders.iter().map(|o| o.0)).collect();
     let mut mesh_changed = false;
     for event in mesh_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } = event {
@@ -187,9 +165,14 @@ fn set_up_planes(
             state.local_meshes.retain(|key, _| key.mesh != *id);
         }
     }
-    if mesh_changed || next != state.last {
-        state.pending = true;
-        state.last = next.clone();
+    // The inputs are read again only when change detection says some may differ.
+    let changed = changes.read();
+    if changed.generators || changed.occluders || changed.lights || settings.is_changed() || mesh_changed {
+        let next = inputs(&generators, &occluders, &lights, core_settings.map(|_| settings.clone()));
+        if mesh_changed || next != state.last {
+            state.pending = true;
+            state.last = next;
+        }
     }
 
     if let Some(task) = state.running.as_mut() {
@@ -242,6 +225,7 @@ fn set_up_planes(
     // The build's inputs: generators in their own frame, receivers in the world's.
     let mut inputs = Vec::new();
     let mut keys = HashSet::new();
+    let next = state.last.clone();
     for &(entity, mesh_id, transform, ior) in &next.generators {
         let Some(mesh) = meshes.get(mesh_id) else { continue };
         let (scale, rotation, translation) = transform.to_scale_rotation_translation();
@@ -297,6 +281,39 @@ fn set_up_planes(
     state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
         clock.time(|| make_frames(inputs, &lights, receivers, &core_settings, (directions, max_bytes, cache_dir)))
     }));
+}
+
+/// The planes' inputs as the scene stands: the generators drawn with illumination
+/// textures, the meshes that block their light and the lights (none of these without
+/// `settings`, the settings when they are valid).
+fn inputs(
+    generators: &Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
+    occluders: &Query<OccluderComponents, Without<CausticGenerator>>,
+    lights: &Query<LightComponents, AnyLight>,
+    settings: Option<IlluminationTexturesSettings>,
+) -> Inputs {
+    let mut next = Inputs { settings, ..default() };
+    for (entity, generator, choice, (mesh, transform, visible, _)) in generators {
+        if choice.technique() != Technique::IlluminationTextures || !visible.get() || next.settings.is_none() {
+            continue;
+        }
+        let Some(ior) = photon_ior(&generator.specular_interaction()) else { continue };
+        next.generators.push((entity, mesh.id(), *transform, ior));
+    }
+    if !next.generators.is_empty() {
+        for ((mesh, transform, visible, _), receiver, no_shadows) in occluders {
+            if blocks_caustic_light(visible, receiver, no_shadows) {
+                next.occluders.push((mesh.id(), *transform));
+            }
+        }
+        next.lights = lights
+            .iter()
+            .filter(|(.., visible)| visible.get())
+            .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
+            .filter(|l| l.validate().is_ok())
+            .collect();
+    }
+    next
 }
 
 /// `settings` with the planes and texture size that the device's limits and the budget

@@ -8,6 +8,7 @@
 use super::{ExtractedReceivers, GpuViewCaustics, ViewCausticIrradiance, ViewCausticWork};
 use crate::components::CausticReceiver;
 use crate::report::PassRecorder;
+use super::kept_bind_group::write_changed;
 use bevy::camera::{MainPassResolutionOverride, Viewport};
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
@@ -357,10 +358,7 @@ pub(super) fn prepare_receiver_bind_groups(
         let texture = image.texture_view.id();
         if let Some(kept) = bind_groups.0.get_mut(entity) {
             if kept.texture == texture {
-                if *kept.uniform.get() != value {
-                    kept.uniform.set(value);
-                    kept.uniform.write_buffer(&device, &queue);
-                }
+                write_changed(&mut kept.uniform, value, &device, &queue);
                 continue;
             }
         }

@@ -1,9 +1,14 @@
-//! Bind groups kept across frames. A pass that binds the same buffers and views frame
-//! after frame (their contents rewritten in place) makes its bind group once, and again
-//! only when one of them is replaced: creating a bind group is a driver call and
-//! validation on the render thread, every frame, for every pass.
+//! Bind groups and uniforms kept across frames. A pass that binds the same buffers and
+//! views frame after frame (their contents rewritten in place) makes its bind group
+//! once, and again only when one of them is replaced: creating a bind group is a driver
+//! call and validation on the render thread, every frame, for every pass. A uniform is
+//! uploaded only when its value changed: each upload is a staging buffer and a copy.
 
-use bevy::render::render_resource::{BindGroup, BindGroupLayout, BindGroupLayoutId, Buffer, BufferId, TextureView, TextureViewId};
+use bevy::render::render_resource::encase::internal::WriteInto;
+use bevy::render::render_resource::{
+    BindGroup, BindGroupLayout, BindGroupLayoutId, Buffer, BufferId, ShaderType, TextureView, TextureViewId, UniformBuffer,
+};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
 
 /// What a bind group binds, by identity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,5 +58,13 @@ impl KeptBindGroup {
                 bind_group
             }
         }
+    }
+}
+
+/// Sets `buffer` to `value` and uploads it, unless the buffer already holds it.
+pub fn write_changed<T: ShaderType + WriteInto + PartialEq>(buffer: &mut UniformBuffer<T>, value: T, device: &RenderDevice, queue: &RenderQueue) {
+    if buffer.buffer().is_none() || *buffer.get() != value {
+        buffer.set(value);
+        buffer.write_buffer(device, queue);
     }
 }

@@ -571,10 +571,7 @@ fn prepare_irradiance_buffers(
         // The same texture as last frame: the bind group stands, the settings are
         // uploaded only when they changed.
         if let Some(mut kept) = kept.filter(|kept| kept.texture.default_view.id() == texture.default_view.id()) {
-            if *kept.settings.get() != value {
-                kept.settings.set(value);
-                kept.settings.write_buffer(&device, &queue);
-            }
+            kept_bind_group::write_changed(&mut kept.settings, value, &device, &queue);
             kept.viewport = viewport;
             continue;
         }

@@ -11,7 +11,7 @@ use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
 use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
-use crate::irradiance::kept_bind_group::KeptBindGroup;
+use crate::irradiance::kept_bind_group::{KeptBindGroup, write_changed};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
 use bevy::prelude::*;
@@ -31,14 +31,14 @@ use caustics_core::volumes::{MediumBox, cell_of, grid_size};
 
 /// `Grid` in `beam_grid.wgsl`: one medium's cells (xyz) and the first one's index (w);
 /// a cell's smallest world edge (x) and world volume (y).
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuGrid {
     size: UVec4,
     cell: Vec4,
 }
 
 /// `Grids` in `beam_grid.wgsl`.
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuBeamGrids {
     grids: [GpuGrid; MAX_MEDIA],
     /// xyz: the hue every volume shares ([`VolumeBuild::hue`]), w: 1 when they do.
@@ -259,9 +259,8 @@ pub(super) fn prepare_grids(
         grids.deposit = true;
     }
     grids.layout = layout;
-    grids.grids.set(gpu);
     grids.grids.set_label(Some("caustic_shaft_grids"));
-    grids.grids.write_buffer(&device, &queue);
+    write_changed(&mut grids.grids, gpu, &device, &queue);
 }
 
 /// Adds every volume's beam to the fixed-point grids, sixteen invocations a volume, then

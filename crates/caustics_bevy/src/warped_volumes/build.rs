@@ -6,12 +6,11 @@
 //! (`compute.rs`); the counts of the last build come back into [`CausticVolumes`].
 
 use super::WarpedVolumesSettings;
-use crate::components::{CausticGenerator, CausticReceiver, InvalidCausticParams};
+use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::reference::{AnyLight, LightComponents, OccluderComponents, blocks_caustic_light, core_light, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
-use bevy::camera::primitives::Aabb;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -111,22 +110,6 @@ pub(super) fn build(app: &mut App) {
         );
 }
 
-type LightChanged = Or<(
-    Changed<GlobalTransform>,
-    Changed<DirectionalLight>,
-    Changed<PointLight>,
-    Changed<SpotLight>,
-    Changed<InheritedVisibility>,
-)>;
-type OccluderChanged = Or<(Changed<GlobalTransform>, Changed<Aabb>, Changed<Mesh3d>, Changed<InheritedVisibility>)>;
-type GeneratorChanged = Or<(
-    Changed<GlobalTransform>,
-    Changed<Mesh3d>,
-    Changed<CausticGenerator>,
-    Changed<CausticTechniqueChoice>,
-    Changed<InheritedVisibility>,
-    Added<MovesOnGpu>,
-)>;
 type Generators<'w, 's> = Query<
     'w,
     's,
@@ -231,19 +214,9 @@ impl Topology {
 #[allow(clippy::too_many_arguments)]
 fn gather_sources(
     generators: Generators<'_, '_>,
-    changed_generators: Query<(), (With<CausticGenerator>, GeneratorChanged)>,
     lights: Query<LightComponents, AnyLight>,
-    changed_lights: Query<(), (AnyLight, LightChanged)>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
-    changed_occluders: Query<(), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
-    mut removed: RemovedComponents<CausticTechniqueChoice>,
-    mut removed_invalid: RemovedComponents<InvalidCausticParams>,
-    (mut removed_meshes, mut removed_receivers, mut removed_moving, mut removed_lights): (
-        RemovedComponents<Mesh3d>,
-        RemovedComponents<CausticReceiver>,
-        RemovedComponents<MovesOnGpu>,
-        (RemovedComponents<DirectionalLight>, RemovedComponents<PointLight>, RemovedComponents<SpotLight>),
-    ),
+    mut changes: SceneChanges,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
@@ -262,21 +235,13 @@ fn gather_sources(
         }
     }
     let several_generators = generators.iter().filter(|(.., visible, _)| visible.get()).count() > 1;
+    let changed = changes.read();
     let generators_changed = generator_mesh_changed
-        || !changed_generators.is_empty()
-        || removed.read().count() > 0
-        || removed_invalid.read().count() > 0
-        || removed_moving.read().count() > 0
+        || changed.generators
         // A mesh that had not loaded at the last gathering.
         || generators.iter().any(|(_, _, _, m, ..)| !state.generator_meshes.contains(&m.id()));
-    let occluders_changed = occluder_mesh_changed
-        || !changed_occluders.is_empty()
-        || removed_meshes.read().count() > 0
-        || removed_receivers.read().count() > 0
-        || (several_generators && generators_changed);
-    // A light despawned (or its light component taken off) shines no more.
-    let lights_removed = removed_lights.0.read().count() + removed_lights.1.read().count() + removed_lights.2.read().count() > 0;
-    if !(occluders_changed || generators_changed || settings.is_changed() || lights_removed || !changed_lights.is_empty()) {
+    let occluders_changed = occluder_mesh_changed || changed.occluders || (several_generators && generators_changed);
+    if !(occluders_changed || generators_changed || settings.is_changed() || changed.lights) {
         return;
     }
     sources.settings = settings.core();

@@ -36,7 +36,7 @@ use caustics_core::volumes::{BuildStats, channels};
 use std::sync::{Arc, Mutex};
 
 /// `BuildJob` in `build.wgsl`: one generator under one light in one colour channel.
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 struct GpuBuildJob {
     world_from_local: Mat4,
     normal_from_local: Mat4,
@@ -193,6 +193,10 @@ pub(super) struct VolumeBuild {
     /// The occluders' `InstancedBvh` as last uploaded, with the one it holds.
     occluders: Option<(Arc<InstancedBvh>, InstancedBvhBuffer, Buffer)>,
     jobs: DynamicUniformBuffer<GpuBuildJob>,
+    /// What `jobs` holds, and each one's offset: the same jobs are not uploaded again.
+    written_jobs: (Vec<GpuBuildJob>, Vec<u32>),
+    /// [`EMPTY_COUNTERS`], copied over the counters before each build.
+    empty_counters: Option<Buffer>,
     dispatches: Vec<Dispatch>,
     /// A generator's vertices were not uploaded yet at the last build: build again.
     retry: bool,
@@ -302,8 +306,7 @@ type DrawnMeshes<'a> = (&'a RenderAssets<RenderMesh>, &'a MeshAllocator, &'a Ren
 
 /// When the sources are new, a generator's mesh moves on the GPU or the last build
 /// missed a mesh's vertices: uploads the topology and occluders that changed, writes
-/// the jobs, sizes the volumes for every triangle of every job and starts the counters
-/// again.
+/// the jobs when they changed and sizes the volumes for every triangle of every job.
 pub(super) fn prepare_build(
     extracted: Res<ExtractedSources>,
     mut build: ResMut<VolumeBuild>,
@@ -326,7 +329,7 @@ pub(super) fn prepare_build(
     let build = &mut *build;
     let sources = &extracted.sources;
     build.generators.retain(|entity, _| sources.generators.iter().any(|(e, _)| e == entity));
-    build.jobs.clear();
+    let mut jobs = Vec::new();
     let mut planned = Vec::new();
     let mut capacity = 0u64;
     let mut hues = Vec::new();
@@ -347,20 +350,26 @@ pub(super) fn prepare_build(
             for channel in channels(&generator.interaction, light.color) {
                 hues.push(channel.1);
                 let job = GpuBuildJob::new(generator, light, channel, sources, (sources.occluders.gpu_instance_offset(), layout));
-                planned.push((*entity, build.jobs.push(&job), job.counts));
+                planned.push((*entity, jobs.len(), job.counts));
+                jobs.push(job);
                 capacity += u64::from(job.counts.y);
             }
         }
     }
     build.hue = shared_hue(&hues);
-    build.jobs.set_label(Some("caustic_volume_jobs"));
-    build.jobs.write_buffer(&device, &queue);
+    if build.jobs.buffer().is_none() || build.written_jobs.0 != jobs {
+        build.jobs.clear();
+        let offsets = jobs.iter().map(|job| build.jobs.push(job)).collect();
+        build.jobs.set_label(Some("caustic_volume_jobs"));
+        build.jobs.write_buffer(&device, &queue);
+        build.written_jobs = (jobs, offsets);
+    }
     build.dispatches.clear();
     if capacity == 0 || sources.bounds.is_none() {
         // Nothing to build: the GPU memory goes back (the counters' readback buffer
         // once no copy is on its way).
-        (buffers.volumes, buffers.counters, build.occluders) = (None, None, None);
-        build.jobs = DynamicUniformBuffer::default();
+        (buffers.volumes, buffers.counters, build.occluders, build.empty_counters) = (None, None, None, None);
+        (build.jobs, build.written_jobs) = default();
         return;
     }
     let occluders = match &mut build.occluders {
@@ -406,13 +415,20 @@ pub(super) fn prepare_build(
             })
         })
         .clone();
-    queue.write_buffer(&counters, 0, bytemuck::cast_slice(&EMPTY_COUNTERS));
+    build.empty_counters.get_or_insert_with(|| {
+        device.create_buffer_with_data(&BufferInitDescriptor {
+            label: Some("caustic_volume_empty_counters"),
+            contents: bytemuck::cast_slice(&EMPTY_COUNTERS),
+            usage: BufferUsages::COPY_SRC,
+        })
+    });
     let (Some(jobs), Some(volumes)) = (build.jobs.binding(), buffers.volumes.as_ref()) else {
         return;
     };
     let layout = cache.get_bind_group_layout(&pipelines.layout);
     let Some(jobs_buffer) = build.jobs.buffer().cloned() else { return };
-    for (entity, offset, counts) in planned {
+    for (entity, job, counts) in planned {
+        let offset = build.written_jobs.1[job];
         let (Some(g), Some(vertices)) = (build.generators.get_mut(&entity), vertex_bindings.get(&entity)) else { continue };
         let [a, b, c, d] = g.indices.each_ref().map(Bound::from);
         let bound = [(&layout).into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
@@ -439,8 +455,8 @@ pub(super) fn prepare_build(
     }
 }
 
-/// Once per change of the sources: every job's three dispatches, then a copy of the
-/// counters for the main world when none is on its way.
+/// Once per change of the sources: the counters started again, every job's three
+/// dispatches, then a copy of the counters for the main world when none is on its way.
 pub(super) fn build_volumes(
     mut ctx: RenderContext,
     mut build: ResMut<VolumeBuild>,
@@ -453,12 +469,13 @@ pub(super) fn build_volumes(
     let Some(kernels) = pipelines.pipelines.iter().map(|id| cache.get_compute_pipeline(*id)).collect::<Option<Vec<_>>>() else {
         return;
     };
-    let (Some(counters), false) = (buffers.counters.as_ref(), build.dispatches.is_empty()) else {
+    let (Some(counters), Some(empty), false) = (buffers.counters.as_ref(), build.empty_counters.as_ref(), build.dispatches.is_empty()) else {
         return;
     };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
+    encoder.copy_buffer_to_buffer(empty, 0, counters, 0, empty.size());
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
     for dispatch in &build.dispatches {

@@ -8,7 +8,7 @@ use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::CausticsSettings;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
-use crate::irradiance::kept_bind_group::KeptBindGroup;
+use crate::irradiance::kept_bind_group::{KeptBindGroup, write_changed};
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
 use bevy::prelude::*;
@@ -65,7 +65,7 @@ pub(super) struct GpuCausticVolume {
 }
 
 /// `VolumeSettings` in `volumes.wgsl`.
-#[derive(Clone, Copy, Default, ShaderType)]
+#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuVolumeSettings {
     intensity_mode: u32,
     max_magnification: f32,
@@ -354,7 +354,7 @@ fn prepare_buffers(
 ) {
     let settings = extracted.0.core();
     let (media, medium_count) = media.padded();
-    buffers.settings.set(GpuVolumeSettings {
+    let value = GpuVolumeSettings {
         intensity_mode: match settings.intensity {
             IntensityMode::Conserving => 0,
             IntensityMode::Interpolated => 1,
@@ -364,9 +364,9 @@ fn prepare_buffers(
         medium_count,
         splat_pixels: extracted.0.splat_pixels,
         media,
-    });
+    };
     buffers.settings.set_label(Some("caustic_volume_settings"));
-    buffers.settings.write_buffer(&device, &queue);
+    write_changed(&mut buffers.settings, value, &device, &queue);
 }
 
 /// The bind group layouts of the rasterised passes, surface and volumetric (each for a
