@@ -6,8 +6,8 @@
 //! `cargo run --example pool` opens a window when there is a display; otherwise, or
 //! with `--headless`, it drops a few scripted pebbles, renders offscreen and writes a
 //! PNG (`--out`, default `target/pool.png`). `--kernel R` sets the kernel radius
-//! (`(2R + 1)²` taps), `--depth M` the pool's depth. With `--features egui`, a window
-//! of sliders sets the depth, the scattering a and the cosine exponent n (one lobe,
+//! (`(2R + 1)²` taps), `--depth M` the pool's depth. In a window, a panel of
+//! sliders sets the depth, the scattering a and the cosine exponent n (one lobe,
 //! n = 2a), the extinction ε and the kernel radius while the water moves.
 
 #[path = "support/mod.rs"]
@@ -86,15 +86,13 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
             schedule.add_systems(drop_scripted_pebbles);
         });
     } else {
-        #[cfg(feature = "egui")]
         world.schedule_scope(bevy_caustics::debug_panel::bevy_egui::EguiPrimaryContextPass, |_, schedule| {
             schedule.add_systems(pool_sliders);
         });
     }
 }
 
-/// The pool's light settings as sliders (the window's `--features egui`).
-#[cfg(feature = "egui")]
+/// The pool's light settings as sliders in the window.
 fn pool_sliders(
     mut contexts: bevy_caustics::debug_panel::bevy_egui::EguiContexts,
     mut pools: Query<&mut PoolRipples>,

@@ -12,7 +12,8 @@ use bevy::image::{ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy_caustics::headless::{HeadlessRenderer, irradiance_image};
+use bevy_caustics::headless::HeadlessRenderer;
+use bevy_caustics::pixels::irradiance_image;
 use bevy_caustics::{
     CausticGenerator, CausticReceiver, CausticsSettings, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
     TagCausticsFromMaterials,

@@ -12,7 +12,8 @@
 mod support;
 
 use bevy::prelude::*;
-use bevy_caustics::headless::{HeadlessRenderer, RenderedImage, irradiance_image};
+use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
+use bevy_caustics::pixels::irradiance_image;
 use bevy_caustics::{CausticReceiver, InjectedIrradiance};
 use support::{render, top_down_camera};
 

@@ -120,9 +120,7 @@ pub fn show<M>(
         }),
         ..default()
     }))
-    .add_plugins(CausticsPlugin);
-    #[cfg(feature = "egui")]
-    app.add_plugins(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
+    .add_plugins((CausticsPlugin, bevy_caustics::debug_panel::CausticsDebugPanelPlugin));
     app.add_systems(Startup, move |world: &mut World| spawn(world, RenderTarget::default()))
         .add_systems(Update, animate);
     app.run();

@@ -23,7 +23,9 @@
 //! match these within the two traces' noise (`caustics_cli/tests/comparison_frames.rs`).
 
 use crate::gpu_work::{FrameWork, newest_pass_work};
-use crate::headless::{HeadlessRenderer, decode_rgba16f, irradiance_image, unpad_rows};
+#[cfg(feature = "headless")]
+use crate::headless::HeadlessRenderer;
+use crate::pixels::{decode_rgba16f, irradiance_image, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
 use crate::reference::{TracedView, ViewError, frame_of_world, pinhole, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
@@ -422,6 +424,7 @@ fn show_split(world: &mut World) {
 /// `photons` per light from photon stream `seed`, printing the tracer's progress:
 /// what `demo --compare` and `caustics bench` on a saved frame do. Afterwards
 /// [`ReferenceComparison`] holds the rows; time stays stopped.
+#[cfg(feature = "headless")]
 pub fn compare_headless(renderer: &mut HeadlessRenderer, camera: Entity, (photons, seed): (u64, u64)) -> Result<(), String> {
     renderer.world_mut().write_message(ReferenceComparisonRequest::Start { camera, photons, seed });
     let mut reported = 0;

@@ -2,13 +2,15 @@
 //!
 //! Components ([`CausticGenerator`], [`CausticReceiver`], [`ParticipatingMedium`]),
 //! the per-view caustic irradiance buffer and its composite onto receivers, a pass
-//! report, glTF tagging and a headless renderer for tests and tools. The math lives in
-//! `caustics_core`; this crate is a thin layer of components, systems and passes.
+//! report, glTF tagging and, with the `headless` feature, a renderer without a window
+//! for tests and tools. The math lives in `caustics_core`; this crate is a thin layer
+//! of components, systems and passes.
 //!
 //! Every buffer and texture the plugin makes is labelled `caustic_…`, so that a GPU
-//! capture or wgpu's allocator report ([`headless::HeadlessRenderer::gpu_memory`]) tells
+//! capture or wgpu's allocator report (`headless::HeadlessRenderer::gpu_memory`) tells
 //! its memory from Bevy's; what it asks of the GPU is bounded by the adapter's limits
 //! and [`CausticsGpuBudget`].
+#![cfg_attr(docsrs, feature(doc_cfg))]
 
 pub mod comparison;
 pub mod components;
@@ -22,6 +24,7 @@ pub mod gpu_budget;
 pub mod gpu_work;
 #[cfg(any(feature = "ocean", feature = "convolution"))]
 mod grid_mesh;
+#[cfg(feature = "headless")]
 pub mod headless;
 #[cfg(feature = "hierarchical-maps")]
 pub mod hierarchical_maps;
@@ -33,6 +36,7 @@ pub mod lights;
 mod mesh_vertices;
 #[cfg(feature = "ocean")]
 pub mod ocean;
+pub mod pixels;
 pub mod reference;
 pub mod report;
 pub mod technique;

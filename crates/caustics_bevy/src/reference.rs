@@ -512,7 +512,7 @@ pub fn spawn_scene(
     typical: f32,
 ) {
     let injected = injected.map(|irradiance| {
-        let image = crate::headless::irradiance_image(camera.width, camera.height, irradiance);
+        let image = crate::pixels::irradiance_image(camera.width, camera.height, irradiance);
         world.resource_mut::<Assets<Image>>().add(image)
     });
     spawn_scene_content(world, scene, shown, injected.is_none().then_some(CausticTechnique::Auto));

@@ -68,7 +68,7 @@ pub const MAX_EXPOSED_IRRADIANCE: f32 = 2048.0;
 /// (`Rgba32Float` or `Rgba16Float`), linear, in the light's units per m² (lux for Bevy
 /// lights), one value per pixel for the surface that pixel sees (an image of another
 /// size is resampled to the view). It starts the view's buffer each frame, before the
-/// techniques add theirs. [`crate::headless::irradiance_image`] builds one.
+/// techniques add theirs. [`crate::pixels::irradiance_image`] builds one.
 #[derive(Component, Clone, Debug, ExtractComponent, Reflect)]
 #[reflect(Component)]
 pub struct InjectedIrradiance(pub Handle<Image>);
