@@ -48,6 +48,7 @@
 //! The Bevy side lives in [`caustics_bevy`], re-exported here; the renderer-independent
 //! math and the ground-truth photon tracer in [`caustics_core`].
 #![cfg_attr(docsrs, feature(doc_cfg))]
+#![warn(missing_docs)]
 
 pub use caustics_bevy::*;
 pub use caustics_core;

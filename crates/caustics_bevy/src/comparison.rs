@@ -55,7 +55,14 @@ const READBACK_LATENCY: u32 = 4;
 pub enum ReferenceComparisonRequest {
     /// Measure what `camera` (a perspective camera with [`crate::CausticsSettings`])
     /// shows now against the tracer, with `photons` per light from photon stream `seed`.
-    Start { camera: Entity, photons: u64, seed: u64 },
+    Start {
+        /// The camera measured.
+        camera: Entity,
+        /// Photons traced per light.
+        photons: u64,
+        /// The photon stream: the same seed traces the same photons.
+        seed: u64,
+    },
     /// Restore the generators' techniques, take the split view away, let time run.
     End,
 }
@@ -63,6 +70,7 @@ pub enum ReferenceComparisonRequest {
 /// Where the comparison stands.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub enum ComparisonState {
+    /// Nothing asked for, or the last comparison ended.
     #[default]
     Idle,
     /// Reading back what this technique (an index into [`CausticTechnique::ALL`]) draws;
@@ -79,6 +87,7 @@ pub enum ComparisonState {
 /// One technique asked of every generator, measured.
 #[derive(Clone, Debug)]
 pub struct ComparisonRow {
+    /// The technique every generator was asked to draw with (`Auto` included).
     pub technique: CausticTechnique,
     /// What each generator drew with, and why (a technique that does not apply to a
     /// generator falls back to `Auto`'s pick).
@@ -99,11 +108,13 @@ type ReadbackSlot = Arc<Mutex<Option<Vec<u8>>>>;
 /// view once the reference is in.
 #[derive(Resource, Default)]
 pub struct ReferenceComparison {
+    /// Where it stands.
     pub state: ComparisonState,
     /// The camera measured.
     pub camera: Option<Entity>,
     /// The view's size in pixels.
     pub size: UVec2,
+    /// One row a technique measured so far, in [`CausticTechnique::ALL`] order.
     pub rows: Vec<ComparisonRow>,
     /// The tracer's irradiance at each pixel that sees a receiver.
     pub reference: Vec<Option<Vec3>>,

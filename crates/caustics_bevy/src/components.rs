@@ -80,7 +80,9 @@ pub enum GeneratorInteraction {
 #[derive(Component, Reflect, Clone, Debug, PartialEq)]
 #[reflect(Component)]
 pub struct CausticGenerator {
+    /// Whether it reflects or refracts, and how much of the light it carries.
     pub interaction: GeneratorInteraction,
+    /// The technique that draws its caustics; `Auto` (the default) picks by what the generator is ([`crate::CausticTechniqueChoice`] says which and why).
     pub technique: CausticTechnique,
     /// Whether an open surface reflects or refracts on its back too, like
     /// `StandardMaterial::double_sided` and glTF's `doubleSided` (which the glTF

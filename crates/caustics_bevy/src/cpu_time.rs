@@ -62,7 +62,9 @@ pub(crate) fn timed<S>(clock: &CpuClock, system: S) -> IntoAdapterSystem<CpuCloc
 /// The plugin's two clocks (a main-world resource; the render world has a copy).
 #[derive(Resource, Clone, Debug, Default)]
 pub struct CausticsCpuTime {
+    /// The plugin's systems in the main world.
     pub main: CpuClock,
+    /// The plugin's systems in the render world.
     pub render: CpuClock,
 }
 

@@ -15,6 +15,7 @@ use bevy::render::renderer::RenderDevice;
 #[derive(Resource, ExtractResource, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
 #[reflect(Resource)]
 pub struct CausticsGpuBudget {
+    /// The most bytes the plugin's GPU buffers and textures may take together.
     pub bytes: u64,
 }
 

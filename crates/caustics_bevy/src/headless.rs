@@ -25,17 +25,28 @@ pub enum HeadlessError {
         "no GPU adapter found ({0}). Install Mesa's software Vulkan to render without a GPU: \
          `apt-get install -y mesa-vulkan-drivers`"
     )]
+    /// No adapter answered; the reason wgpu gave.
     NoAdapter(String),
+    /// The frame's pixels did not come back in time.
     #[error("the frame was not read back after {0} extra updates")]
     NoReadback(u32),
+    /// Mapping a buffer read back from the GPU failed.
     #[error("reading the GPU back failed: {0}")]
     Readback(String),
+    /// The entity asked for is not a camera that renders.
     #[error("the entity is not a rendered camera")]
     NotACamera,
+    /// A render pipeline failed to compile; the error.
     #[error("a pipeline failed to build: {0}")]
     Pipeline(String),
+    /// An image could not be written to `path`.
     #[error("cannot write {path}: {reason}")]
-    Write { path: String, reason: String },
+    Write {
+        /// The file.
+        path: String,
+        /// Why it failed.
+        reason: String,
+    },
 }
 
 /// The adapter wgpu finds on the backends Bevy would use.
@@ -82,8 +93,11 @@ pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
 /// Linear RGBA pixels of a rendered frame, row-major from the top-left.
 #[derive(Clone, Debug)]
 pub struct RenderedImage {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// `width × height` pixels, row by row from the top-left.
     pub pixels: Vec<Vec4>,
 }
 
@@ -122,6 +136,7 @@ impl RenderedImage {
 /// advances 1/60 s a frame, whatever the frame takes: an animated scene renders the
 /// same image on any machine.
 pub struct HeadlessRenderer {
+    /// The app: spawn the scene into its world.
     pub app: App,
     /// The adapter it renders on.
     pub adapter: Adapter,

@@ -11,6 +11,7 @@
 //! its memory from Bevy's; what it asks of the GPU is bounded by the adapter's limits
 //! and [`CausticsGpuBudget`].
 #![cfg_attr(docsrs, feature(doc_cfg))]
+#![warn(missing_docs)]
 
 pub mod comparison;
 pub mod components;

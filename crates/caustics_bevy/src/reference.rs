@@ -282,6 +282,7 @@ fn view_gather<T: Send>(
 
 /// The scene the caustics plugin sees in a world ([`scene_from_world`]).
 pub struct WorldScene {
+    /// The core crate's scene: generators, receivers, lights, media.
     pub scene: Scene,
     /// How many of its receivers are [`CausticReceiver`]s: they come first.
     pub shown: usize,
@@ -467,7 +468,9 @@ pub fn trace_view(
 /// shown receiver.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewError {
+    /// Relative L2.
     pub l2: f32,
+    /// Relative L1.
     pub l1: f32,
     /// Pixels measured.
     pub pixels: usize,

@@ -182,7 +182,9 @@ pub const BYTES_PER_TEXEL: u64 = 24 + 56;
 /// its start (negative inverts the wave). A pebble outside every pool is ignored.
 #[derive(Message, Clone, Copy, Debug, PartialEq)]
 pub struct DropPebble {
+    /// Where it falls, in world space: the pool whose water lies under it gets the ripple.
     pub position: Vec3,
+    /// The wave's height at its start, in metres; negative starts with a trough.
     pub strength: f32,
 }
 

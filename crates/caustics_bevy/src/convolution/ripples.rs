@@ -123,7 +123,9 @@ impl PoolSurface {
 /// (outside it) is reported and left out.
 #[derive(Component, Clone, Debug, Default)]
 pub struct PoolImpulses {
+    /// The impulses, each with its drop time on the clock of `time`.
     pub impulses: Vec<Impulse>,
+    /// The clock's reading that this frame stands for, in seconds.
     pub time: f32,
 }
 

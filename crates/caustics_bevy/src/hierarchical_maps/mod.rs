@@ -58,10 +58,12 @@ pub struct HierarchicalMapsSettings {
     /// reach 63°, `caustics_core::hierarchical::light_view::CUBE_FACE_REACH`): twice the
     /// side keeps the sharpness of a face that does not.
     pub map_resolution: u32,
+    /// How the maps gather photons onto the receivers (§3.2).
     pub gather: CausticMapGather,
     /// Splat sizes from photon divergence into a multi-resolution map (§3.3); off:
     /// fixed splats of `fixed_splat_diameter` texels.
     pub variable_splats: bool,
+    /// The splats' diameter in caustic-map texels when `variable_splats` is off.
     pub fixed_splat_diameter: f32,
     /// The caustic map's top level for variable splats (the paper: 3).
     pub top_splat_level: u32,

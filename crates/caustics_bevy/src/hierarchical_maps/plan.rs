@@ -24,6 +24,7 @@ use std::sync::Arc;
 /// One light view to make a caustic map for, with the light it belongs to.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlannedLightView {
+    /// The light's view: a directional light's box, or a point or spot light's face.
     pub view: LightView,
     /// Linear RGB colour times the light's intensity (irradiance across a parallel beam,
     /// intensity per steradian for point and spot lights).
@@ -38,7 +39,9 @@ pub struct PlannedLightView {
 /// One mesh drawn into the light maps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CausticMapInstance {
+    /// The mesh drawn.
     pub mesh: AssetId<Mesh>,
+    /// Its placement.
     pub world_from_local: Mat4,
     /// A generator's index of refraction (the green channel's for a dispersive one),
     /// 0 for a mirror; unused for occluders.
@@ -58,17 +61,22 @@ pub struct CausticMapInstance {
 /// What the caustic maps are made of. A new `generation` means new contents.
 #[derive(Resource, Clone, Debug, Default, PartialEq)]
 pub struct CausticMapPlan {
+    /// A caustic map for each.
     pub views: Vec<PlannedLightView>,
+    /// The generators, in the order the maps index them.
     pub generators: Vec<CausticMapInstance>,
+    /// The meshes that receive or block the caustic light.
     pub occluders: Vec<CausticMapInstance>,
     /// Generators left out because the occluders hide every vertex of theirs from
     /// every light: a generator in full shadow costs no map work.
     pub shadowed: usize,
+    /// The settings planned with, `None` before the first plan.
     pub settings: Option<CausticMapSettings>,
     /// The generators placed over their meshes' BVHs, each with its index in
     /// `generators`, where photons are traced through them; placed again when the plan
     /// changes, the meshes' BVHs built only when a mesh does.
     pub bvh: Option<Arc<InstancedBvh>>,
+    /// Counts the plans; a new one means new contents.
     pub generation: u64,
 }
 

@@ -42,6 +42,7 @@ impl LightTransportTables {
         self.tables.len()
     }
 
+    /// Whether no table is held.
     pub fn is_empty(&self) -> bool {
         self.tables.is_empty()
     }
@@ -68,8 +69,11 @@ struct TableKey {
 /// `generation` means new contents.
 #[derive(Resource, Clone, Default)]
 pub struct IlluminationFrames {
+    /// One frame for each light through each generator.
     pub frames: Arc<Vec<IlluminationTextures>>,
+    /// The meshes that receive or block the light, placed over their BVHs.
     pub receivers: Arc<InstancedBvh>,
+    /// Counts the builds; a new one means new contents.
     pub generation: u64,
 }
 

@@ -64,6 +64,7 @@ pub struct IlluminationTexturesSettings {
     /// The most bytes one table may take: a mesh whose table at `table_directions`
     /// would not fit gets a coarser grid, with a warning saying which.
     pub max_table_bytes: usize,
+    /// How the planes' texels weigh the light they receive.
     pub cosine: IlluminationCosine,
     /// Where tables are cached between runs, by their mesh's content; `None`: not
     /// cached.
@@ -115,6 +116,7 @@ pub enum IlluminationCosine {
 }
 
 impl IlluminationCosine {
+    /// The core crate's form.
     pub fn core(self) -> Cosine {
         match self {
             IlluminationCosine::Receiver => Cosine::Receiver,

@@ -121,6 +121,7 @@ impl CachedRenderPipelinePhaseItem for CausticComposite3d {
 #[derive(Resource)]
 pub struct CausticCompositePipeline {
     mesh_pipeline: MeshPipeline,
+    /// Group 1: the view's caustic buffer and settings.
     pub view_layout: BindGroupLayoutDescriptor,
     material_layout: BindGroupLayoutDescriptor,
     shader: Handle<Shader>,

@@ -13,10 +13,13 @@ use bevy::render::renderer::{RenderDevice, RenderQueue};
 /// What a bind group binds, by identity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Bound {
+    /// A bind group layout.
     Layout(BindGroupLayoutId),
+    /// A whole buffer.
     Buffer(BufferId),
     /// Part of a buffer: its offset and size in bytes.
     Slice(BufferId, u64, u64),
+    /// A texture view.
     View(TextureViewId),
 }
 

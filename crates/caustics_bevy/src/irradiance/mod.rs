@@ -78,13 +78,18 @@ pub struct InjectedIrradiance(pub Handle<Image>);
 /// application injects irradiance into it.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ActiveCausticTechniques {
+    /// The warped volumes have volumes to draw.
     pub warped_volumes: bool,
+    /// A pool is lit by convolution.
     pub convolution: bool,
+    /// The caustic maps have a light view to draw.
     pub hierarchical_maps: bool,
+    /// The illumination textures have a frame to draw.
     pub illumination_textures: bool,
 }
 
 impl ActiveCausticTechniques {
+    /// Whether any technique has work.
     pub fn any(&self) -> bool {
         self.warped_volumes || self.convolution || self.hierarchical_maps || self.illumination_textures
     }
@@ -135,7 +140,9 @@ struct GpuViewCaustics {
 /// for a split-screen half or a minimap as for a full-target camera.
 #[derive(Component)]
 pub struct ViewCausticIrradiance {
+    /// The buffer (`CAUSTIC_IRRADIANCE_FORMAT`), the size of the view's target.
     pub texture: CachedTexture,
+    /// What the composite binds of it: the buffer and the view's settings.
     pub bind_group: BindGroup,
     /// The camera's viewport, `None` for the whole target.
     pub viewport: Option<Viewport>,
@@ -239,7 +246,9 @@ pub fn projection_pipeline(
 /// ([`projection_pipeline`], for a single-sampled or multisampled prepass).
 #[derive(Component)]
 pub struct ViewProjectionPipeline<P: 'static> {
+    /// The pipeline, specialised for the view.
     pub pipeline: CachedRenderPipelineId,
+    /// Whether the view's prepass is multisampled.
     pub multisampled: bool,
     technique: PhantomData<fn() -> P>,
 }
@@ -248,10 +257,15 @@ pub struct ViewProjectionPipeline<P: 'static> {
 /// where the prepass has one), the view uniform and the bind group layout that fits the
 /// prepass's sampling.
 pub struct ProjectionInputs<'a> {
+    /// The projection's pipeline.
     pub pipeline: &'a RenderPipeline,
+    /// The prepass's depth.
     pub depth: &'a TextureView,
+    /// The prepass's normals, where it has them.
     pub normal: Option<&'a TextureView>,
+    /// The view uniform.
     pub view: BindingResource<'a>,
+    /// The layout that fits the prepass's sampling.
     pub layout: BindGroupLayout,
 }
 
@@ -380,6 +394,7 @@ pub(crate) fn build(app: &mut App) {
 /// A material whose receivers' albedo the composite reads: its `StandardMaterial`
 /// part's base colour, texture and UV transform.
 pub trait ReceiverMaterial: Material {
+    /// Its `StandardMaterial` part.
     fn standard(&self) -> &StandardMaterial;
 }
 

@@ -32,8 +32,11 @@ use std::sync::{Arc, Mutex};
 /// GPU adds none while its waves move.
 #[derive(Resource, Clone, Default)]
 pub struct CausticVolumes {
+    /// The last build's counts and flux.
     pub stats: BuildStats,
+    /// Counts the builds read back.
     pub generation: u64,
+    /// Counts the gatherings of the builds' sources on the CPU.
     pub gathered: u64,
     /// How the surface pass shared out the volumes in a recent frame.
     pub surface: SurfaceWork,
@@ -45,8 +48,11 @@ pub struct CausticVolumes {
 /// pixels in all), the others rasterised (`rasterised`, shading the pass's fragments).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SurfaceWork {
+    /// Volumes lit by the compute pass.
     pub splatted: u32,
+    /// Pixels they shaded in all.
     pub splatted_pixels: u32,
+    /// Volumes rasterised.
     pub rasterised: u32,
 }
 

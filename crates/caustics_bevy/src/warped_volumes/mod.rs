@@ -59,6 +59,7 @@ use caustics_core::volumes::{IntensityMode, VolumeSettings};
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Resource)]
 pub struct WarpedVolumesSettings {
+    /// How a volume's intensity varies across it (§3.2).
     pub intensity: VolumeIntensity,
     /// Upper bound of the magnification `a/A(α)` near focal points; see
     /// [`VolumeSettings::max_magnification`].
