@@ -34,5 +34,5 @@ fn setup(mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut materials
         Transform::default().looking_to(Vec3::new(0.2, -1.0, 0.1), Vec3::Y),
     ));
     // The camera opts in, as for Bevy's Bloom; a camera without it does no caustics work.
-    commands.spawn((Camera3d::default(), CausticsSettings::default(), Transform::from_xyz(0.0, 3.0, 3.5).looking_at(Vec3::ZERO, Vec3::Y)));
+    commands.spawn((Camera3d::default(), Caustics::default(), Transform::from_xyz(0.0, 3.0, 3.5).looking_at(Vec3::ZERO, Vec3::Y)));
 }

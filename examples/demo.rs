@@ -280,7 +280,7 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) -> Enviro
     let sky = support::sky(world, SKY);
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         sky.clone(),
         target,
         Exposure { ev100: EV100 },
@@ -306,7 +306,7 @@ fn spawn_underwater_view(world: &mut World, target: RenderTarget, sky: Environme
         Camera3d::default(),
         // Its own sky behind it, not the main view's image.
         Camera { order: 1, is_active: false, msaa_writeback: MsaaWriteback::Off, ..default() },
-        CausticsSettings::default(),
+        Caustics::default(),
         sky,
         target,
         Exposure { ev100: EV100 },

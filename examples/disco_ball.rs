@@ -120,7 +120,7 @@ fn spawn_room(world: &mut World, target: RenderTarget, facets: usize) {
     ));
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         Exposure { ev100: 9.0 },
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),

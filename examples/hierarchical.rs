@@ -117,7 +117,7 @@ fn spawn_scene(world: &mut World, target: RenderTarget, settings: HierarchicalMa
     world.spawn((
         sky,
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(0.2, 2.2, 2.6).looking_at(Vec3::new(0.05, 0.15, 0.0), Vec3::Y),

@@ -164,7 +164,7 @@ fn spawn_scene(world: &mut World, target: RenderTarget, settings: IlluminationTe
     ));
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         Exposure { ev100: 8.0 },
         Transform::from_xyz(1.1, 1.2, 1.8).looking_at(Vec3::new(0.0, 0.45, 0.0), Vec3::Y),

@@ -79,7 +79,7 @@ fn spawn_sea(world: &mut World, target: RenderTarget, resolution: u32, wind_spee
     ));
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(-4.5, 1.6, 4.5).looking_at(Vec3::new(0.5, 0.4, -0.5), Vec3::Y),

@@ -74,7 +74,7 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
     ));
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         // A white floor under the midday sun.
         bevy::camera::Exposure { ev100: 11.0 },
         target,

@@ -28,7 +28,7 @@ fn run() -> Result<(), String> {
         world.spawn((
             sky,
             Camera3d::default(),
-            CausticsSettings::default(),
+            Caustics::default(),
             target,
             Exposure { ev100: 12.0 },
             Transform::from_xyz(-0.6, 2.6, 2.4).looking_at(Vec3::new(0.1, 0.0, 0.0), Vec3::Y),

@@ -38,7 +38,7 @@ fn run() -> Result<(), String> {
     // Straight down onto the cusp of the cardioid.
     world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         Exposure { ev100: 12.5 },
         Transform::from_xyz(0.35, 1.3, 0.0).looking_at(Vec3::new(0.35, 0.0, 0.0), Vec3::NEG_Z),

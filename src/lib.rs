@@ -3,7 +3,7 @@
 //! Real-time caustics for Bevy 0.19: the light a mirror or a glass or water surface
 //! focuses onto diffuse ones. Add [`CausticsPlugin`], put [`CausticGenerator`] on
 //! specular meshes, [`CausticReceiver`] on the surfaces that should show their light and
-//! [`CausticsSettings`] on the cameras that draw caustics. Bevy's own directional, point
+//! [`Caustics`] on the cameras that draw caustics. Bevy's own directional, point
 //! and spot lights cast them. Each generator is drawn by one of four techniques, which
 //! `Auto` picks from what the generator is ([`CausticTechniqueChoice`] says which and
 //! why).
@@ -24,8 +24,8 @@
 //!     let glass = materials.add(StandardMaterial { specular_transmission: 1.0, ior: 1.5, ..default() });
 //!     commands.spawn((Mesh3d(ball), MeshMaterial3d(glass), Transform::from_xyz(0.0, 1.0, 0.0), CausticGenerator::refractive(1.5)));
 //!     commands.spawn((DirectionalLight { illuminance: 10_000.0, ..default() }, Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)));
-//!     // A camera without `CausticsSettings` does no caustics work.
-//!     commands.spawn((Camera3d::default(), CausticsSettings::default(), Transform::from_xyz(0.0, 3.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y)));
+//!     // A camera without `Caustics` does no caustics work.
+//!     commands.spawn((Camera3d::default(), Caustics::default(), Transform::from_xyz(0.0, 3.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y)));
 //! }
 //! ```
 //!

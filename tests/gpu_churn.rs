@@ -19,7 +19,7 @@ use bevy_caustics::hierarchical_maps::HierarchicalMapsSettings;
 use bevy_caustics::illumination_textures::IlluminationTexturesSettings;
 use bevy_caustics::ocean::Ocean;
 use bevy_caustics::{
-    CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InvalidCausticParams, ParticipatingMedium,
+    CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams, ParticipatingMedium,
 };
 use caustics_core::rng::Pcg32;
 use std::collections::BTreeMap;
@@ -313,7 +313,7 @@ fn five_hundred_frames_of_churn_leave_no_panic_and_no_gpu_memory_behind() {
             }
         }
         if churn.uniform() < 0.05 {
-            let mut settings = world.get_mut::<CausticsSettings>(camera).expect("the camera");
+            let mut settings = world.get_mut::<Caustics>(camera).expect("the camera");
             settings.shafts = !settings.shafts;
             settings.intensity = if settings.intensity == 1.0 { f32::NAN } else { 1.0 };
         }

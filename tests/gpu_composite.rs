@@ -15,7 +15,7 @@ use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::pixels::irradiance_image;
 use bevy_caustics::{
-    CausticGenerator, CausticReceiver, CausticsSettings, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
+    CausticGenerator, CausticReceiver, Caustics, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
     TagCausticsFromMaterials,
 };
 use std::f32::consts::PI;
@@ -62,7 +62,7 @@ fn spawn_view(renderer: &mut HeadlessRenderer, inject: bool) {
     let mut camera = world.spawn((
         Camera3d::default(),
         target,
-        CausticsSettings::default(),
+        Caustics::default(),
         Tonemapping::None,
         Exposure { ev100: EV100 },
         Projection::from(OrthographicProjection { scale: 3.0 / SIZE as f32, ..OrthographicProjection::default_3d() }),

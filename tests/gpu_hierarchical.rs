@@ -352,8 +352,8 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     finite(&mut renderer, "a light inside the generator");
     assert_eq!(gpu(&mut renderer).view_count(), 6);
     // 4096² photons: memory bounded and reported. They take 1.4 GB, past the default
-    // `CausticsGpuBudget` (which would lower them to 2048²): this budget lets them through.
-    renderer.world_mut().insert_resource(bevy_caustics::CausticsGpuBudget { bytes: 2 << 30 });
+    // `CausticGpuBudget` (which would lower them to 2048²): this budget lets them through.
+    renderer.world_mut().insert_resource(bevy_caustics::CausticGpuBudget { bytes: 2 << 30 });
     renderer.world_mut().entity_mut(light).remove::<PointLight>().insert(spot());
     renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: 4096, map_resolution: 1024, ..HierarchicalMapsSettings::FULL });
     finite(&mut renderer, "4096² photons");

@@ -1,6 +1,6 @@
 //! Requests beyond the machine on lavapipe: a photon buffer and caustic maps of 4096²,
 //! illumination textures of 16 planes at 4096² and a pool of 8192² texels, each far past
-//! the adapter's storage bindings and a 32 MiB `CausticsGpuBudget`. Each is lowered to
+//! the adapter's storage bindings and a 32 MiB `CausticGpuBudget`. Each is lowered to
 //! fit (a wgpu validation error would stop the frames, and an allocation past the budget
 //! would show in the allocator's report), still renders finite caustics, and the GPU
 //! memory the plugin holds stays within the budget.
@@ -14,7 +14,7 @@ use bevy_caustics::convolution::{PoolRipples, PoolSurface};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::HierarchicalMapsSettings;
 use bevy_caustics::illumination_textures::IlluminationTexturesSettings;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsGpuBudget};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticGpuBudget};
 use support::{render, render_caustics};
 
 const SIZE: u32 = 32;
@@ -57,7 +57,7 @@ fn requests_beyond_the_gpu_and_the_budget_are_lowered_and_still_render() {
     let target = renderer.render_target();
     let camera = renderer.world_mut().spawn((support::top_down_camera(target, 4.0, SIZE, Vec3::ZERO), Msaa::Off)).id();
     let world = renderer.world_mut();
-    world.insert_resource(CausticsGpuBudget { bytes: BUDGET });
+    world.insert_resource(CausticGpuBudget { bytes: BUDGET });
     world.insert_resource(HierarchicalMapsSettings { photon_resolution: 4096, map_resolution: 4096, ..default() });
     world.insert_resource(IlluminationTexturesSettings { planes: 16, texture_size: 4096, cache_dir: None, ..default() });
     let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(8.0, 8.0));

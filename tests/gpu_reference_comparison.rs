@@ -19,7 +19,7 @@ use bevy_caustics::comparison::{ComparisonState, ReferenceComparison, ReferenceC
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::irradiance::reference_view::ReferenceSplit;
 use bevy_caustics::reference::view_error;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics};
 use caustics_core::metrics::relative_l2;
 
 const WIDTH: u32 = 64;
@@ -44,7 +44,7 @@ fn the_reference_comparison_measures_every_technique_and_splits_the_view() {
     let camera = world
         .spawn((
             Camera3d::default(),
-            CausticsSettings::default(),
+            Caustics::default(),
             target,
             Exposure { ev100: 11.0 },
             Projection::from(PerspectiveProjection { fov: 0.8, ..default() }),

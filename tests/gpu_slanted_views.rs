@@ -17,7 +17,7 @@
 use bevy::camera::Exposure;
 use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, PoolRipples};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, PoolRipples};
 use caustics_core::optics::fresnel_transmittance;
 
 mod support;
@@ -51,7 +51,7 @@ fn receivers_seen_at_a_slant_through_a_multisampled_view_get_their_caustics() {
     let camera = world
         .spawn((
             Camera3d::default(),
-            CausticsSettings::default(),
+            Caustics::default(),
             Msaa::Sample4,
             target,
             Exposure { ev100: 11.5 },

@@ -6,8 +6,8 @@
 //!
 //! - Split screen: two cameras side by side on one target, each with its viewport,
 //!   each get the caustics a lone camera gets; a camera that did not opt in with
-//!   `CausticsSettings` gets none, and nothing is added to it.
-//! - `CausticsSettings::intensity` scales what a view shows.
+//!   `Caustics` gets none, and nothing is added to it.
+//! - `Caustics::intensity` scales what a view shows.
 //! - `DistanceFog` dims caustics as bevy_pbr dims the floor's own light.
 //! - A `ParticipatingMedium` between eye and floor dims them by exp(−σₜ ℓ).
 //! - An `ExtendedMaterial` receiver shows them with its base colour.
@@ -24,7 +24,7 @@ use bevy::render::render_resource::AsBindGroup;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::irradiance::CausticReceiverMaterialPlugin;
 use bevy_caustics::reference::bevy_mesh;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, ParticipatingMedium, PoolRipples};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, ParticipatingMedium, PoolRipples};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use support::{render, render_caustics, render_without_caustics};
@@ -66,10 +66,10 @@ fn matte(world: &mut World) -> MeshMaterial3d<StandardMaterial> {
 }
 
 /// A top-down camera over `centre` without caustics (support's camera, which opts in,
-/// less its `CausticsSettings`).
+/// less its `Caustics`).
 fn plain_camera(world: &mut World, target: RenderTarget, centre: Vec3) -> Entity {
     let camera = world.spawn(support::top_down_camera(target, VIEW, SIZE, centre)).id();
-    world.entity_mut(camera).remove::<(CausticsSettings, DepthPrepass, NormalPrepass)>();
+    world.entity_mut(camera).remove::<(Caustics, DepthPrepass, NormalPrepass)>();
     camera
 }
 
@@ -168,7 +168,7 @@ fn split_screen(technique: CausticTechnique, direct_tolerance: Option<f32>) {
     assert!(!entity.contains::<DepthPrepass>() && !entity.contains::<NormalPrepass>(), "the plugin added prepasses to a camera that did not opt in");
 
     // The right half opts in at half intensity.
-    renderer.world_mut().entity_mut(right).insert(CausticsSettings { intensity: 0.5, ..default() });
+    renderer.world_mut().entity_mut(right).insert(Caustics { intensity: 0.5, ..default() });
     let with = render(&mut renderer, 2);
     let right_caustic = difference(&view_pixels(&with, SIZE), &view_pixels(&without, SIZE));
     let left_caustic = difference(&view_pixels(&with, 0), &view_pixels(&without, 0));

@@ -13,7 +13,7 @@ use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::reference::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, ParticipatingMedium};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
@@ -232,17 +232,17 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert!((spread(0) - spread(2)).abs() > 1e-3 * spread(0).abs(), "the channels' shafts do not differ: no dispersion to test");
     renderer.world_mut().entity_mut(generator).insert(water.clone());
     let cpu = grid_twin;
-    // The camera's CausticsSettings: shafts at half intensity are half the twin's;
+    // The camera's Caustics: shafts at half intensity are half the twin's;
     // shafts off, no volumetric pass.
     let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.app.world()).unwrap();
-    renderer.world_mut().entity_mut(camera).insert(CausticsSettings { intensity: 0.5, ..default() });
+    renderer.world_mut().entity_mut(camera).insert(Caustics { intensity: 0.5, ..default() });
     let dimmed = render(&mut renderer, 3);
     let half: Vec<f32> = cpu.iter().map(|e| 0.5 * e).collect();
     let gpu: Vec<f32> = dimmed.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
     let error = relative_l2(&gpu, &half);
     eprintln!("GPU vs half the CPU twin, in-scattering at intensity ½: relative L2 {error:.2e}");
     assert!(error < 0.01, "shafts at intensity ½: relative L2 {error}");
-    renderer.world_mut().entity_mut(camera).insert(CausticsSettings::default());
+    renderer.world_mut().entity_mut(camera).insert(Caustics::default());
     // The default: shafts integrated at one pixel in sixteen and spread bilinearly over
     // the image. Against every pixel's own (the GPU's, above, and the twin's).
     let full = gpu_grid;
@@ -252,11 +252,11 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let (against_full, against_twin) = (relative_l2(&gpu, &full), relative_l2(&gpu, &cpu));
     eprintln!("shafts at one pixel in sixteen: relative L2 {against_full:.2e} from every pixel's, {against_twin:.2e} from the twin's");
     assert!(against_full > 0.0 && against_full < 0.03 && against_twin < 0.03, "shafts at one pixel in sixteen: {against_full}, {against_twin}");
-    renderer.world_mut().entity_mut(camera).insert(CausticsSettings { shafts: false, ..default() });
+    renderer.world_mut().entity_mut(camera).insert(Caustics { shafts: false, ..default() });
     let unlit = render(&mut renderer, 3);
     assert_eq!(renderer.pass_report().views("volumetric"), 0, "{:?}", renderer.pass_report());
     assert!(unlit.pixels.iter().zip(&clear.pixels).all(|(a, b)| (a.x - b.x).abs() < 1e-6), "shafts off, yet light in the medium");
-    renderer.world_mut().entity_mut(camera).insert(CausticsSettings::default());
+    renderer.world_mut().entity_mut(camera).insert(Caustics::default());
 
     // Stiff: a glass lens 1 m up under an overhead sun, whose normals refract the light
     // exactly onto one point (n ∝ η₁ i − η₂ t, Snell's law in vector form): on the

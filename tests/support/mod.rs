@@ -6,7 +6,7 @@
 use bevy::camera::{Exposure, RenderTarget};
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
-use bevy_caustics::CausticsSettings;
+use bevy_caustics::Caustics;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use std::f32::consts::PI;
 
@@ -24,7 +24,7 @@ pub fn top_down_camera(target: RenderTarget, view: f32, pixels: u32, centre: Vec
     (
         Camera3d::default(),
         target,
-        CausticsSettings::default(),
+        Caustics::default(),
         Tonemapping::None,
         Exposure { ev100: EV100 },
         Projection::from(OrthographicProjection { scale: view / pixels as f32, ..OrthographicProjection::default_3d() }),

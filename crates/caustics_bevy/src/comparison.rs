@@ -53,7 +53,7 @@ const READBACK_LATENCY: u32 = 4;
 /// Starts or ends the comparison ([`ReferenceComparison`]).
 #[derive(Message, Clone, Copy, Debug)]
 pub enum ReferenceComparisonRequest {
-    /// Measure what `camera` (a perspective camera with [`crate::CausticsSettings`])
+    /// Measure what `camera` (a perspective camera with [`crate::Caustics`])
     /// shows now against the tracer, with `photons` per light from photon stream `seed`.
     Start {
         /// The camera measured.

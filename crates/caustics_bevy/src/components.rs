@@ -22,7 +22,7 @@ use caustics_core::params::{MediumCoefficients, ParamError, SpecularInteraction}
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default)]
 #[require(bevy::camera::Hdr, bevy::core_pipeline::prepass::DepthPrepass, bevy::core_pipeline::prepass::NormalPrepass)]
-pub struct CausticsSettings {
+pub struct Caustics {
     /// Scales the caustic light this view shows, on receivers and in shafts: 1 is
     /// physical, 0 shows none. Negative or NaN reads as 0.
     pub intensity: f32,
@@ -31,13 +31,13 @@ pub struct CausticsSettings {
     pub shafts: bool,
 }
 
-impl Default for CausticsSettings {
+impl Default for Caustics {
     fn default() -> Self {
         Self { intensity: 1.0, shafts: true }
     }
 }
 
-impl CausticsSettings {
+impl Caustics {
     /// The intensity the passes apply: [`Self::intensity`] where it is a finite
     /// non-negative number, 0 otherwise.
     pub fn applied_intensity(&self) -> f32 {

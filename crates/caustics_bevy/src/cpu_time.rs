@@ -3,7 +3,7 @@
 //! Every per-frame system the plugin adds runs [`timed`] by its world's [`CpuClock`],
 //! and the builds it hands to the async compute pool add their time when they end.
 //! At the start of each frame the main world publishes the two sums as Bevy
-//! diagnostics ([`CausticsCpuTime::MAIN`], [`CausticsCpuTime::RENDER`], in ms) and
+//! diagnostics ([`CausticCpuTime::MAIN`], [`CausticCpuTime::RENDER`], in ms) and
 //! starts them again. The times are wall-clock time on the thread that runs each
 //! system or build: a build's parallel parts count once, not once per core.
 
@@ -61,14 +61,14 @@ pub(crate) fn timed<S>(clock: &CpuClock, system: S) -> IntoAdapterSystem<CpuCloc
 
 /// The plugin's two clocks (a main-world resource; the render world has a copy).
 #[derive(Resource, Clone, Debug, Default)]
-pub struct CausticsCpuTime {
+pub struct CausticCpuTime {
     /// The plugin's systems in the main world.
     pub main: CpuClock,
     /// The plugin's systems in the render world.
     pub render: CpuClock,
 }
 
-impl CausticsCpuTime {
+impl CausticCpuTime {
     /// The plugin's CPU time in the main world last frame (ms): its systems and the
     /// builds that ended.
     pub const MAIN: DiagnosticPath = DiagnosticPath::const_new("caustics/cpu_main");
@@ -95,8 +95,8 @@ impl CausticsCpuTime {
 }
 
 /// Publishes last frame's sums and starts new ones.
-fn publish(clocks: Res<CausticsCpuTime>, mut diagnostics: Diagnostics) {
+fn publish(clocks: Res<CausticCpuTime>, mut diagnostics: Diagnostics) {
     let (main, render) = (clocks.main.take(), clocks.render.take());
-    diagnostics.add_measurement(&CausticsCpuTime::MAIN, || main.as_secs_f64() * 1e3);
-    diagnostics.add_measurement(&CausticsCpuTime::RENDER, || render.as_secs_f64() * 1e3);
+    diagnostics.add_measurement(&CausticCpuTime::MAIN, || main.as_secs_f64() * 1e3);
+    diagnostics.add_measurement(&CausticCpuTime::RENDER, || render.as_secs_f64() * 1e3);
 }

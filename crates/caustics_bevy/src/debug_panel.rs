@@ -8,7 +8,7 @@
 //! view), and every invalid entity with its reason. Behind the `egui` cargo feature.
 
 use crate::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
-use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
+use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::gpu_work::{FrameWork, PassWork, newest_pass_work, pass_time_history};
 use crate::technique::CausticTechniqueChoice;
 use bevy::diagnostic::DiagnosticsStore;
@@ -135,7 +135,7 @@ fn panel(
 type Comparison<'w, 's> = (
     ResMut<'w, ReferenceComparison>,
     MessageWriter<'w, ReferenceComparisonRequest>,
-    Query<'w, 's, (Entity, &'static Camera), With<CausticsSettings>>,
+    Query<'w, 's, (Entity, &'static Camera), With<Caustics>>,
     Local<'s, Option<String>>,
 );
 

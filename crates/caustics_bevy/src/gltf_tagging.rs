@@ -18,10 +18,10 @@ pub struct TagCausticsFromMaterials;
 
 /// Marks a mesh the tagging has looked at, so that it is judged once.
 #[derive(Component)]
-pub struct CausticsTagged;
+pub struct CausticTagged;
 
 /// Meshes with a `StandardMaterial` that neither the tagging nor the user has tagged.
-type Untagged = (With<Mesh3d>, Without<CausticsTagged>, Without<CausticGenerator>, Without<CausticReceiver>);
+type Untagged = (With<Mesh3d>, Without<CausticTagged>, Without<CausticGenerator>, Without<CausticReceiver>);
 
 /// Tags untagged meshes below a [`TagCausticsFromMaterials`] root.
 pub fn tag_from_materials(
@@ -41,7 +41,7 @@ pub fn tag_from_materials(
         }
         let Some(material) = materials.get(&material.0) else { continue };
         let mut e = commands.entity(entity);
-        e.insert(CausticsTagged);
+        e.insert(CausticTagged);
         match role_from_material(material.specular_transmission, material.ior, material.metallic, material.perceptual_roughness) {
             Ok(SurfaceRole::Receiver) => {
                 e.insert(CausticReceiver);

@@ -14,12 +14,12 @@ use bevy::render::renderer::RenderDevice;
 /// fit it as it is to fit the adapter's limits. Default: 1 GiB.
 #[derive(Resource, ExtractResource, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
 #[reflect(Resource)]
-pub struct CausticsGpuBudget {
+pub struct CausticGpuBudget {
     /// The most bytes the plugin's GPU buffers and textures may take together.
     pub bytes: u64,
 }
 
-impl Default for CausticsGpuBudget {
+impl Default for CausticGpuBudget {
     fn default() -> Self {
         Self { bytes: 1 << 30 }
     }

@@ -215,11 +215,11 @@ impl HeadlessRenderer {
     }
 
     /// The plugin's CPU time (ms) in the main and in the render world, in the last
-    /// frame the diagnostics published ([`crate::CausticsCpuTime`]).
+    /// frame the diagnostics published ([`crate::CausticCpuTime`]).
     pub fn plugin_cpu_times(&self) -> Option<(f64, f64)> {
         let store = self.app.world().get_resource::<bevy::diagnostic::DiagnosticsStore>()?;
         let last = |path| store.get(path).and_then(|d| d.measurement()).map(|m| m.value);
-        Some((last(&crate::CausticsCpuTime::MAIN)?, last(&crate::CausticsCpuTime::RENDER)?))
+        Some((last(&crate::CausticCpuTime::MAIN)?, last(&crate::CausticCpuTime::RENDER)?))
     }
 
     /// The render target to put on the camera.

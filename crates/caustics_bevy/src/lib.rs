@@ -9,7 +9,7 @@
 //! Every buffer and texture the plugin makes is labelled `caustic_…`, so that a GPU
 //! capture or wgpu's allocator report (`headless::HeadlessRenderer::gpu_memory`) tells
 //! its memory from Bevy's; what it asks of the GPU is bounded by the adapter's limits
-//! and [`CausticsGpuBudget`].
+//! and [`CausticGpuBudget`].
 #![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 
@@ -45,17 +45,17 @@ pub mod technique;
 pub mod warped_volumes;
 
 pub use components::{
-    CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InvalidCausticParams,
+    CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams,
     ParticipatingMedium,
 };
 pub use gltf_tagging::TagCausticsFromMaterials;
-pub use gpu_budget::CausticsGpuBudget;
+pub use gpu_budget::CausticGpuBudget;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, InjectedIrradiance};
 #[cfg(feature = "convolution")]
 pub use convolution::{DropPebble, PoolImpulses, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
-pub use cpu_time::CausticsCpuTime;
+pub use cpu_time::CausticCpuTime;
 pub use report::CausticPassReport;
 pub use technique::{AvailableCausticTechniques, CausticTechniqueChoice};
 
@@ -64,13 +64,13 @@ use cpu_time::timed;
 
 /// Where the plugin's main-world systems run.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
-pub enum CausticsSystems {
+pub enum CausticSystems {
     /// In `PostUpdate`: systems that read the placed scene — after transforms are
     /// propagated, bounds computed, visibility inherited and parameters validated.
     ReadScene,
 }
 
-/// Adds caustics to the views of cameras with [`CausticsSettings`]. Passes run only for
+/// Adds caustics to the views of cameras with [`Caustics`]. Passes run only for
 /// views and scenes that need them: a scene without generators (and without injected
 /// irradiance) does no caustics work at all — see [`CausticPassReport`].
 #[derive(Default)]
@@ -78,20 +78,20 @@ pub struct CausticsPlugin;
 
 impl Plugin for CausticsPlugin {
     fn build(&self, app: &mut App) {
-        let cpu = CausticsCpuTime::of(app).main;
+        let cpu = CausticCpuTime::of(app).main;
         app.register_type::<CausticGenerator>()
             .register_type::<CausticReceiver>()
-            .register_type::<CausticsSettings>()
+            .register_type::<Caustics>()
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
-            .register_type::<CausticsGpuBudget>()
-            .init_resource::<CausticsGpuBudget>()
-            .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<CausticsGpuBudget>::default())
+            .register_type::<CausticGpuBudget>()
+            .init_resource::<CausticGpuBudget>()
+            .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<CausticGpuBudget>::default())
             .add_systems(Update, timed(&cpu, gltf_tagging::tag_from_materials))
             .add_systems(PostUpdate, (timed(&cpu, components::validate_caustic_params), timed(&cpu, lights::warn_unsupported_lights)))
             .configure_sets(
                 PostUpdate,
-                CausticsSystems::ReadScene
+                CausticSystems::ReadScene
                     .after(bevy::transform::TransformSystems::Propagate)
                     .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
                     .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate)
@@ -129,7 +129,7 @@ pub mod prelude {
     pub use crate::{
         AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticReceiverMaterialPlugin,
         CausticTechnique,
-        CausticTechniqueChoice, CausticsGpuBudget, CausticsPlugin, CausticsSettings,
+        CausticTechniqueChoice, CausticGpuBudget, CausticsPlugin, Caustics,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };
 }

@@ -5,7 +5,7 @@
 
 use crate::mesh_vertices::MovesOnGpu;
 use crate::technique::CausticTechniqueChoice;
-use crate::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, GeneratorInteraction, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium};
+use crate::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium};
 use bevy::ecs::system::SystemParam;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::primitives::Aabb;
@@ -521,7 +521,7 @@ pub fn spawn_scene(
     spawn_scene_content(world, scene, shown, injected.is_none().then_some(CausticTechnique::Auto));
     let mut camera = world.spawn((
         Camera3d::default(),
-        CausticsSettings::default(),
+        Caustics::default(),
         target,
         exposure_for(typical),
         Projection::from(PerspectiveProjection { fov: camera.fov_y, ..default() }),

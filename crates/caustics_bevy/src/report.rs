@@ -59,7 +59,7 @@ impl PassRecorder {
 }
 
 pub(crate) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     let recorder = PassRecorder::default();
     app.insert_resource(recorder.clone())
         .init_resource::<CausticPassReport>()
@@ -69,7 +69,7 @@ pub(crate) fn build(app: &mut App) {
                 report.passes = last;
             }
         })
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, report_choices).in_set(crate::CausticsSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, report_choices).in_set(crate::CausticSystems::ReadScene));
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
         render_app
             .insert_resource(recorder)

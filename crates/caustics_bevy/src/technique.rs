@@ -76,14 +76,14 @@ impl CausticTechnique {
 }
 
 pub(crate) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<AvailableCausticTechniques>().add_systems(
         PostUpdate,
         crate::cpu_time::timed(&cpu, choose_techniques)
             .after(crate::components::validate_caustic_params)
             .after(bevy::transform::TransformSystems::Propagate)
             .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
-            .before(crate::CausticsSystems::ReadScene),
+            .before(crate::CausticSystems::ReadScene),
     );
 }
 

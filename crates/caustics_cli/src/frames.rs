@@ -13,7 +13,7 @@
 //! queries) and the shader invocations (pipeline-statistics queries: the figure that
 //! carries from a software rasteriser to any GPU), Bevy's main opaque pass of the same
 //! view as the yardstick, the receiver pixels (the composite shades each once), the
-//! plugin's CPU time in the main and render worlds (`CausticsCpuTime`), and how often
+//! plugin's CPU time in the main and render worlds (`CausticCpuTime`), and how often
 //! the caustic volumes' sources were gathered on the CPU in those frames
 //! (`CausticVolumes::gathered`: none for the ocean, whose waves move on the GPU).
 //! Writes `frames.csv` (a row per size, a column per figure), `frames-passes.csv` (a
@@ -455,7 +455,7 @@ fn stage(world: &mut World, target: RenderTarget, direction: Vec3, (eye, at): (V
         DirectionalLight { illuminance: 30_000.0, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(direction, Vec3::Y),
     ));
-    world.spawn((Camera3d::default(), CausticsSettings::default(), target, Exposure { ev100: 12.0 }, Transform::from_translation(eye).looking_at(at, Vec3::Y)));
+    world.spawn((Camera3d::default(), Caustics::default(), target, Exposure { ev100: 12.0 }, Transform::from_translation(eye).looking_at(at, Vec3::Y)));
 }
 
 /// The ocean example's sea at `resolution`² cells, 3 m deep, with a medium for shafts.

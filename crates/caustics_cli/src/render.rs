@@ -283,7 +283,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
         .spawn((
             Camera3d::default(),
             target,
-            caustics_bevy::CausticsSettings::default(),
+            caustics_bevy::Caustics::default(),
             Tonemapping::None,
             exposure_for(typical_irradiance(&bench.scene, centre)),
             Projection::from(OrthographicProjection { scale: size / pixels as f32, ..OrthographicProjection::default_3d() }),

@@ -17,7 +17,7 @@ use bevy::prelude::*;
 use caustics_bevy::comparison::{ReferenceComparison, compare_headless};
 use caustics_bevy::headless::HeadlessRenderer;
 use bevy::time::TimeUpdateStrategy;
-use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticsSettings, DropPebble, ParticipatingMedium, PoolRipples};
+use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, DropPebble, ParticipatingMedium, PoolRipples};
 use std::time::Duration;
 use caustics_core::metrics::relative_l2;
 use std::process::Command;
@@ -101,7 +101,7 @@ fn spawn_game_scene(renderer: &mut HeadlessRenderer) -> Entity {
     world
         .spawn((
             Camera3d::default(),
-            CausticsSettings::default(),
+            Caustics::default(),
             target,
             Exposure { ev100: 12.0 },
             Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),

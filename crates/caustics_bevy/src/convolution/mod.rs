@@ -194,7 +194,7 @@ pub struct PoolRipplesPlugin;
 
 impl Plugin for PoolRipplesPlugin {
     fn build(&self, app: &mut App) {
-        app.register_type::<PoolRipples>().add_message::<DropPebble>().init_resource::<crate::CausticsGpuBudget>();
+        app.register_type::<PoolRipples>().add_message::<DropPebble>().init_resource::<crate::CausticGpuBudget>();
         ripples::build(app);
         if app.get_sub_app(bevy::render::RenderApp).is_some() {
             app.insert_resource(ripples::WaterOnGpu);

@@ -168,7 +168,7 @@ pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "convolution.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
-    let cpu = crate::CausticsCpuTime::of(app);
+    let cpu = crate::CausticCpuTime::of(app);
     app.add_systems(PostUpdate, (timed(&cpu.main, mark_active), timed(&cpu.main, aim_kernels).after(bevy::transform::TransformSystems::Propagate)));
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;

@@ -1,7 +1,7 @@
 //! Main world: the pool's water, simulated from its impulses and written into its mesh.
 
 use crate::cpu_time::timed;
-use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
@@ -130,7 +130,7 @@ pub struct PoolImpulses {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     app.add_systems(
         Update,
         (timed(&cpu, configure_pools), timed(&cpu, replay_impulses), timed(&cpu, drop_pebbles), timed(&cpu, animate_pools)).chain(),
@@ -162,7 +162,7 @@ fn configure_pools(
     orphans: Query<(Entity, &PoolSurface, Option<&Mesh3d>, Has<MovesOnGpu>), Without<PoolRipples>>,
     mut removed: RemovedComponents<PoolRipples>,
     mut warned: Local<HashSet<Entity>>,
-    (device, budget, time, mut meshes): (Option<Res<RenderDevice>>, Res<CausticsGpuBudget>, Res<Time>, ResMut<Assets<Mesh>>),
+    (device, budget, time, mut meshes): (Option<Res<RenderDevice>>, Res<CausticGpuBudget>, Res<Time>, ResMut<Assets<Mesh>>),
 ) {
     let largest = device.as_deref().map_or(u64::MAX, largest_binding);
     for entity in removed.read() {
@@ -182,7 +182,7 @@ fn configure_pools(
         let pool = &asked.fitted(largest, budget.bytes);
         if pool != asked {
             warn!(
-                "bevy_caustics: PoolRipples on {entity}: {}×{} texels with a kernel radius of {} do not fit this GPU or CausticsGpuBudget ({}); \
+                "bevy_caustics: PoolRipples on {entity}: {}×{} texels with a kernel radius of {} do not fit this GPU or CausticGpuBudget ({}); \
                  its water runs at {}×{} texels of {} m with a radius of {}",
                 asked.columns,
                 asked.rows,

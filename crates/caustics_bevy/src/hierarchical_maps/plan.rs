@@ -81,9 +81,9 @@ pub struct CausticMapPlan {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<CausticMapPlan>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).in_set(crate::CausticsSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).in_set(crate::CausticSystems::ReadScene));
 }
 
 /// The occluders' BVH, by `occluders` of [`CausticMapPlan`], for the shadow test.

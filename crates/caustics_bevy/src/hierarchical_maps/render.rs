@@ -2,7 +2,7 @@
 //! the passes (`pass.rs`) draw with.
 
 use crate::cpu_time::timed;
-use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
@@ -492,7 +492,7 @@ impl CausticMapsGpu {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).render;
+    let cpu = crate::CausticCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -720,7 +720,7 @@ fn prepare_maps(
     mut specialized: ResMut<SpecializedMeshPipelines<LightMapPipeline>>,
     cache: Res<PipelineCache>,
     meshes: Res<RenderAssets<RenderMesh>>,
-    budget: Res<CausticsGpuBudget>,
+    budget: Res<CausticGpuBudget>,
 ) {
     let plan = &extracted.0;
     let Some(mut settings) = plan.settings.filter(|_| !plan.views.is_empty()) else {
@@ -740,7 +740,7 @@ fn prepare_maps(
         let asked = (settings.photon_resolution, settings.map_resolution);
         if gpu.lowered != Some(asked) {
             warn!(
-                "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers or CausticsGpuBudget ({}); the caustic maps use {}² into {}²",
+                "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers or CausticGpuBudget ({}); the caustic maps use {}² into {}²",
                 settings.photon_resolution, settings.map_resolution, mib(budget.bytes), fitted.photon_resolution, fitted.map_resolution
             );
             gpu.lowered = Some(asked);

@@ -3,7 +3,7 @@
 
 use super::IlluminationTexturesSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
-use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
@@ -78,10 +78,10 @@ pub struct IlluminationFrames {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<LightTransportTables>()
         .init_resource::<IlluminationFrames>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).in_set(crate::CausticsSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).in_set(crate::CausticSystems::ReadScene));
 }
 
 /// One generator as the build reads it.
@@ -146,7 +146,7 @@ fn set_up_planes(
     mut frames: ResMut<IlluminationFrames>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<BuildState>,
-    (cpu, device, budget, mut bvhs): (Res<crate::CausticsCpuTime>, Option<Res<RenderDevice>>, Res<CausticsGpuBudget>, ResMut<MeshBvhs>),
+    (cpu, device, budget, mut bvhs): (Res<crate::CausticCpuTime>, Option<Res<RenderDevice>>, Res<CausticGpuBudget>, ResMut<MeshBvhs>),
 ) {
     let core_settings = match settings.core() {
         Ok(s) => {
@@ -269,7 +269,7 @@ fn set_up_planes(
     let builds = !inputs.is_empty() && !lights.is_empty();
     if builds && fitted != core_settings && state.lowered != Some(core_settings) {
         warn!(
-            "bevy_caustics: illumination textures of {} planes at {}² for {} light(s) do not fit this GPU or CausticsGpuBudget ({}); they use {} planes at {}²",
+            "bevy_caustics: illumination textures of {} planes at {}² for {} light(s) do not fit this GPU or CausticGpuBudget ({}); they use {} planes at {}²",
             core_settings.planes,
             core_settings.texture_size,
             lights.len(),

@@ -179,7 +179,7 @@ pub(super) struct IlluminationPipelines {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).render;
+    let cpu = crate::CausticCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };

@@ -150,13 +150,13 @@ pub(super) fn build(app: &mut App) {
 }
 
 /// The 3D cameras that show caustics.
-type CausticsCameras = Query<'static, 'static, (Entity, &'static Camera), (With<Camera3d>, With<crate::CausticsSettings>)>;
+type CausticCameras = Query<'static, 'static, (Entity, &'static Camera), (With<Camera3d>, With<crate::Caustics>)>;
 
 /// Gives every 3D camera with caustics work its composite phase for the frame, and
 /// lets those of other cameras go.
 fn extract_phases(
     mut phases: ResMut<ViewSortedRenderPhases<CausticComposite3d>>,
-    cameras: Extract<CausticsCameras>,
+    cameras: Extract<CausticCameras>,
     mut live: Local<bevy::platform::collections::HashSet<RetainedViewEntity>>,
 ) {
     live.clear();

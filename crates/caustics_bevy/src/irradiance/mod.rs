@@ -15,7 +15,7 @@
 //!
 //! An application can supply the buffer itself with [`InjectedIrradiance`] (the demo
 //! injects the CPU reference tracer's irradiance this way). A camera opts in with
-//! [`CausticsSettings`], which brings Bevy's `Hdr` (the composite adds linear light
+//! [`Caustics`], which brings Bevy's `Hdr` (the composite adds linear light
 //! before tonemapping) and the prepasses the techniques read receiver points from.
 
 mod composite;
@@ -24,7 +24,7 @@ pub mod mesh_bvhs;
 pub mod reference_view;
 
 use crate::cpu_time::timed;
-use crate::components::{CausticReceiver, CausticsSettings, InvalidCausticParams, ParticipatingMedium};
+use crate::components::{CausticReceiver, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
@@ -97,7 +97,7 @@ impl ActiveCausticTechniques {
 
 /// Render world: this view has caustics work this frame, with its camera's settings.
 #[derive(Component, Clone, Copy)]
-pub struct ViewCausticWork(pub CausticsSettings);
+pub struct ViewCausticWork(pub Caustics);
 
 /// The most media the passes read (the first visible ones).
 pub const MAX_MEDIA: usize = 4;
@@ -357,13 +357,13 @@ pub(crate) fn build(app: &mut App) {
     bevy::shader::load_shader_library!(app, "receiver_view.wgsl");
     bevy::shader::load_shader_library!(app, "optics.wgsl");
     bevy::shader::load_shader_library!(app, "triangle_bvh.wgsl");
-    let cpu = crate::CausticsCpuTime::of(app);
+    let cpu = crate::CausticCpuTime::of(app);
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()
         .init_resource::<mesh_bvhs::MeshBvhs>()
         .add_systems(
             PostUpdate,
-            (timed(&cpu.main, warn_receivers_with_unread_material), timed(&cpu.main, mesh_bvhs::forget_changed_meshes).before(crate::CausticsSystems::ReadScene)),
+            (timed(&cpu.main, warn_receivers_with_unread_material), timed(&cpu.main, mesh_bvhs::forget_changed_meshes).before(crate::CausticSystems::ReadScene)),
         )
         .add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default())
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
@@ -427,7 +427,7 @@ impl<M: ReceiverMaterial> Plugin for CausticReceiverMaterialPlugin<M> {
     fn build(&self, app: &mut App) {
         let component = app.world_mut().register_component::<MeshMaterial3d<M>>();
         app.init_resource::<ReadableReceiverMaterials>().world_mut().resource_mut::<ReadableReceiverMaterials>().0.push(component);
-        let cpu = crate::CausticsCpuTime::of(app).render;
+        let cpu = crate::CausticCpuTime::of(app).render;
         if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
             render_app.add_systems(ExtractSchedule, timed(&cpu, extract_receiver_albedo::<M>).after(start_receivers));
         }
@@ -511,14 +511,14 @@ fn extract_media(mut extracted: ResMut<ExtractedMedia>, media: Extract<MediumQue
 type CameraQuery = Query<
     'static,
     'static,
-    (Entity, RenderEntity, Option<&'static CausticsSettings>, Has<InjectedIrradiance>, Has<Hdr>),
+    (Entity, RenderEntity, Option<&'static Caustics>, Has<InjectedIrradiance>, Has<Hdr>),
     With<Camera3d>,
 >;
 
-/// A view has caustics work when its camera opted in with [`CausticsSettings`] and the
+/// A view has caustics work when its camera opted in with [`Caustics`] and the
 /// application injects irradiance into it or a technique has something to draw.
 /// Caustics are added to the linear HDR image before tonemapping, so the camera needs
-/// [`Hdr`] (which `CausticsSettings` requires; a camera that removed it is reported
+/// [`Hdr`] (which `Caustics` requires; a camera that removed it is reported
 /// once and skipped). Injected irradiance on a camera that did not opt in is reported
 /// once too.
 fn mark_views_with_work(
@@ -539,8 +539,8 @@ fn mark_views_with_work(
             }
         }
         let problem = match (settings.is_some(), hdr) {
-            (true, false) if has_work => Some("has CausticsSettings but no `Hdr` component; add `Hdr` to see caustics"),
-            (false, _) if injected => Some("has InjectedIrradiance but no CausticsSettings; add CausticsSettings to see it"),
+            (true, false) if has_work => Some("has Caustics but no `Hdr` component; add `Hdr` to see caustics"),
+            (false, _) if injected => Some("has InjectedIrradiance but no Caustics; add Caustics to see it"),
             _ => None,
         };
         if let Some(problem) = problem

@@ -5,7 +5,7 @@
 //! shows it.
 
 use super::{InjectPipeline, ViewCausticIrradiance};
-use crate::cpu_time::{CausticsCpuTime, timed};
+use crate::cpu_time::{CausticCpuTime, timed};
 use bevy::asset::RenderAssetUsages;
 use bevy::core_pipeline::{Core3dSystems, core_3d::main_opaque_pass_3d, schedule::Core3d};
 use bevy::prelude::*;
@@ -41,7 +41,7 @@ pub fn capture_image(size: UVec2) -> Image {
 
 pub(super) fn build(app: &mut App) {
     app.add_plugins((ExtractComponentPlugin::<CaptureCausticIrradiance>::default(), ExtractComponentPlugin::<ReferenceSplit>::default()));
-    let cpu = CausticsCpuTime::of(app).render;
+    let cpu = CausticCpuTime::of(app).render;
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
         render_app.add_systems(
             Core3d,

@@ -129,7 +129,7 @@ pub struct OceanPlugin;
 
 impl Plugin for OceanPlugin {
     fn build(&self, app: &mut App) {
-        let cpu = crate::CausticsCpuTime::of(app).main;
+        let cpu = crate::CausticCpuTime::of(app).main;
         app.register_type::<Ocean>().add_systems(Update, (timed(&cpu, draw_waves), timed(&cpu, animate_oceans)).chain());
         if app.get_sub_app(bevy::render::RenderApp).is_some() {
             app.insert_resource(GpuWaves);

@@ -87,7 +87,7 @@ struct OceanPipelines {
 
 pub(super) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "waves.wgsl");
-    let cpu = crate::CausticsCpuTime::of(app).render;
+    let cpu = crate::CausticCpuTime::of(app).render;
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };

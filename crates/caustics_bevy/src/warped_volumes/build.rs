@@ -105,14 +105,14 @@ pub(super) struct VolumeSources {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).main;
+    let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<CausticVolumes>()
         .init_resource::<VolumeSources>()
         .init_resource::<BuildStatsChannel>()
         .add_systems(
             PostUpdate,
             (crate::cpu_time::timed(&cpu, gather_sources), crate::cpu_time::timed(&cpu, receive_stats))
-                .in_set(crate::CausticsSystems::ReadScene),
+                .in_set(crate::CausticSystems::ReadScene),
         );
 }
 

@@ -10,7 +10,7 @@
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
 use super::render::{GpuCausticVolume, VolumeBuffers, WordsReadback};
-use crate::gpu_budget::{CausticsGpuBudget, largest_binding, mib};
+use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -314,7 +314,7 @@ pub(super) fn prepare_build(
     pipelines: Res<VolumeBuildPipelines>,
     cache: Res<PipelineCache>,
     (meshes, allocator): (Res<RenderAssets<RenderMesh>>, Res<MeshAllocator>),
-    (device, queue, budget): (Res<RenderDevice>, Res<RenderQueue>, Res<CausticsGpuBudget>),
+    (device, queue, budget): (Res<RenderDevice>, Res<RenderQueue>, Res<CausticGpuBudget>),
 ) {
     // A build read back with no volume for the current sources: nothing to draw.
     if let Some((generation, volumes)) = build.counted.lock().ok().and_then(|mut c| c.take()) {
@@ -387,7 +387,7 @@ pub(super) fn prepare_build(
         if build.clamped != Some(capacity) {
             warn!(
                 "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {}, more than this adapter binds \
-                 or CausticsGpuBudget allows ({}): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
+                 or CausticGpuBudget allows ({}): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
                  dropped flux); use coarser generator meshes",
                 mib(capacity * volume_bytes),
                 mib(bindable * volume_bytes)

@@ -28,7 +28,7 @@
 //!    the depth prepass). Both paths shade the same pixels with the same function;
 //!    [`CausticVolumes::surface`] counts what each did;
 //! 2. **volumetric pass** (after the main pass), only for views that see a
-//!    [`crate::ParticipatingMedium`] and show shafts (`CausticsSettings::shafts`): the
+//!    [`crate::ParticipatingMedium`] and show shafts (`Caustics::shafts`): the
 //!    single-scattering term of §3.5 added to the view's HDR image. By default
 //!    ([`ShaftIntegral::Grid`]) a compute pass deposits every beam once per build on a
 //!    grid over each medium's box (`beam_grid.wgsl`, the twin of
@@ -40,7 +40,7 @@
 //!    ([`WarpedVolumesSettings::shaft_downsample`]).
 //!
 //! Both read Bevy's `DepthPrepass` and `NormalPrepass`, which
-//! [`crate::CausticsSettings`] requires on the camera. The WGSL in `build.wgsl` and
+//! [`crate::Caustics`] requires on the camera. The WGSL in `build.wgsl` and
 //! `volumes.wgsl` mirrors `caustics_core::volumes` line by line; the GPU tests hold the
 //! two together.
 

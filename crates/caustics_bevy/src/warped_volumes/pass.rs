@@ -102,7 +102,7 @@ impl VolumeDraw<'_> {
     }
 
     /// One render pass into `target` with `pipeline` and `bind_group` (at the view's
-    /// uniform offset) and the view's `CausticsSettings::intensity` as the blend
+    /// uniform offset) and the view's `Caustics::intensity` as the blend
     /// constant, drawing what `draw` draws; timed as the span `caustics/{pass}` and
     /// recorded as `pass` in the report.
     fn additive_pass(

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use super::beam_grid::{self, BeamGridPipelines, MarchKey};
 use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
-use crate::components::CausticsSettings;
+use crate::components::Caustics;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
 use crate::irradiance::kept_bind_group::{KeptBindGroup, write_changed};
 use bevy::camera::primitives::{Aabb, Frustum};
@@ -155,7 +155,7 @@ impl WordsReadback {
     }
 }
 
-/// Render world: this view shows shafts (`CausticsSettings::shafts`) and sees a
+/// Render world: this view shows shafts (`Caustics::shafts`) and sees a
 /// participating medium, and so runs the volumetric pass.
 #[derive(Component)]
 pub(super) struct ViewSeesMedium;
@@ -264,7 +264,7 @@ pub(super) struct SurfacePipelines {
 }
 
 pub(super) fn build(app: &mut App) {
-    let cpu = crate::CausticsCpuTime::of(app).render;
+    let cpu = crate::CausticCpuTime::of(app).render;
     let channel = app.world().resource::<BuildStatsChannel>().clone();
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
@@ -323,7 +323,7 @@ fn extract_settings(mut extracted: ResMut<ExtractedVolumeSettings>, settings: Ex
 }
 
 /// 3D cameras, their frusta and caustics settings.
-type CameraFrusta = Query<'static, 'static, (RenderEntity, &'static Frustum, Option<&'static CausticsSettings>), With<Camera3d>>;
+type CameraFrusta = Query<'static, 'static, (RenderEntity, &'static Frustum, Option<&'static Caustics>), With<Camera3d>>;
 
 /// Marks the views that show shafts and whose frustum meets a medium's box.
 fn mark_views_seeing_media(
@@ -565,7 +565,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         let (label, entry) =
             if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
         // Shafts go into the view's image scaled by the view's
-        // `CausticsSettings::intensity` as the blend constant (straight, or when they
+        // `Caustics::intensity` as the blend constant (straight, or when they
         // are upsampled from their own texture); the composite scales the surface
         // pass's buffer.
         let src_factor = if key.volumetric && key.shaft_scale == 1 { BlendFactor::Constant } else { BlendFactor::One };
@@ -821,7 +821,7 @@ impl SpecializedRenderPipeline for ShaftUpsamplePipeline {
     type Key = ShaftUpsampleKey;
 
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
-        // Scaled by the view's `CausticsSettings::intensity` as the blend constant.
+        // Scaled by the view's `Caustics::intensity` as the blend constant.
         let additive = BlendComponent { src_factor: BlendFactor::Constant, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some("caustic_shaft_upsample_pipeline".into()),
