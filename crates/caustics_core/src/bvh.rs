@@ -26,6 +26,7 @@ pub enum Surface {
 pub struct Hit {
     /// Distance along the (unit) ray direction.
     pub t: f32,
+    /// Which scene surface the hit triangle belongs to.
     pub surface: Surface,
     /// Triangle index within the surface's mesh.
     pub triangle: u32,

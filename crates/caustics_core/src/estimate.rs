@@ -9,10 +9,15 @@ use std::collections::HashMap;
 /// the full edge vectors `edge_u` (columns) and `edge_v` (rows).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GridRegion {
+    /// Corner of cell `(0, 0)`.
     pub origin: Vec3,
+    /// Full edge that the `nu` columns divide.
     pub edge_u: Vec3,
+    /// Full edge that the `nv` rows divide.
     pub edge_v: Vec3,
+    /// Number of columns along `edge_u`.
     pub nu: usize,
+    /// Number of rows along `edge_v`.
     pub nv: usize,
 }
 
@@ -158,6 +163,7 @@ pub(crate) fn clip_to_square(t: &[glam::Vec2; 3], corner: glam::Vec2) -> Vec<gla
 /// RGB, row-major. Flux accumulates in f64: a cell may receive 10⁶ photons.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IrradianceGrid {
+    /// The region the photons are binned on.
     pub region: GridRegion,
     flux: Vec<DVec3>,
     tolerance: f32,

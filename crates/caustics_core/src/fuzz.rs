@@ -125,7 +125,10 @@ impl Category {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Verdict {
     /// Every twin ran; the largest energy ratio any of them reached (output over input).
-    Passed { energy_ratio: f64 },
+    Passed {
+        /// Largest output-over-input energy ratio any twin reached.
+        energy_ratio: f64,
+    },
     /// The input was refused before any twin ran, with this message.
     Refused(String),
     /// Something that must hold did not.
@@ -135,9 +138,13 @@ pub enum Verdict {
 /// One case's result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CaseResult {
+    /// The seed the case was drawn from.
     pub seed: u64,
+    /// The case's index within its seed.
     pub index: u64,
+    /// The kind of trouble the case was drawn from.
     pub category: Category,
+    /// How the case ended.
     pub verdict: Verdict,
     /// Peak bytes allocated while it ran ([`CountingAllocator`]; 0 when not installed).
     pub peak_bytes: usize,
@@ -161,10 +168,15 @@ pub fn valid_scene(seed: u64, index: u64) -> Option<(Category, Scene)> {
 /// size); the light's `sun_direction` is in the same frame.
 #[derive(Clone, Debug)]
 pub struct PoolCase {
+    /// Texel columns of the pool (along x).
     pub columns: usize,
+    /// Texel rows of the pool (along z).
     pub rows: usize,
+    /// Side of one square texel (m).
     pub cell_size: f32,
+    /// The wave each pebble's impulse sends out.
     pub waves: RippleSettings,
+    /// The water and sunlight the caustics are computed for.
     pub light: ConvolutionSettings,
     /// Where pebbles fall (in the pool, on its walls and corners) and how high each
     /// impulse starts (m).

@@ -4,6 +4,8 @@
 //! scenes, and the ground-truth photon tracer that every real-time technique
 //! measures itself against. Everything here runs on the CPU and tests in seconds.
 
+#![warn(missing_docs)]
+
 pub mod bvh;
 pub mod convolution;
 pub mod estimate;

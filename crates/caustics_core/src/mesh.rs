@@ -12,22 +12,44 @@ pub enum MeshError {
     Empty,
     /// `normals.len() != positions.len()`.
     #[error("mesh has {positions} positions but {normals} normals")]
-    NormalCount { positions: usize, normals: usize },
+    NormalCount {
+        /// Number of positions.
+        positions: usize,
+        /// Number of normals.
+        normals: usize,
+    },
     /// A triangle refers to a vertex that does not exist.
     #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertices} vertices")]
-    IndexOutOfRange { triangle: usize, index: u32, vertices: usize },
+    IndexOutOfRange {
+        /// Index of the triangle.
+        triangle: usize,
+        /// The vertex index it holds.
+        index: u32,
+        /// Number of vertices the mesh has.
+        vertices: usize,
+    },
     /// A position is NaN or infinite.
     #[error("vertex {0} has a position that is not finite")]
     NonFinitePosition(usize),
     /// A coordinate lies farther than [`MAX_COORDINATE`] from the origin.
     #[error("vertex {index} has a coordinate of {value:e} m, past the ±1e12 m within which areas, volumes and BVH costs stay finite")]
-    PositionTooLarge { index: usize, value: f32 },
+    PositionTooLarge {
+        /// Index of the vertex.
+        index: usize,
+        /// The coordinate (m).
+        value: f32,
+    },
     /// A normal is NaN, infinite or zero.
     #[error("vertex {0} has a normal that is NaN, infinite or zero")]
     BadNormal(usize),
     /// A line of a Wavefront OBJ text that does not parse.
     #[error("OBJ line {line}: {reason}")]
-    Obj { line: usize, reason: String },
+    Obj {
+        /// Line number, counted from 1.
+        line: usize,
+        /// What is wrong with it.
+        reason: String,
+    },
 }
 
 /// The largest coordinate a mesh may have (m): a product of three coordinates (a

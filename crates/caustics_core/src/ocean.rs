@@ -164,9 +164,13 @@ impl OceanSettings {
 /// the unit normal of the displaced surface there.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct OceanSurface {
+    /// Grid points per side (N).
     pub resolution: usize,
+    /// Side of the square patch (m).
     pub size: f32,
+    /// Per point, the displacement (λDx, h, λDz) from its rest position (m).
     pub displacement: Vec<Vec3>,
+    /// Per point, the unit normal of the displaced surface.
     pub normals: Vec<Vec3>,
 }
 
@@ -252,6 +256,7 @@ impl OceanSpectrum {
         Ok(Self { settings: *settings, h0, omega, bound: bound as f32, fft, work: Workspace::default() })
     }
 
+    /// The settings the wave field was drawn from.
     pub fn settings(&self) -> &OceanSettings {
         &self.settings
     }

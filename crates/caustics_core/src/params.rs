@@ -12,19 +12,41 @@ pub enum ParamError {
     ImpossibleIor(f32),
     /// A dispersion model that gives an impossible IOR somewhere in the visible range.
     #[error("Cauchy dispersion A = {a}, B = {b} gives an index of refraction below 1 in the visible range")]
-    ImpossibleDispersion { a: f32, b: f32 },
+    ImpossibleDispersion {
+        /// Cauchy `A`: the index of refraction in the long-wavelength limit.
+        a: f32,
+        /// Cauchy `B` in µm².
+        b: f32,
+    },
     /// A scattering or absorption coefficient that is negative or not finite.
     #[error("{name} = {value} is impossible: it must be a finite number ≥ 0 (per metre)")]
-    NegativeCoefficient { name: &'static str, value: f32 },
+    NegativeCoefficient {
+        /// Which coefficient.
+        name: &'static str,
+        /// Its value (per metre).
+        value: f32,
+    },
     /// A Henyey–Greenstein asymmetry outside the open interval (−1, 1).
     #[error("phase asymmetry g = {0} is impossible: it must lie strictly between −1 and 1")]
     ImpossibleAsymmetry(f32),
     /// A value outside the range it must lie in.
     #[error("{name} = {value} is impossible: it must be {expected}")]
-    OutOfRange { name: &'static str, value: f32, expected: &'static str },
+    OutOfRange {
+        /// Which value.
+        name: &'static str,
+        /// The value given.
+        value: f32,
+        /// The range it must lie in, in words.
+        expected: &'static str,
+    },
     /// Any other value that must be finite and is not.
     #[error("{name} = {value} is not a finite number")]
-    NotFinite { name: &'static str, value: f32 },
+    NotFinite {
+        /// Which value.
+        name: &'static str,
+        /// The value given.
+        value: f32,
+    },
 }
 
 /// Checks an index of refraction: finite and at least one.

@@ -14,13 +14,34 @@ use thiserror::Error;
 pub enum LightKind {
     /// Parallel light travelling along `direction`, with irradiance `irradiance` on a
     /// plane perpendicular to the beam.
-    Directional { direction: Vec3, irradiance: f32 },
+    Directional {
+        /// The way the light travels; any non-zero length.
+        direction: Vec3,
+        /// Irradiance on a plane perpendicular to the beam (lux).
+        irradiance: f32,
+    },
     /// Isotropic point source of radiant intensity `intensity` (per steradian), so
     /// irradiance at distance r under normal incidence is `intensity / r²`.
-    Point { position: Vec3, intensity: f32 },
+    Point {
+        /// Where the light is (m).
+        position: Vec3,
+        /// Intensity per steradian (candela).
+        intensity: f32,
+    },
     /// A point source restricted to a cone along `direction`, with Bevy's falloff
     /// between `inner_angle` and `outer_angle` (half-angles, radians).
-    Spot { position: Vec3, direction: Vec3, intensity: f32, inner_angle: f32, outer_angle: f32 },
+    Spot {
+        /// Where the light is (m).
+        position: Vec3,
+        /// The cone's axis, the way the light points; any non-zero length.
+        direction: Vec3,
+        /// Intensity per steradian inside the inner cone (candela).
+        intensity: f32,
+        /// Half-angle at which the falloff starts (radians).
+        inner_angle: f32,
+        /// Half-angle at which the light ends (radians).
+        outer_angle: f32,
+    },
 }
 
 /// The largest irradiance or intensity a light may have in any colour channel (lux or
@@ -32,7 +53,9 @@ pub const MAX_LIGHT_POWER: f32 = 1e20;
 /// A light with a linear RGB colour that scales its flux per channel.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Light {
+    /// What the light emits, and from where.
     pub kind: LightKind,
+    /// Linear RGB colour: scales the flux per channel.
     pub color: Vec3,
     /// A point or spot light's range (m), as Bevy's `PointLight::range`: its light
     /// fades out towards it ([`Self::range_attenuation`]). Infinite: no end (`null`
@@ -178,7 +201,9 @@ fn nonzero(v: Vec3) -> Result<(), ParamError> {
 /// A specular surface that reflects or refracts light into caustics.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Generator {
+    /// The surface, in world space.
     pub mesh: TriMesh,
+    /// Whether it reflects or refracts, and how.
     pub interaction: SpecularInteraction,
     /// glTF's `doubleSided`: whether an open surface reflects or refracts on its back
     /// too ([`Sides`]). The front is the side its vertex normals face and its
@@ -216,6 +241,7 @@ pub enum Sides {
 }
 
 impl Sides {
+    /// The sides of a `closed` (watertight) or open mesh with glTF's `doubleSided`.
     pub fn of(closed: bool, double_sided: bool) -> Self {
         match (closed, double_sided) {
             (true, _) => Sides::Closed,
@@ -239,6 +265,7 @@ impl Sides {
 /// A diffuse surface on which caustics land (and which blocks light).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Receiver {
+    /// The surface, in world space.
     pub mesh: TriMesh,
     /// Linear RGB albedo, used when a view is shaded.
     pub albedo: Vec3,
@@ -260,10 +287,23 @@ mod range_or_null {
 /// Why a scene was refused.
 #[derive(Clone, Debug, PartialEq, Error)]
 pub enum SceneError {
+    /// A light is invalid.
     #[error("light {index}: {source}")]
-    Light { index: usize, source: ParamError },
+    Light {
+        /// Index into [`Scene::lights`].
+        index: usize,
+        /// What is wrong with it.
+        source: ParamError,
+    },
+    /// A generator's interaction is invalid.
     #[error("generator {index}: {source}")]
-    Generator { index: usize, source: ParamError },
+    Generator {
+        /// Index into [`Scene::generators`].
+        index: usize,
+        /// What is wrong with it.
+        source: ParamError,
+    },
+    /// The scene has no lights.
     #[error("the scene has no lights")]
     NoLights,
 }
@@ -272,8 +312,11 @@ pub enum SceneError {
 /// [`crate::view::SceneView`] saves.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Scene {
+    /// The lights, in world space.
     pub lights: Vec<Light>,
+    /// The specular surfaces that cast caustics.
     pub generators: Vec<Generator>,
+    /// The diffuse surfaces caustics land on.
     pub receivers: Vec<Receiver>,
 }
 

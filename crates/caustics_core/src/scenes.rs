@@ -11,17 +11,24 @@ use serde::Deserialize;
 /// A scene together with the receiver region on which its caustic is measured.
 #[derive(Clone, Debug)]
 pub struct BenchScene {
+    /// Name the scene is reported under.
     pub name: String,
+    /// The scene itself.
     pub scene: Scene,
+    /// The receiver region its caustic is measured on.
     pub region: GridRegion,
 }
 
 /// One sinusoid of a heightfield: `a·sin(kx·x + kz·z + φ)`.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 pub struct Wave {
+    /// x component of the wave vector (rad/m).
     pub kx: f32,
+    /// z component of the wave vector (rad/m).
     pub kz: f32,
+    /// Amplitude `a` (m).
     pub amplitude: f32,
+    /// Phase `φ` (radians).
     pub phase: f32,
 }
 
@@ -159,28 +166,45 @@ pub const MAX_DESCRIPTION_GRID: usize = 4096;
 /// The scene description format of `shared/reference/*_scene.json`.
 #[derive(Clone, Debug, Deserialize)]
 pub struct SceneDescription {
+    /// The scene's name.
     pub name: String,
+    /// The one light.
     pub light: LightDescription,
+    /// The specular heightfields.
     pub generators: Vec<GeneratorDescription>,
+    /// The floor and the square measured on it.
     pub receiver: ReceiverDescription,
+    /// Most specular interactions a traced branch may have
+    /// ([`crate::tracer::TraceSettings::max_depth`]).
     pub max_depth: u32,
 }
 
+/// The light of a scene description: a directional one.
 #[derive(Clone, Debug, Deserialize)]
 pub struct LightDescription {
+    /// The light's type; only `"directional"` is supported.
     #[serde(rename = "type")]
     pub kind: String,
+    /// The way the light travels `[x, y, z]`; any non-zero length.
     pub direction: [f32; 3],
+    /// Irradiance on a plane perpendicular to the beam.
     pub irradiance: f32,
 }
 
+/// A generator of a scene description: a heightfield of waves.
 #[derive(Clone, Debug, Deserialize)]
 pub struct GeneratorDescription {
+    /// Only `"heightfield"` is supported.
     pub shape: String,
+    /// `"glass"` (refracts with `ior`) or `"mirror"`.
     pub material: String,
+    /// Index of refraction of `"glass"`.
     pub ior: f32,
+    /// Vertices along each side of the heightfield, 1 to [`MAX_DESCRIPTION_GRID`].
     pub n: usize,
+    /// Side of the square heightfield, centred on the origin (m).
     pub size: f32,
+    /// Rest height `y` of the surface (m).
     pub height: f32,
     /// `[kx, kz, amplitude, phase]` per wave.
     pub waves: Vec<[f32; 4]>,
@@ -189,8 +213,10 @@ pub struct GeneratorDescription {
     pub double_sided: bool,
 }
 
+/// The receiver of a scene description: a floor, and the square measured on it.
 #[derive(Clone, Debug, Deserialize)]
 pub struct ReceiverDescription {
+    /// Height of the floor (m).
     pub y: f32,
     /// Side of the measured square, centred on the origin.
     pub size: f32,

@@ -110,6 +110,7 @@ impl GeneratorShape {
 /// What the choice reads of a generator and its scene.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct GeneratorFacts {
+    /// What the generator is.
     pub shape: GeneratorShape,
     /// Whether a participating medium overlaps the generator's bounds: part of the
     /// reason given (only the volumes draw its shafts), no bearing on the choice since
@@ -185,9 +186,11 @@ pub fn availability(technique: Technique, shape: GeneratorShape, compiled: bool)
 /// The technique a generator gets, with the reason.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct TechniqueChoice {
+    /// The technique chosen.
     pub technique: Technique,
     /// The generator named this technique itself.
     pub requested: bool,
+    /// What the choice read of the generator and its scene.
     pub facts: GeneratorFacts,
     /// Techniques tried first and why each could not be used: the requested one, then
     /// `Auto`'s preferences in order.

@@ -42,6 +42,7 @@ impl Default for TraceSettings {
 /// One photon deposit on a receiver.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PhotonHit {
+    /// Where it landed (world space).
     pub position: Vec3,
     /// Unit geometric normal of the receiver triangle, facing the incoming photon.
     pub normal: Vec3,
@@ -68,6 +69,7 @@ pub trait PhotonSink: Send + Sync + Sized {
 /// the balance closes to rounding even for 10⁹ photons).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TraceStats {
+    /// Photons emitted, over every light.
     pub photons: u64,
     /// Flux that left the lights towards the generators.
     pub emitted: DVec3,

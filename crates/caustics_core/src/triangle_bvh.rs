@@ -26,9 +26,14 @@ pub const STACK_DEPTH: usize = 32;
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct BvhNode {
+    /// Lower corner of the box.
     pub min: [f32; 3],
+    /// The left child of an inner node, or a leaf's first triangle (instance, in a top
+    /// level).
     pub first: u32,
+    /// Upper corner of the box.
     pub max: [f32; 3],
+    /// Triangles (instances, in a top level) in a leaf; 0 for an inner node.
     pub count: u32,
 }
 
@@ -36,7 +41,9 @@ pub struct BvhNode {
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct BvhTriangle {
+    /// The three corners, `w` 0.
     pub positions: [[f32; 4]; 3],
+    /// The three vertex normals, `w` 0.
     pub normals: [[f32; 4]; 3],
 }
 
@@ -53,7 +60,9 @@ impl BvhTriangle {
 /// A ray's closest generator hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GeneratorHit {
+    /// The hit's `t` along `origin + t·dir`.
     pub t: f32,
+    /// The mesh index its instance was placed with ([`InstancedBvh::new`]).
     pub generator: u32,
     /// The interpolated vertex normal (unit, as the mesh orients it).
     pub normal: Vec3,
@@ -64,7 +73,9 @@ pub struct GeneratorHit {
 /// One mesh's triangles in a binary BVH, in the mesh's own space.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MeshBvh {
+    /// The nodes, root first.
     pub nodes: Vec<BvhNode>,
+    /// The triangles in BVH order: a leaf's `first` and `count` index them.
     pub triangles: Vec<BvhTriangle>,
 }
 
@@ -138,7 +149,10 @@ const MIRRORED: u32 = 1;
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C)]
 pub struct BvhInstance {
+    /// The rows of its `local_from_world` affine transform, `w` the translation.
     pub local_from_world: [[f32; 4]; 3],
+    /// As bits: where its mesh's nodes start and where its triangles start (in `vec4`s),
+    /// its mesh index, and flags.
     pub ids: [u32; 4],
 }
 
@@ -173,6 +187,7 @@ pub struct InstancedBvh {
     pub meshes: Vec<Arc<MeshBvh>>,
     /// The top level's nodes: a leaf's `first` and `count` index [`Self::instances`].
     pub top: Vec<BvhNode>,
+    /// The placed meshes, in the order the top level's leaves index them.
     pub instances: Vec<BvhInstance>,
     /// Each instance's mesh in [`Self::meshes`].
     instance_meshes: Vec<usize>,

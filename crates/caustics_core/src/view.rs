@@ -17,12 +17,17 @@ use std::f32::consts::PI;
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PinholeCamera {
+    /// Where the camera is (world space).
     pub position: Vec3,
+    /// The point it looks at.
     pub look_at: Vec3,
+    /// Which way is up in the image; not parallel to the view direction.
     pub up: Vec3,
     /// Vertical field of view, radians.
     pub fov_y: f32,
+    /// Image width in pixels, 1 to [`MAX_VIEW_SIDE`].
     pub width: u32,
+    /// Image height in pixels, 1 to [`MAX_VIEW_SIDE`].
     pub height: u32,
 }
 
@@ -71,9 +76,11 @@ impl PinholeCamera {
 /// measured (in a game, meshes that cast shadows but are no `CausticReceiver`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SceneView {
+    /// The scene the frame showed, in world space.
     pub scene: Scene,
     /// How many of the scene's receivers, from the first, are measured.
     pub shown: usize,
+    /// The camera that looked at it.
     pub camera: PinholeCamera,
     /// The generators that are a rippling pool's water: the mesh alone would lose what
     /// convolution caustics draw from.
@@ -88,7 +95,9 @@ pub struct SceneView {
 /// coefficients, filling the unit cube `[-½, ½]³` that `transform` places.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MediumView {
+    /// World from medium space: places the unit cube the medium fills.
     pub transform: glam::Affine3A,
+    /// Its scattering, absorption and phase asymmetry.
     pub coefficients: MediumCoefficients,
 }
 
@@ -101,13 +110,22 @@ pub struct PoolView {
     pub generator: usize,
     /// World from pool space: the water's rest level at y = 0, centred on the origin.
     pub transform: glam::Affine3A,
+    /// Texel columns of the pool (along x).
     pub columns: u32,
+    /// Texel rows of the pool (along z).
     pub rows: u32,
+    /// Side of one square texel (m).
     pub cell_size: f32,
+    /// The wave each impulse sends out.
     pub waves: RippleSettings,
+    /// `d`: depth of the floor below the water's rest level (m).
     pub depth: f32,
+    /// `n`: the convolution form's cosine exponent
+    /// ([`crate::convolution::ConvolutionSettings::exponent`]).
     pub exponent: f32,
+    /// `ε`: extinction coefficient of the water (1/m).
     pub extinction: f32,
+    /// `r`: the kernel covers the `(2r + 1)²` texels around a floor point.
     pub kernel_radius: u32,
     /// The impulses live in the frame (pool coordinates, times on the pool's clock).
     pub impulses: Vec<Impulse>,
@@ -157,7 +175,9 @@ impl SceneView {
 /// A rendered view: linear radiance and the caustic irradiance seen at each pixel.
 #[derive(Clone, Debug)]
 pub struct ViewImage {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
     /// Outgoing radiance towards the camera, linear RGB.
     pub radiance: Vec<Vec3>,

@@ -39,7 +39,10 @@ pub const MAX_SPLAT_RADIUS: f32 = 16.0;
 /// fixed-point flux, row-major.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CausticMap {
+    /// Side of level 0, the full-resolution map, in texels.
     pub resolution: u32,
+    /// Level `i`'s `(resolution >> i)²` texels, row-major, of fixed-point flux
+    /// ([`FLUX_UNITS`] per photon unit).
     pub levels: Vec<Vec<u64>>,
 }
 
@@ -59,8 +62,11 @@ pub struct SplatStats {
 /// A splat: where, how much and how wide (diameter in full-resolution texels).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Splat {
+    /// Caustic-map coordinates of its centre, in `[0, 1]²`.
     pub uv: Vec2,
+    /// Flux in photon units.
     pub flux: f32,
+    /// Diameter in full-resolution texels.
     pub diameter: f32,
 }
 

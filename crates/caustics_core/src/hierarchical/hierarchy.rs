@@ -43,6 +43,7 @@ pub struct Node {
 }
 
 impl Node {
+    /// A node with no valid photon below it.
     pub const EMPTY: Self = Self { texel: EMPTY, flux: 0.0, moment: Vec2::ZERO, count: 0.0 };
 
     /// The node of one photon buffer texel in a `map_resolution²` caustic map.
@@ -90,7 +91,9 @@ impl Node {
 /// `(resolution >> k)²` nodes, row-major, up to a single root.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhotonPyramid {
+    /// Side of the photon buffer (level 0), in nodes.
     pub resolution: u32,
+    /// Level `k`'s `(resolution >> k)²` nodes, row-major.
     pub levels: Vec<Vec<Node>>,
 }
 
@@ -156,7 +159,9 @@ pub fn start_level(resolution: u32, start_resolution: u32) -> u32 {
 /// One gathered photon or cluster: node `node` (row-major) of pyramid level `level`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct GatherEntry {
+    /// Pyramid level: 0 is the photon buffer.
     pub level: u32,
+    /// Row-major index of the node within its level.
     pub node: u32,
 }
 
@@ -176,8 +181,9 @@ pub struct GatherStats {
     pub processed: Vec<u64>,
     /// Photons gathered one by one.
     pub photons: u64,
-    /// Clusters gathered, and the photons they stand for.
+    /// Clusters gathered.
     pub clusters: u64,
+    /// Photons the clusters stand for.
     pub clustered_photons: u64,
 }
 

@@ -32,6 +32,7 @@ pub struct SurfaceSample {
 }
 
 impl SurfaceSample {
+    /// A texel that saw no surface.
     pub const NONE: Self = Self { depth: NO_SURFACE, normal: Vec3::ZERO, material: 0 };
 
     /// Whether the texel saw a surface.
@@ -45,9 +46,13 @@ impl SurfaceSample {
 /// receivers at the caustic map's.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightMaps {
+    /// Side of the front and back maps (the photon buffer's), in texels.
     pub photon_resolution: u32,
+    /// Row-major front map: the nearest generator surface facing the light.
     pub front: Vec<SurfaceSample>,
+    /// Row-major back map: the farthest generator surface facing away from the light.
     pub back: Vec<SurfaceSample>,
+    /// Side of the receiver map (the caustic map's), in texels.
     pub map_resolution: u32,
     /// Row-major view depths of the nearest receiver, [`NO_SURFACE`] where none.
     pub receivers: Vec<f32>,

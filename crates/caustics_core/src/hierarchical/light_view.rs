@@ -14,23 +14,34 @@ use glam::{Mat4, Vec2, Vec3, Vec4};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Projection {
     /// Parallel light: a box `2·half_extent` wide across the beam.
-    Orthographic { half_extent: Vec2 },
+    Orthographic {
+        /// Half the box's width (along `right`) and height (along `up`), in metres.
+        half_extent: Vec2,
+    },
     /// A point light's frustum with a square image plane at `z = 1`, `2·tan_half_fov` wide.
-    Perspective { tan_half_fov: f32 },
+    Perspective {
+        /// Tangent of the half-angle from the axis to the image plane's edges.
+        tan_half_fov: f32,
+    },
 }
 
 /// One light view: a shadow-map-like frame from which photons are emitted and in which
 /// the caustic map is stored.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightView {
+    /// How the view projects.
     pub projection: Projection,
     /// A point on the view's axis (orthographic) or the light's position (perspective).
     pub origin: Vec3,
+    /// Unit axis along which `u` grows.
     pub right: Vec3,
+    /// Unit axis along which `v` shrinks (rows run down).
     pub up: Vec3,
+    /// Unit direction of view depth, away from the light.
     pub forward: Vec3,
-    /// View depths that bound everything the view draws.
+    /// View depth in front of everything the view draws.
     pub near: f32,
+    /// View depth behind everything the view draws.
     pub far: f32,
     /// The central fraction of the image, across and down, that the photon buffer (and
     /// the front and back maps) covers; the receiver and caustic maps cover all of it.

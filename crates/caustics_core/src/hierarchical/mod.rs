@@ -56,12 +56,16 @@ pub enum Gather {
     Flat,
     /// The pyramid is traversed from [`START_RESOLUTION`]² nodes (§3.1), with or
     /// without clustering (§3.2).
-    Hierarchical { clustering: Clustering },
+    Hierarchical {
+        /// Where converging photons are clustered.
+        clustering: Clustering,
+    },
 }
 
 /// Where the hierarchical gather clusters converging photons (§3.2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Clustering {
+    /// Never: every valid photon that is gathered is splatted on its own.
     Off,
     /// At the level just above the photon buffer only ("combine last").
     LastLevel,
@@ -73,10 +77,18 @@ pub enum Clustering {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Splats {
     /// One diameter, in caustic-map texels, for every splat, in the full-resolution map.
-    Fixed { diameter: f32 },
+    Fixed {
+        /// Splat diameter in full-resolution texels, above 0 and at most 64.
+        diameter: f32,
+    },
     /// Diameters from photon divergence, in a pyramid of maps up to `max_level` (the
     /// paper sums levels 0–3).
-    Variable { max_level: u32, overflow: LevelOverflow },
+    Variable {
+        /// Top level of the pyramid of maps, at most 8 (the paper: 3).
+        max_level: u32,
+        /// What happens to a splat too wide for `max_level`.
+        overflow: LevelOverflow,
+    },
 }
 
 /// What happens to a variable splat too wide for the top level.
@@ -108,10 +120,13 @@ pub struct CausticMapSettings {
     pub photon_resolution: u32,
     /// Caustic map (and receiver map) side, a power of two, 16 to 4096.
     pub map_resolution: u32,
+    /// How the photon buffer is gathered.
     pub gather: Gather,
+    /// How photons are splatted.
     pub splats: Splats,
     /// Refinements of a photon's exit point from a closed refractor (image space).
     pub exit_iterations: u32,
+    /// How photons cross the generators past the front map's surface.
     pub paths: PhotonPaths,
     /// Past the paper: Fresnel-reflected branches a traced path follows beside the
     /// transmitted light, each a photon buffer of its own splatted into the same map —
@@ -210,23 +225,32 @@ pub struct StageTimes {
 /// One light view's caustic map, computed on the CPU with every stage's result kept.
 #[derive(Clone, Debug)]
 pub struct ViewCaustics {
+    /// The light the view belongs to.
     pub light: Light,
+    /// The light view the maps and photons live in.
     pub view: LightView,
+    /// The settings the caustic map is made with.
     pub settings: CausticMapSettings,
+    /// The front, back and receiver maps the photons are traced in.
     pub maps: LightMaps,
     /// The transmitted light's photons, with their pyramid and gather.
     pub photons: PhotonBuffer,
     /// The Fresnel branches' photons ([`CausticMapSettings::fresnel_branches`]),
     /// gathered and splatted into the same map.
     pub branches: Vec<PhotonBuffer>,
+    /// The transmitted light's photon pyramid.
     pub pyramid: PhotonPyramid,
+    /// The transmitted light's gathered photons and clusters.
     pub entries: Vec<GatherEntry>,
     /// Every photon buffer's gather, summed.
     pub gather_stats: GatherStats,
+    /// The caustic map every photon buffer is splatted into.
     pub map: CausticMap,
+    /// What splatting did, summed over every photon buffer.
     pub splat_stats: SplatStats,
     /// The resolved full-resolution map (eq. 3), photon units per texel.
     pub resolved: Vec<f32>,
+    /// Seconds each stage took.
     pub times: StageTimes,
 }
 

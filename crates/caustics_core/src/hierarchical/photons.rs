@@ -82,9 +82,13 @@ pub enum PhotonFate {
 /// Counts and flux (in photon units, f64) of a photon buffer by fate.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PhotonStats {
+    /// Texels of the buffer, whatever their fate.
     pub texels: u64,
+    /// Photons that land on a receiver.
     pub caustic: u64,
+    /// Photons totally internally reflected at the refractor's far side.
     pub total_internal_reflection: u64,
+    /// Photons that leave the view before reaching a receiver.
     pub left_map: u64,
     /// Photons whose generator texel a nearer surface hides from the light.
     pub shadowed: u64,
@@ -97,8 +101,9 @@ pub struct PhotonStats {
     /// Flux that left the view.
     pub flux_left_map: f64,
     /// Traced paths absorbed by a one-sided surface's back or cut after
-    /// [`MAX_PATH_EVENTS`] interfaces, and their flux.
+    /// [`MAX_PATH_EVENTS`] interfaces.
     pub lost_on_path: u64,
+    /// Flux of the paths lost on the way.
     pub flux_lost_on_path: f64,
 }
 
@@ -148,8 +153,11 @@ impl PhotonStats {
 /// The photons of one light view, row-major, `resolution²` of them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PhotonBuffer {
+    /// Side of the buffer, in photons.
     pub resolution: u32,
+    /// Its `resolution²` photons, row-major.
     pub photons: Vec<Photon>,
+    /// Counts and flux of its texels by fate.
     pub stats: PhotonStats,
 }
 
@@ -194,12 +202,22 @@ pub const MAX_PATH_EVENTS: u32 = 8;
 pub enum PathTracer<'a> {
     /// The image-space pair (Wyman 2005): out where the back map sees the far side,
     /// refined `exit_iterations` times.
-    ImageSpace { exit_iterations: u32 },
+    ImageSpace {
+        /// Fixed-point iterations refining each exit distance.
+        exit_iterations: u32,
+    },
     /// Traced through the generators' triangles; `epsilon` lifts each new ray off the
     /// surface it leaves. `branch` 0 follows the light each refracting interface
     /// transmits; branch `k ≥ 1` the light the `k`-th reflects (its Fresnel
     /// reflectance), transmitted at the others.
-    Traced { bvh: &'a InstancedBvh, epsilon: f32, branch: u32 },
+    Traced {
+        /// The generators' triangles.
+        bvh: &'a InstancedBvh,
+        /// How far each new ray starts off the surface it leaves (m).
+        epsilon: f32,
+        /// Which Fresnel branch: 0 the transmitted light, `k` the `k`-th reflection.
+        branch: u32,
+    },
 }
 
 impl<'a> PathTracer<'a> {
@@ -242,13 +260,17 @@ impl PhotonBuffer {
 /// A photon's path, as far as it went.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TracedPhoton {
+    /// What became of it.
     pub fate: PhotonFate,
     /// Where it landed (world space) when it did.
     pub hit: Vec3,
+    /// Caustic-map coordinates of where it landed.
     pub uv: Vec2,
-    /// Flux when it met the generator (before Fresnel), and the flux it carries on.
+    /// Flux when it met the generator (before Fresnel).
     pub flux_at_generator: f32,
+    /// Flux it carries on past the generator.
     pub flux: f32,
+    /// The beam it stands for ([`Photon::solid_angle`]).
     pub solid_angle: f32,
 }
 

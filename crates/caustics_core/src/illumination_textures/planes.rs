@@ -69,7 +69,10 @@ impl Default for IlluminationSettings {
 /// gives the irradiance on any normal `n` as `−xyz·n` and the light's way for shadows.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IlluminationPlane {
+    /// Depth along the virtual camera's `axis`.
     pub depth: f32,
+    /// The illumination texture, `size²` texels, in units of `light_color`; empty
+    /// before [`IlluminationTextures::draw`].
     pub texture: Vec<Vec4>,
 }
 
@@ -85,11 +88,15 @@ pub struct IlluminationPlane {
 pub struct IlluminationTextures {
     /// The virtual camera: looks along `axis`; `u`, `v` span the texture plane.
     pub axis: Vec3,
+    /// Unit axis along which texel `x` (the column) grows.
     pub u: Vec3,
+    /// Unit axis along which texel `y` (the row) grows.
     pub v: Vec3,
-    /// The texture rectangle's lower corner and size in (u, v) metres.
+    /// The texture rectangle's lower corner in (u, v) metres.
     pub corner: Vec2,
+    /// The texture rectangle's size in (u, v) metres.
     pub extent: Vec2,
+    /// Texels along a side of each plane's texture.
     pub size: u32,
     /// Where the virtual camera's rays start, in depth along `axis`: just before the
     /// receivers.
@@ -340,7 +347,9 @@ pub const SOLID_SPANS: usize = 4;
 /// shading normal, and where the ray through the texel centre runs inside receivers.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeenSurface {
+    /// Depth of the nearest receiver surface along the camera's `axis`.
     pub depth: f32,
+    /// Its shading normal (world space).
     pub normal: Vec3,
     /// Depth spans `(in, out)` inside receivers, nearest first: from a face towards the
     /// camera to the next face away from it (an ear is thin, a body thick, and light
@@ -409,7 +418,9 @@ pub enum Cosine {
 /// its three vertex rays leave the object, which way, and the flux they carry.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IlluminationVolume {
+    /// Where the triangle's three vertex rays leave the object (world space).
     pub exits: [Vec3; 3],
+    /// The unit direction each of those rays leaves in.
     pub directions: [Vec3; 3],
     /// The triangle's area times its vertices' mean of light, cos θ and both Fresnel
     /// factors, in units of the textures' `light_color`.

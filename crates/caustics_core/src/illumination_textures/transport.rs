@@ -37,10 +37,13 @@ pub const TRANSPORT_CACHE_VERSION: u32 = 1;
 /// Why a table cannot be built.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum TransportError {
+    /// The mesh is not closed, so light entering it has no far side to leave by.
     #[error("the light transport table needs a closed (watertight) mesh: light must leave through a far side")]
     NotClosed,
+    /// An index of refraction below 1 or not finite.
     #[error("index of refraction {0} is impossible: it must be a finite number ≥ 1")]
     ImpossibleIor(f32),
+    /// The mesh has no triangles.
     #[error("the mesh has no triangles")]
     Empty,
 }
@@ -79,6 +82,7 @@ impl DirectionGrid {
         (grid, grid.side < side.max(2))
     }
 
+    /// Directions along a side of the grid (at least 2).
     pub fn side(&self) -> u32 {
         self.side
     }
@@ -88,6 +92,7 @@ impl DirectionGrid {
         (self.side * self.side) as usize
     }
 
+    /// Never: a grid holds at least 2² directions.
     pub fn is_empty(&self) -> bool {
         false
     }
@@ -134,8 +139,12 @@ fn frame(normal: Vec3) -> (Vec3, Vec3, Vec3) {
 /// far side's Fresnel factor alone, the entry's being exact at the looked-up cosine.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transported {
+    /// Where the light leaves the object.
     pub exit: Vec3,
+    /// The unit direction it leaves in; in the table, the deviation `out − in` instead.
     pub direction: Vec3,
+    /// Fraction of the vertex's light that leaves (in the table: the far side's Fresnel
+    /// factor alone); 0 where it is lost.
     pub transmittance: f32,
 }
 
@@ -173,7 +182,9 @@ pub struct TransportStats {
 /// How to build a table.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TransportBuild {
+    /// Index of refraction of the object (finite, ≥ 1).
     pub ior: f32,
+    /// The directions each vertex is lit from.
     pub grid: DirectionGrid,
 }
 
@@ -184,6 +195,7 @@ pub struct LightTransportTable {
     build: TransportBuild,
     normals: Vec<Vec3>,
     entries: Vec<Transported>,
+    /// What the build found and cost.
     pub stats: TransportStats,
 }
 
@@ -254,6 +266,7 @@ impl LightTransportTable {
         vertices * (size_of::<Vec3>() + grid.len() * size_of::<Transported>())
     }
 
+    /// The index of refraction and direction grid the table was built with.
     pub fn build_settings(&self) -> TransportBuild {
         self.build
     }

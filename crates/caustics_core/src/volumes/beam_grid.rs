@@ -87,11 +87,17 @@ pub fn deposit_barycentric(split: u32, k: u32) -> Vec3 {
 /// `count`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ThinBeam {
+    /// Barycentric weights of the volume's rays that blend into its central ray.
     pub lambda: Vec3,
+    /// The ray at `α = 0`, in grid coordinates.
     pub start: Vec3,
+    /// How far the ray moves per unit of `α`, in grid coordinates.
     pub per_alpha: Vec3,
+    /// The axis the ray runs most along (0: x, 1: y, 2: z).
     pub axis: usize,
+    /// The first layer across `axis` that it passes.
     pub first: i32,
+    /// How many layers it passes, at most [`MAX_DEPOSIT_LAYERS`].
     pub count: u32,
 }
 
@@ -149,7 +155,9 @@ pub fn march_steps(length: f32, cell: f32, max_steps: u32) -> u32 {
 /// The caustic beams' scattering source on a grid over one medium's box.
 #[derive(Clone, Debug)]
 pub struct BeamGrid {
+    /// The medium whose box the grid covers.
     pub medium: MediumBox,
+    /// Cells along the box's local x, y and z ([`grid_size`]).
     pub size: UVec3,
     /// Per cell (x fastest, then y, then z of the box's local frame): the mean of
     /// `colour · E_beam · e^{−σₜ dₛ}` over the cell (linear RGB).

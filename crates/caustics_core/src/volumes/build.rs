@@ -18,6 +18,7 @@ pub struct VertexFans {
 }
 
 impl VertexFans {
+    /// The fans around every vertex of `mesh`.
     pub fn new(mesh: &TriMesh) -> Self {
         let vertices = mesh.positions().len();
         let mut count = vec![0u32; vertices + 1];
@@ -75,6 +76,7 @@ impl VertexFans {
 /// Counts of what a build kept and dropped, and the flux on each side.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BuildStats {
+    /// Volumes kept.
     pub volumes: usize,
     /// Triangles facing away from the light, or outside a spot light's cone.
     pub unlit: usize,

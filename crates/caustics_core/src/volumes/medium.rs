@@ -9,7 +9,9 @@ use glam::{Affine3A, Vec3};
 /// `world_from_local` (the convention of Bevy's `FogVolume`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MediumBox {
+    /// Maps the unit cube `[-½, ½]³` onto the box in the world.
     pub world_from_local: Affine3A,
+    /// The medium's scattering, absorption and phase asymmetry.
     pub coefficients: MediumCoefficients,
 }
 

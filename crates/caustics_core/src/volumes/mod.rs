@@ -81,6 +81,7 @@ pub enum IntensityMode {
 /// Settings shared by the CPU twin and the GPU pass.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VolumeSettings {
+    /// How irradiance varies inside one caustic triangle.
     pub intensity: IntensityMode,
     /// Upper bound of the magnification `a / A(α)`. Irradiance at an exact focus is
     /// infinite, and a point sample that lands in a caustic triangle a thousandth of
@@ -112,15 +113,19 @@ pub struct CausticVolume {
     /// World directions of the local x, y and z axes; y is the slicing axis (the
     /// generator's mean ray, or the triangle's normal on the side the rays leave to).
     pub axes: [Vec3; 3],
-    /// Local x and z of the three vertices (their y is 0).
+    /// Local x of the three vertices (their y is 0).
     pub vertex_x: Vec3,
+    /// Local z of the three vertices.
     pub vertex_z: Vec3,
-    /// Local x and z of the three vertex rays, scaled to `r_y = 1`.
+    /// Local x of the three vertex rays, scaled to `r_y = 1`.
     pub ray_x: Vec3,
+    /// Local z of the three vertex rays, scaled to `r_y = 1`.
     pub ray_z: Vec3,
-    /// Per-vertex area coefficients ā, b̄, c̄ of the flattened fans (§3.4, Fig. 5).
+    /// Per-vertex area coefficients ā of the flattened fans (§3.4, Fig. 5).
     pub fan_a: Vec3,
+    /// Per-vertex area coefficients b̄ of the flattened fans.
     pub fan_b: Vec3,
+    /// Per-vertex area coefficients c̄ of the flattened fans.
     pub fan_c: Vec3,
     /// The triangle's own area coefficients (a, b, c) for the constant mode.
     pub triangle_abc: Vec3,
@@ -142,6 +147,7 @@ pub struct CausticVolume {
     /// or spot light's range fades the caustic by its whole path, light to generator
     /// to receiver ([`crate::scene::Light::range_attenuation`]).
     pub light_distance: Vec3,
+    /// `1 / range²` of a point or spot light; 0: no range.
     pub inverse_range_squared: f32,
     /// Local depth α at which the volume ends: where its rays have met the surfaces
     /// they hit (every point past is occluded), else the far side of the receivers.
@@ -177,7 +183,9 @@ pub struct CausticVolume {
 pub struct SurfaceSlab {
     /// Unit normal, pointing the way the rays travel.
     pub normal: Vec3,
+    /// Least `normal·p` in the slab.
     pub near: f32,
+    /// Greatest `normal·p` in the slab.
     pub far: f32,
 }
 
@@ -333,7 +341,9 @@ impl CausticVolume {
 /// rasterising each volume's prism).
 #[derive(Clone, Debug, Default)]
 pub struct VolumeSet {
+    /// Every volume built.
     pub volumes: Vec<CausticVolume>,
+    /// What the build kept and dropped.
     pub stats: BuildStats,
     boxes: Vec<(Vec3, Vec3)>,
     grid: VolumeGrid,

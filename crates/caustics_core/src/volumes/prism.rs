@@ -9,6 +9,7 @@ use glam::Vec3;
 /// counter-clockwise front faces.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BoundingShape {
+    /// The eight corners: the top face `0..4`, the bottom face `4..8`.
     pub corners: [Vec3; 8],
     /// Whether this is the tight prism of §4.3 (`false`: the fallback box).
     pub is_prism: bool,
