@@ -30,7 +30,6 @@ use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit
 use crate::reference::{TracedView, ViewError, frame_of_world, pinhole, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
 use caustics_core::metrics::relative_l2;
-use caustics_core::technique::Technique;
 use caustics_core::view::SceneView;
 use bevy::camera::Exposure;
 use bevy::diagnostic::DiagnosticsStore;
@@ -370,13 +369,14 @@ fn drop_readback(world: &mut World) {
 }
 
 /// The pass that draws a technique's caustics into a view's buffer, as the pass report
-/// names it.
-fn view_pass(technique: Technique) -> &'static str {
+/// names it (none for `Auto`, which is not a technique drawn).
+fn view_pass(technique: CausticTechnique) -> Option<&'static str> {
     match technique {
-        Technique::WarpedVolumes => "volumes",
-        Technique::IlluminationTextures => "illumination textures projection",
-        Technique::Convolution => "pool floor",
-        Technique::HierarchicalMaps => "caustic map projection",
+        CausticTechnique::Auto => None,
+        CausticTechnique::WarpedVolumes => Some("volumes"),
+        CausticTechnique::IlluminationTextures => Some("illumination textures projection"),
+        CausticTechnique::Convolution => Some("pool floor"),
+        CausticTechnique::HierarchicalMaps => Some("caustic map projection"),
     }
 }
 
@@ -385,8 +385,8 @@ fn view_pass(technique: Technique) -> &'static str {
 /// built before for some frames (the volumes are built off the frame), and one
 /// switched to can take some to build.
 fn techniques_drawing(report: &CausticPassReport) -> bool {
-    let chosen: Vec<&str> = report.generators.iter().map(|(_, choice)| view_pass(choice.technique)).collect();
-    Technique::ALL.iter().map(|&t| view_pass(t)).all(|pass| chosen.contains(&pass) == (report.views(pass) > 0))
+    let chosen: Vec<&str> = report.generators.iter().filter_map(|(_, choice)| view_pass(choice.technique())).collect();
+    CausticTechnique::ALL.iter().filter_map(|&t| view_pass(t)).all(|pass| chosen.contains(&pass) == (report.views(pass) > 0))
 }
 
 /// Whether two readbacks of the same still frame agree (relative L2 of their mean of

@@ -89,7 +89,7 @@ fn panel(
                         });
                 });
             });
-            let drawn = choice.map_or_else(|| "no technique (see below)".to_string(), |c| c.0.to_string());
+            let drawn = choice.map_or_else(|| "no technique (see below)".to_string(), |c| c.to_string());
             ui.label(egui::RichText::new(format!("  {drawn}")).small());
             if technique != asked {
                 generator.technique = technique;

@@ -57,6 +57,17 @@ pub fn blocks_caustic_light(visible: &InheritedVisibility, receiver: bool, no_sh
 /// Any of Bevy's lights.
 pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight>)>;
 
+/// The visible lights that cast caustics, as the core crate's: a light that fails
+/// [`Light::validate`] (a zero or non-finite direction or power) casts none.
+pub fn core_lights(lights: &Query<LightComponents, AnyLight>) -> Vec<Light> {
+    lights
+        .iter()
+        .filter(|(.., visible)| visible.get())
+        .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
+        .filter(|l| l.validate().is_ok())
+        .collect()
+}
+
 type LightChanged = Or<(
     Changed<GlobalTransform>,
     Changed<DirectionalLight>,

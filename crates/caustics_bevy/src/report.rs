@@ -2,7 +2,7 @@
 //! each generator and why, for tests, profiling overlays and "no generators, no work"
 //! guarantees.
 
-use crate::technique::{CausticTechniqueChoice, TechniqueChoice};
+use crate::technique::CausticTechniqueChoice;
 use bevy::prelude::*;
 use bevy::render::{Render, RenderApp, RenderSystems};
 use std::sync::{Arc, Mutex};
@@ -16,7 +16,7 @@ pub struct CausticPassReport {
     pub passes: Vec<(&'static str, u32)>,
     /// Each generator with a technique, by entity, with the choice and its reason
     /// (`closed refractor → hierarchical maps`).
-    pub generators: Vec<(Entity, TechniqueChoice)>,
+    pub generators: Vec<(Entity, CausticTechniqueChoice)>,
 }
 
 impl CausticPassReport {
@@ -79,7 +79,7 @@ pub(crate) fn build(app: &mut App) {
 
 /// Copies every generator's [`CausticTechniqueChoice`] into the report.
 fn report_choices(choices: Query<(Entity, &CausticTechniqueChoice)>, mut report: ResMut<CausticPassReport>) {
-    let mut generators: Vec<(Entity, TechniqueChoice)> = choices.iter().map(|(e, c)| (e, c.0.clone())).collect();
+    let mut generators: Vec<(Entity, CausticTechniqueChoice)> = choices.iter().map(|(e, c)| (e, c.clone())).collect();
     generators.sort_by_key(|(e, _)| *e);
     if report.generators != generators {
         report.generators = generators;

@@ -13,18 +13,36 @@ use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::Sides;
-use caustics_core::technique::{GeneratorFacts, GeneratorShape, choose};
-pub use caustics_core::technique::{Technique, TechniqueChoice};
+use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, TechniqueChoice, choose};
+use std::fmt;
 
 /// The technique a generator draws with and why (`closed refractor → hierarchical
-/// maps`), kept up to date by the plugin. Read it to see what `Auto` decided.
-#[derive(Component, Clone, Debug, PartialEq, Eq, Deref)]
-pub struct CausticTechniqueChoice(pub TechniqueChoice);
+/// maps`), kept up to date by the plugin. Read it to see what `Auto` decided; its
+/// `Display` gives the reason, and the techniques passed over and why.
+#[derive(Component, Clone, Debug, PartialEq, Eq)]
+pub struct CausticTechniqueChoice(TechniqueChoice);
 
 impl CausticTechniqueChoice {
-    /// The technique drawing the generator.
-    pub fn technique(&self) -> Technique {
-        self.0.technique
+    /// The technique drawing the generator (never `Auto`).
+    pub fn technique(&self) -> CausticTechnique {
+        self.0.technique.into()
+    }
+
+    /// Whether the generator asked for this technique itself, rather than `Auto`
+    /// picking it.
+    pub fn requested(&self) -> bool {
+        self.0.requested
+    }
+
+    /// What the choice read of the generator: its shape, sides, medium.
+    pub(crate) fn facts(&self) -> &GeneratorFacts {
+        &self.0.facts
+    }
+}
+
+impl fmt::Display for CausticTechniqueChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.fmt(f)
     }
 }
 
@@ -33,16 +51,16 @@ impl CausticTechniqueChoice {
 /// too slow for them. A generator that asks for a technique not listed gets `Auto`'s
 /// choice among the rest, with a warning.
 #[derive(Resource, Clone, Debug, PartialEq, Eq)]
-pub struct AvailableCausticTechniques(pub HashSet<Technique>);
+pub struct AvailableCausticTechniques(pub HashSet<CausticTechnique>);
 
 impl Default for AvailableCausticTechniques {
     /// Every technique this build contains.
     fn default() -> Self {
         let compiled = [
-            (Technique::WarpedVolumes, cfg!(feature = "warped-volumes")),
-            (Technique::Convolution, cfg!(feature = "convolution")),
-            (Technique::HierarchicalMaps, cfg!(feature = "hierarchical-maps")),
-            (Technique::IlluminationTextures, cfg!(feature = "illumination-textures")),
+            (CausticTechnique::WarpedVolumes, cfg!(feature = "warped-volumes")),
+            (CausticTechnique::Convolution, cfg!(feature = "convolution")),
+            (CausticTechnique::HierarchicalMaps, cfg!(feature = "hierarchical-maps")),
+            (CausticTechnique::IlluminationTextures, cfg!(feature = "illumination-textures")),
         ];
         Self(compiled.into_iter().filter_map(|(t, on)| on.then_some(t)).collect())
     }
@@ -64,13 +82,24 @@ impl CausticTechnique {
     }
 
     /// The technique asked for; `None` for `Auto`.
-    pub fn requested(self) -> Option<Technique> {
+    pub(crate) fn requested(self) -> Option<Technique> {
         match self {
             CausticTechnique::Auto => None,
             CausticTechnique::WarpedVolumes => Some(Technique::WarpedVolumes),
             CausticTechnique::IlluminationTextures => Some(Technique::IlluminationTextures),
             CausticTechnique::Convolution => Some(Technique::Convolution),
             CausticTechnique::HierarchicalMaps => Some(Technique::HierarchicalMaps),
+        }
+    }
+}
+
+impl From<Technique> for CausticTechnique {
+    fn from(technique: Technique) -> Self {
+        match technique {
+            Technique::WarpedVolumes => CausticTechnique::WarpedVolumes,
+            Technique::IlluminationTextures => CausticTechnique::IlluminationTextures,
+            Technique::Convolution => CausticTechnique::Convolution,
+            Technique::HierarchicalMaps => CausticTechnique::HierarchicalMaps,
         }
     }
 }
@@ -198,7 +227,7 @@ pub fn choose_techniques(
         let facts = GeneratorFacts { with_closed_refractor, ..facts };
         let shape = facts.shape;
         let requested = generator.technique.requested();
-        match choose(requested, facts, |t| available.0.contains(&t)) {
+        match choose(requested, facts, |t| available.0.contains(&CausticTechnique::from(t))) {
             Some(choice) => {
                 silent.remove(&entity);
                 if current.map(|c| &c.0) == Some(&choice) {

@@ -12,7 +12,7 @@ use bevy::light::RectLight;
 use caustics_bevy::components::validate_caustic_params;
 use caustics_bevy::irradiance::{CausticReceiverMaterialPlugin, warn_receivers_with_unread_material};
 use caustics_bevy::lights::warn_unsupported_lights;
-use caustics_bevy::technique::{AvailableCausticTechniques, Technique, choose_techniques};
+use caustics_bevy::technique::{AvailableCausticTechniques, choose_techniques};
 use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, CausticTechniqueChoice, ParticipatingMedium};
 use std::sync::{Arc, Mutex};
 
@@ -40,7 +40,7 @@ fn choice(app: &App, entity: Entity) -> CausticTechniqueChoice {
 }
 
 fn seen(app: &App, entity: Entity) -> String {
-    choice(app, entity).0.to_string()
+    choice(app, entity).to_string()
 }
 
 fn ball() -> Mesh {
@@ -76,7 +76,7 @@ fn auto_picks_by_what_the_generator_is() {
     app.world_mut().resource_mut::<Assets<Mesh>>().insert(handle.id(), holed).unwrap();
     app.update();
     app.update();
-    assert_eq!(choice(&app, glass).technique(), Technique::WarpedVolumes, "{}", seen(&app, glass));
+    assert_eq!(choice(&app, glass).technique(), CausticTechnique::WarpedVolumes, "{}", seen(&app, glass));
     // No closed refractor left: the mirror goes back to the volumes.
     assert_eq!(seen(&app, mirror), "mirror → warped volumes");
 
@@ -113,15 +113,15 @@ fn no_technique_choice_is_silently_dark() {
     // Each technique asked for while it is unavailable (its cargo feature off, or taken
     // out by the app), on a generator it would otherwise draw.
     let cases = [
-        (CausticTechnique::WarpedVolumes, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
-        (CausticTechnique::HierarchicalMaps, Technique::IlluminationTextures, "closed refractor → illumination textures"),
-        (CausticTechnique::Convolution, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
-        (CausticTechnique::IlluminationTextures, Technique::HierarchicalMaps, "closed refractor → hierarchical maps"),
+        (CausticTechnique::WarpedVolumes, CausticTechnique::HierarchicalMaps, "closed refractor → hierarchical maps"),
+        (CausticTechnique::HierarchicalMaps, CausticTechnique::IlluminationTextures, "closed refractor → illumination textures"),
+        (CausticTechnique::Convolution, CausticTechnique::HierarchicalMaps, "closed refractor → hierarchical maps"),
+        (CausticTechnique::IlluminationTextures, CausticTechnique::HierarchicalMaps, "closed refractor → hierarchical maps"),
     ];
     for (asked, fallback, reason) in cases {
         let mut app = app();
         let all = AvailableCausticTechniques::default();
-        let without = all.0.iter().copied().filter(|&t| Some(t) != asked.requested()).collect();
+        let without = all.0.iter().copied().filter(|&t| t != asked).collect();
         app.insert_resource(AvailableCausticTechniques(without));
         let glass = spawn(&mut app, ball(), CausticGenerator { technique: asked, ..CausticGenerator::refractive(1.5) }, Vec3::ZERO);
         warnings.0.lock().unwrap().clear();
@@ -129,9 +129,9 @@ fn no_technique_choice_is_silently_dark() {
             app.update();
         }
         let chosen = choice(&app, glass);
-        assert_eq!(chosen.technique(), fallback, "{asked:?}: {}", chosen.0);
-        assert!(chosen.0.to_string().ends_with(reason), "{asked:?}: {}", chosen.0);
-        let asked_label = asked.requested().unwrap().label();
+        assert_eq!(chosen.technique(), fallback, "{asked:?}: {}", chosen);
+        assert!(chosen.to_string().ends_with(reason), "{asked:?}: {}", chosen);
+        let asked_label = asked.label();
         let logged = warnings.0.lock().unwrap().clone();
         let named: Vec<_> = logged.iter().filter(|w| w.contains(&format!("{glass}")) && w.contains(asked_label)).collect();
         assert_eq!(named.len(), 1, "{asked:?}: one warning naming the entity and the technique, got {logged:?}");

@@ -313,7 +313,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
         }
     }
     let report = renderer.pass_report();
-    if let Some((entity, choice)) = report.generators.iter().find(|(_, c)| technique.requested().is_some_and(|t| t != c.technique)) {
+    if let Some((entity, choice)) = report.generators.iter().find(|(_, c)| technique != CausticTechnique::Auto && technique != c.technique()) {
         return Err(format!("--method {method:?} does not apply to generator {entity}: {choice}"));
     }
     for (entity, choice) in &report.generators {

@@ -5,7 +5,7 @@ use crate::cpu_time::timed;
 use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -223,7 +223,7 @@ type SunComponents = (&'static DirectionalLight, &'static GlobalTransform, &'sta
 
 fn uses_convolution((generator, choice): (&CausticGenerator, &CausticTechniqueChoice)) -> Option<f32> {
     match (choice.technique(), generator.interaction) {
-        (Technique::Convolution, GeneratorInteraction::Refract { ior, .. }) => Some(ior),
+        (CausticTechnique::Convolution, GeneratorInteraction::Refract { ior, .. }) => Some(ior),
         _ => None,
     }
 }

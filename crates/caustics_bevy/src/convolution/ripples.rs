@@ -12,7 +12,7 @@ use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use caustics_core::convolution::ripples::{Impulse, PoolRipples as Ripples};
 use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
 use std::sync::Arc;
@@ -262,7 +262,7 @@ type Pools<'w, 's> = Query<
 /// reads the pool's triangles on the CPU (the caustic maps; a generator whose technique
 /// is not chosen yet waits a frame).
 fn moves_on_gpu(gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: bool) -> bool {
-    gpu && (!generator || choice.is_some_and(|c| matches!(c.technique(), Technique::WarpedVolumes | Technique::Convolution)))
+    gpu && (!generator || choice.is_some_and(|c| matches!(c.technique(), CausticTechnique::WarpedVolumes | CausticTechnique::Convolution)))
 }
 
 /// Removes faded impulses and, while the water moves, has the render world write it

@@ -17,7 +17,7 @@ use caustics_core::hierarchical::{CausticMapSettings, LightView, PhotonPaths, li
 use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::scene::{Light, Receiver, Scene, Sides};
 use caustics_core::params::SpecularInteraction;
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -169,8 +169,8 @@ fn plan_caustic_maps(
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
     let traced = core_settings.paths == PhotonPaths::Traced;
     for (entity, generator, choice, (mesh, transform, visible, aabb)) in &generators {
-        let drawn = choice.technique() == Technique::HierarchicalMaps;
-        if !(drawn || traced && choice.facts.shape.traced_through()) || !visible.get() || !valid {
+        let drawn = choice.technique() == CausticTechnique::HierarchicalMaps;
+        if !(drawn || traced && choice.facts().shape.traced_through()) || !visible.get() || !valid {
             continue;
         }
         if next.generators.len() == super::render::MAX_GENERATORS {
@@ -188,7 +188,7 @@ fn plan_caustic_maps(
             SpecularInteraction::Reflect => 0.0,
             interaction => caustics_core::hierarchical::photons::photon_ior(&interaction).unwrap_or(1.0),
         };
-        let (both_sides, one_sided) = (choice.facts.sides == Sides::Both, choice.facts.sides == Sides::Front);
+        let (both_sides, one_sided) = (choice.facts().sides == Sides::Both, choice.facts().sides == Sides::Front);
         let world_from_local = transform.to_matrix();
         next.generators.push(CausticMapInstance { mesh: mesh.id(), world_from_local, ior, both_sides, one_sided, drawn });
     }

@@ -7,7 +7,7 @@ use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, core_mesh};
+use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, core_mesh};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -19,7 +19,7 @@ use caustics_core::illumination_textures::{
 };
 use caustics_core::mesh::TriMesh;
 use caustics_core::scene::Light;
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use caustics_core::triangle_bvh::InstancedBvh;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -298,7 +298,7 @@ fn inputs(
 ) -> Inputs {
     let mut next = Inputs { settings, ..default() };
     for (entity, generator, choice, (mesh, transform, visible, _)) in generators {
-        if choice.technique() != Technique::IlluminationTextures || !visible.get() || next.settings.is_none() {
+        if choice.technique() != CausticTechnique::IlluminationTextures || !visible.get() || next.settings.is_none() {
             continue;
         }
         let Some(ior) = photon_ior(&generator.specular_interaction()) else { continue };
@@ -310,12 +310,7 @@ fn inputs(
                 next.occluders.push((mesh.id(), *transform));
             }
         }
-        next.lights = lights
-            .iter()
-            .filter(|(.., visible)| visible.get())
-            .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
-            .filter(|l| l.validate().is_ok())
-            .collect();
+        next.lights = core_lights(lights);
     }
     next
 }

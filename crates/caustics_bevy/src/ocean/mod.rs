@@ -25,7 +25,7 @@ use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use std::sync::Arc;
 
 /// The largest resolution evaluated on the GPU: four complex fields of 2048² texels fill
@@ -189,7 +189,7 @@ type Oceans<'w, 's> = Query<
 fn evaluates_on_gpu(ocean: &Ocean, gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: bool) -> bool {
     gpu && ocean.on_gpu
         && ocean.resolution <= MAX_GPU_RESOLUTION
-        && (!generator || choice.is_some_and(|c| c.technique() == Technique::WarpedVolumes))
+        && (!generator || choice.is_some_and(|c| c.technique() == CausticTechnique::WarpedVolumes))
 }
 
 /// Moves every ocean: on the GPU, makes its mesh once (the surface of this moment) and

@@ -9,7 +9,7 @@ use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::reference::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, to_core, world_aabb};
+use crate::reference::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
@@ -20,7 +20,7 @@ use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::Light;
-use caustics_core::technique::Technique;
+use crate::CausticTechnique;
 use caustics_core::volumes::{BuildStats, VertexFans, VolumeSettings};
 use std::sync::{Arc, Mutex};
 
@@ -251,12 +251,7 @@ fn gather_sources(
         return;
     }
     sources.settings = settings.core();
-    sources.lights = lights
-        .iter()
-        .filter(|(.., visible)| visible.get())
-        .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
-        .filter(|l| l.validate().is_ok())
-        .collect();
+    sources.lights = core_lights(&lights);
     // Volumes end beyond the receivers' world bounds.
     sources.bounds = occluders
         .iter()
@@ -280,7 +275,7 @@ fn gather_sources(
         if several_generators && occluders_changed {
             occluder_meshes.push((mesh3d.id(), transform.to_matrix(), index));
         }
-        if choice.technique() != Technique::WarpedVolumes {
+        if choice.technique() != CausticTechnique::WarpedVolumes {
             continue;
         }
         let topology = match state.topologies.get(&entity) {
@@ -304,7 +299,7 @@ fn gather_sources(
                     VolumeGenerator {
                         mesh: mesh3d.id(),
                         world_from_local: transform.to_matrix(),
-                        two_sided: choice.facts.sides.lit_from_behind(&interaction),
+                        two_sided: choice.facts().sides.lit_from_behind(&interaction),
                         interaction,
                         topology,
                         occluder_index: if several_generators { index } else { caustics_core::triangle_bvh::NO_MESH },
