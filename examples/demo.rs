@@ -26,15 +26,16 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, MsaaWriteback, RenderTarget, Viewport};
+use bevy::camera::{Exposure, MsaaWriteback, Viewport};
 use bevy::light::{EnvironmentMapLight, GlobalAmbientLight};
 use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy::window::PrimaryWindow;
+use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::prelude::*;
 use std::f32::consts::{FRAC_PI_2, TAU};
-use std::process::ExitCode;
+use std::path::Path;
 use std::time::Duration;
 
 const WIDTH: u32 = 960;
@@ -71,41 +72,74 @@ const SUN_ELEVATION: f32 = 0.95;
 const SKY: f32 = 1500.0;
 const EV100: f32 = 11.5;
 
-fn main() -> ExitCode {
-    support::exit_code("demo", run)
+fn main() -> AppExit {
+    let frames: u32 = support::option("frames", FRAMES);
+    let out = support::out_path("demo");
+    if support::flag("compare") {
+        return harness(compare(&out, frames, support::option("photons", 1u64 << 23)));
+    }
+    let sequence: u32 = support::option("sequence", 0);
+    if sequence > 0 {
+        return harness(write_sequence(&out, frames, sequence));
+    }
+    let mut app = App::new();
+    app.add_plugins((support::plugins("demo", "pool", (WIDTH, HEIGHT), frames), CausticsPlugin))
+        .add_systems(Startup, spawn_scene)
+        .add_systems(Update, (bob_ball, rain, place_underwater_view, touch_water, move_sun));
+    if support::headless() {
+        // Frames 50 ms apart.
+        app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
+    }
+    app.run()
 }
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("demo", &["frames", "photons", "sequence"], &["compare"])?;
-    let frames: u32 = args.number("frames", FRAMES)?;
-    let headless = args.headless;
-    if args.has("compare") {
-        return compare(&args, frames, args.number("photons", 1u64 << 23)?);
+/// The pool, and the view from under its water.
+fn spawn_scene(world: &mut World) {
+    let sky = spawn_pool(world);
+    spawn_underwater_view(world, sky);
+}
+
+/// A harness mode's outcome as the process's exit.
+fn harness(outcome: Result<(), String>) -> AppExit {
+    outcome.map_or_else(
+        |e| {
+            eprintln!("demo: {e}");
+            AppExit::error()
+        },
+        |()| AppExit::Success,
+    )
+}
+
+/// The demo in a [`HeadlessRenderer`], for the harness modes: the pool (and, with
+/// `underwater`, the view from under the water) drawn into the renderer's image, moving
+/// as in the app, frames 50 ms apart; `timed` for GPU times and counts.
+fn demo_renderer(timed: bool, underwater: bool) -> Result<HeadlessRenderer, String> {
+    let renderer = if timed { HeadlessRenderer::timed(WIDTH, HEIGHT) } else { HeadlessRenderer::new(WIDTH, HEIGHT) };
+    let mut renderer = renderer.map_err(|e| e.to_string())?;
+    renderer.app.add_systems(Update, (bob_ball, rain, place_underwater_view));
+    let target = renderer.render_target();
+    let world = renderer.world_mut();
+    world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
+    let sky = spawn_pool(world);
+    if underwater {
+        spawn_underwater_view(world, sky);
     }
-    let sequence: u32 = args.number("sequence", 0)?;
-    if sequence > 0 {
-        return write_sequence(&args, frames, sequence);
+    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
+    for camera in cameras {
+        world.entity_mut(camera).insert(target.clone());
     }
-    let spawn = move |world: &mut World, target: RenderTarget| {
-        let sky = spawn_pool(world, target.clone(), headless);
-        spawn_underwater_view(world, target, sky);
-    };
-    support::show(&args, "pool", (WIDTH, HEIGHT), frames, spawn, (touch_water, move_sun))
+    Ok(renderer)
 }
 
 /// `--sequence N` (headless): after the usual frames, the next `N` rendered frames as
 /// `<out stem>-000.png`, … (`scripts/animation.sh` makes the README's animation of them).
-fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), String> {
-    use bevy_caustics::headless::HeadlessRenderer;
-    let mut renderer = HeadlessRenderer::new(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
-    let target = renderer.render_target();
-    let sky = spawn_pool(renderer.world_mut(), target.clone(), true);
-    spawn_underwater_view(renderer.world_mut(), target, sky);
+fn write_sequence(out: &Path, frames: u32, count: u32) -> Result<(), String> {
+    let mut renderer = demo_renderer(false, true)?;
     renderer.render(frames).map_err(|e| e.to_string())?;
-    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+    let stem = out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     for i in 0..count {
         let image = renderer.render(0).map_err(|e| e.to_string())?;
-        let path = args.out.with_file_name(format!("{stem}-{i:03}.png"));
+        let path = out.with_file_name(format!("{stem}-{i:03}.png"));
         image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
         eprintln!("wrote {} ({} of {count})", path.display(), i + 1);
     }
@@ -120,12 +154,9 @@ fn write_sequence(args: &support::Args, frames: u32, count: u32) -> Result<(), S
 /// GPU time, and writes beside `--out` the frame traced (`<stem>-frame.json`, for
 /// `caustics bench --scene`) and the split view per technique: left the technique,
 /// right the reference.
-fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String> {
+fn compare(out: &Path, frames: u32, photons: u64) -> Result<(), String> {
     use bevy_caustics::comparison::{ReferenceComparison, compare_headless};
-    use bevy_caustics::headless::HeadlessRenderer;
-    let mut renderer = HeadlessRenderer::timed(WIDTH, HEIGHT).map_err(|e| e.to_string())?;
-    let target = renderer.render_target();
-    spawn_pool(renderer.world_mut(), target, true);
+    let mut renderer = demo_renderer(true, false)?;
     renderer.render(frames).map_err(|e| e.to_string())?;
     let world = renderer.world_mut();
     let camera = world.query_filtered::<Entity, (With<Camera3d>, Without<UnderwaterView>)>().single(world).map_err(|e| e.to_string())?;
@@ -149,10 +180,10 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
             w.main_pass.fragments.unwrap_or(0.0) / 1e6
         );
     }
-    let stem = args.out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
+    let stem = out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
     let comparison = renderer.world_mut().resource::<ReferenceComparison>();
     println!("\nThe reference's own noise: relative L2 {:.3}.", comparison.reference_noise.unwrap_or(f32::NAN));
-    let frame = args.out.with_file_name(format!("{stem}-frame.json"));
+    let frame = out.with_file_name(format!("{stem}-frame.json"));
     comparison.save_frame(&frame)?;
     eprintln!("wrote {} (`caustics bench --scenes '' --scene {}` measures it again)", frame.display(), frame.display());
     // The split view of each technique, as the panel shows it.
@@ -167,7 +198,7 @@ fn compare(args: &support::Args, frames: u32, photons: u64) -> Result<(), String
         // A white line where the halves meet.
         let (width, middle) = (image.width as usize, image.width as usize / 2);
         image.pixels.iter_mut().skip(middle).step_by(width).for_each(|p| *p = Vec4::ONE);
-        let path = args.out.with_file_name(format!("{stem}-{}-vs-reference.png", row.technique.label().to_lowercase().replace(' ', "-")));
+        let path = out.with_file_name(format!("{stem}-{}-vs-reference.png", row.technique.label().to_lowercase().replace(' ', "-")));
         image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
         eprintln!("wrote {}", path.display());
     }
@@ -201,7 +232,7 @@ impl Sun {
 }
 
 /// The pool, its lights and its main camera; returns the sky, for other cameras.
-fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) -> EnvironmentMapLight {
+fn spawn_pool(world: &mut World) -> EnvironmentMapLight {
     world.insert_resource(GlobalAmbientLight { brightness: 800.0, color: Color::srgb(0.75, 0.85, 1.0), ..default() });
     world.insert_resource(ClearColor(Color::srgb(0.45, 0.65, 0.95)));
     let tiles = world.resource_mut::<Assets<Image>>().add(support::tiles());
@@ -277,29 +308,22 @@ fn spawn_pool(world: &mut World, target: RenderTarget, headless: bool) -> Enviro
         sun.transform(),
         sun,
     ));
-    let sky = support::sky(world, SKY);
+    let sky = support::sky(&mut world.resource_mut::<Assets<Image>>(), SKY);
     world.spawn((
         Camera3d::default(),
         Caustics::default(),
         sky.clone(),
-        target,
         Exposure { ev100: EV100 },
         Projection::from(PerspectiveProjection { fov: 0.9, ..default() }),
         Transform::from_xyz(-1.3, 1.8, 3.5).looking_at(Vec3::new(0.3, -0.9, -0.7), Vec3::Y),
     ));
-    world.schedule_scope(Update, |_, schedule| {
-        schedule.add_systems((bob_ball, rain));
-    });
-    if headless {
-        world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
-    }
     sky
 }
 
 /// A second camera, in the pool's corner half a metre under the water, looking across
 /// it towards the sun and up at the surface; [`place_underwater_view`] gives it its
 /// corner of the image.
-fn spawn_underwater_view(world: &mut World, target: RenderTarget, sky: EnvironmentMapLight) {
+fn spawn_underwater_view(world: &mut World, sky: EnvironmentMapLight) {
     world.spawn((
         Name::new("underwater camera"),
         UnderwaterView,
@@ -308,7 +332,6 @@ fn spawn_underwater_view(world: &mut World, target: RenderTarget, sky: Environme
         Camera { order: 1, is_active: false, msaa_writeback: MsaaWriteback::Off, ..default() },
         Caustics::default(),
         sky,
-        target,
         Exposure { ev100: EV100 },
         // Bevy's own light does not know the `ParticipatingMedium`: under the water a
         // fog stands in for the water's extinction of it, and for the sky light the
@@ -318,9 +341,6 @@ fn spawn_underwater_view(world: &mut World, target: RenderTarget, sky: Environme
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),
         Transform::from_xyz(1.6, -0.9, -1.6).looking_at(Vec3::new(-1.0, 0.15, 0.4), Vec3::Y),
     ));
-    world.schedule_scope(Update, |_, schedule| {
-        schedule.add_systems(place_underwater_view);
-    });
 }
 
 /// Keeps the underwater view in the bottom right corner of its image, whatever the

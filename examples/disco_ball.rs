@@ -9,28 +9,25 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::Exposure;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
 use bevy_caustics::reference::bevy_mesh;
 use std::f32::consts::{PI, TAU};
-use std::process::ExitCode;
 
 /// The room: 4 m wide, deep and high, open at the front (+z).
 const ROOM: f32 = 4.0;
 const BALL_CENTER: Vec3 = Vec3::new(0.0, 2.6, 0.0);
 
-fn main() -> ExitCode {
-    support::exit_code("disco_ball", run)
-}
-
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("disco_ball", &["facets"], &[])?;
-    let facets: usize = args.number("facets", 24)?;
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_room(world, target, facets);
-    support::show(&args, "disco ball", (640, 480), 6, spawn, turn)
+fn main() -> AppExit {
+    let facets: usize = support::option("facets", 24);
+    App::new()
+        .add_plugins((support::plugins("disco_ball", "disco ball", (640, 480), 6), CausticsPlugin))
+        .add_systems(Startup, move |world: &mut World| spawn_room(world, facets))
+        .add_systems(Update, turn)
+        .run()
 }
 
 #[derive(Component)]
@@ -75,7 +72,7 @@ fn faceted_sphere(radius: f32, segments: usize) -> TriMesh {
     TriMesh::new(positions, normals, triangles).expect("facet normals are never zero")
 }
 
-fn spawn_room(world: &mut World, target: RenderTarget, facets: usize) {
+fn spawn_room(world: &mut World, facets: usize) {
     world.insert_resource(GlobalAmbientLight { brightness: 40.0, ..default() });
     world.insert_resource(ClearColor(Color::BLACK));
     let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
@@ -121,7 +118,6 @@ fn spawn_room(world: &mut World, target: RenderTarget, facets: usize) {
     world.spawn((
         Camera3d::default(),
         Caustics::default(),
-        target,
         Exposure { ev100: 9.0 },
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),
         Transform::from_xyz(0.0, 2.0, 6.2).looking_at(Vec3::new(0.0, 2.0, 0.0), Vec3::Y),

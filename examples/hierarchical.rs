@@ -15,35 +15,34 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::Exposure;
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
 use bevy_caustics::reference::bevy_mesh;
-use std::process::ExitCode;
 
-fn main() -> ExitCode {
-    support::exit_code("hierarchical", run)
-}
-
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("hierarchical", &["photons"], &["flat", "hierarchical", "image-space"])?;
-    let photons: u32 = args.number("photons", 1024)?;
-    let preset = if args.has("flat") {
+fn main() -> AppExit {
+    let photons: u32 = support::option("photons", 1024);
+    let preset = if support::flag("flat") {
         HierarchicalMapsSettings::FLAT
-    } else if args.has("hierarchical") {
+    } else if support::flag("hierarchical") {
         HierarchicalMapsSettings::HIERARCHICAL
-    } else if args.has("image-space") {
+    } else if support::flag("image-space") {
         HierarchicalMapsSettings::FULL
     } else {
         HierarchicalMapsSettings::TRACED
     };
-    let settings = HierarchicalMapsSettings { photon_resolution: photons, ..preset };
-    let bunny = TriMesh::from_obj(include_str!("../assets/models/bunny.obj")).map_err(|e| format!("assets/models/bunny.obj: {e}"))?;
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_scene(world, target, settings, &bunny);
-    support::show(&args, "hierarchical caustic maps", (800, 520), 4, spawn, switch_gather)
+    let bunny = TriMesh::from_obj(include_str!("../assets/models/bunny.obj")).expect("assets/models/bunny.obj is a mesh");
+    App::new()
+        .add_plugins((support::plugins("hierarchical", "hierarchical caustic maps", (800, 520), 4), CausticsPlugin))
+        .insert_resource(HierarchicalMapsSettings { photon_resolution: photons, ..preset })
+        .insert_resource(GlobalAmbientLight { brightness: 60.0, ..default() })
+        .insert_resource(ClearColor(Color::srgb(0.04, 0.04, 0.05)))
+        .add_systems(Startup, move |world: &mut World| spawn_scene(world, &bunny))
+        .add_systems(Update, switch_gather)
+        .run()
 }
 
 /// Keys 1–4: flat, hierarchical, full (the paper's image-space pair), traced paths.
@@ -59,10 +58,9 @@ fn switch_gather(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<Hierarchi
     *settings = HierarchicalMapsSettings { photon_resolution: settings.photon_resolution, ..preset.1 };
 }
 
-fn spawn_scene(world: &mut World, target: RenderTarget, settings: HierarchicalMapsSettings, bunny: &TriMesh) {
-    world.insert_resource(settings);
-    world.insert_resource(GlobalAmbientLight { brightness: 60.0, ..default() });
-    world.insert_resource(ClearColor(Color::srgb(0.04, 0.04, 0.05)));
+/// A stone floor, the glass bunny and the steel ring on it, a spot above and a low sun,
+/// and a camera.
+fn spawn_scene(world: &mut World, bunny: &TriMesh) {
     let stone = support::texture(128, |u, v| {
         let (x, y) = ((u * 128.0) as u32, (v * 128.0) as u32);
         let hash = (x.wrapping_mul(0x9E37_79B9) ^ y.wrapping_mul(0x85EB_CA6B)).wrapping_mul(0xC2B2_AE35);
@@ -113,12 +111,11 @@ fn spawn_scene(world: &mut World, target: RenderTarget, settings: HierarchicalMa
         DirectionalLight { illuminance: 9000.0, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(Vec3::new(-1.0, -0.42, 0.3), Vec3::Y),
     ));
-    let sky = support::sky(world, 400.0);
+    let sky = support::sky(&mut world.resource_mut::<Assets<Image>>(), 400.0);
     world.spawn((
         sky,
         Camera3d::default(),
         Caustics::default(),
-        target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(0.2, 2.2, 2.6).looking_at(Vec3::new(0.05, 0.15, 0.0), Vec3::Y),
     ));

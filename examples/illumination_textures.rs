@@ -13,20 +13,14 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::Exposure;
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
-use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::illumination_textures::{IlluminationFrames, LightTransportTables};
 use bevy_caustics::prelude::*;
 use bevy_caustics::reference::bevy_mesh;
-use std::process::ExitCode;
-
-fn main() -> ExitCode {
-    support::exit_code("illumination_textures", run)
-}
 
 /// The glass ball.
 #[derive(Component)]
@@ -36,56 +30,73 @@ struct Ball;
 #[derive(Component)]
 struct Lamp;
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("illumination_textures", &["planes", "texture"], &[])?;
-    let settings =
-        IlluminationTexturesSettings { planes: args.number("planes", 4)?, texture_size: args.number("texture", 512)?, ..default() };
-    settings.core()?;
-    let bunny = TriMesh::from_obj(include_str!("../assets/models/bunny.obj")).map_err(|e| format!("assets/models/bunny.obj: {e}"))?;
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_scene(world, target, settings.clone(), &bunny);
-    if !args.headless {
-        return support::show(&args, "illumination textures", (960, 640), 0, spawn, (move_ball_and_light, switch_settings));
+fn main() -> AppExit {
+    let settings = IlluminationTexturesSettings { planes: support::option("planes", 4), texture_size: support::option("texture", 512), ..default() };
+    let bunny = TriMesh::from_obj(include_str!("../assets/models/bunny.obj")).expect("assets/models/bunny.obj is a mesh");
+    let mut app = App::new();
+    // Headless, the picture is taken when the tour below says so (frames: 0).
+    app.add_plugins((support::plugins("illumination_textures", "illumination textures", (960, 640), 0), CausticsPlugin))
+        .insert_resource(settings)
+        .insert_resource(GlobalAmbientLight { brightness: 80.0, ..default() })
+        .insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.06)))
+        .add_systems(Startup, move |world: &mut World| spawn_scene(world, &bunny));
+    if support::headless() {
+        app.add_systems(Update, tour);
+    } else {
+        app.add_systems(Update, (move_ball_and_light, switch_settings));
     }
-    // Headless: the planes are set up off the frame; wait for them, move the ball and
-    // the light a few times, waiting each time, then take the picture.
-    let mut renderer = HeadlessRenderer::new(960, 640).map_err(|e| e.to_string())?;
-    let target = renderer.render_target();
-    spawn(renderer.world_mut(), target);
-    let wait_for_planes = |renderer: &mut HeadlessRenderer| -> Result<(), String> {
-        let before = renderer.world_mut().resource::<IlluminationFrames>().generation;
-        for _ in 0..200 {
-            renderer.render(1).map_err(|e| e.to_string())?;
-            let frames = renderer.world_mut().resource::<IlluminationFrames>();
-            if frames.generation > before && !frames.frames.is_empty() {
-                return Ok(());
-            }
+    app.run()
+}
+
+/// Headless: the planes are set up off the frame. Once they are, the ball and the light
+/// move, three times, each time once the planes of the last pose are in; then the
+/// picture is taken, and the run fails if the ball's table was made more than once.
+#[allow(clippy::too_many_arguments)]
+fn tour(
+    frames: Res<IlluminationFrames>,
+    tables: Res<LightTransportTables>,
+    mut ball: Query<&mut Transform, (With<Ball>, Without<Lamp>)>,
+    mut lamp: Query<&mut Transform, (With<Lamp>, Without<Ball>)>,
+    (mut step, mut seen, mut waited): (Local<u32>, Local<u64>, Local<u32>),
+    mut shoot: MessageWriter<support::Shoot>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    if *step > 3 {
+        // Two frames to draw the last pose's planes, then the picture.
+        *step += 1;
+        if *step == 6 {
+            shoot.write(support::Shoot);
         }
-        Err("the illumination textures were not set up in 200 frames".into())
-    };
-    wait_for_planes(&mut renderer)?;
-    for step in 0..3 {
-        let world = renderer.world_mut();
-        let mut balls = world.query_filtered::<&mut Transform, With<Ball>>();
-        for mut t in balls.iter_mut(world) {
-            t.translation.x += 0.04;
-            t.rotate_y(0.4);
-        }
-        let mut lamps = world.query_filtered::<&mut Transform, With<Lamp>>();
-        for mut t in lamps.iter_mut(world) {
-            t.translation.z -= 0.1 + 0.05 * step as f32;
-        }
-        wait_for_planes(&mut renderer)?;
+        return;
     }
-    let tables = renderer.world_mut().resource::<LightTransportTables>();
-    let made = tables.built + tables.loaded;
-    eprintln!("light transport tables: {} built, {} read from the cache, over 4 poses", tables.built, tables.loaded);
-    if made != 1 {
-        return Err(format!("the ball's light transport table was made {made} times, not once"));
+    *waited += 1;
+    if *waited > 200 {
+        eprintln!("the illumination textures were not set up in 200 frames");
+        exit.write(AppExit::error());
+        return;
     }
-    let image = renderer.render(2).map_err(|e| e.to_string())?;
-    image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
-    eprintln!("wrote {}", args.out.display());
-    Ok(())
+    if frames.generation == *seen || frames.frames.is_empty() {
+        return;
+    }
+    (*seen, *waited) = (frames.generation, 0);
+    if *step == 3 {
+        let made = tables.built + tables.loaded;
+        eprintln!("light transport tables: {} built, {} read from the cache, over 4 poses", tables.built, tables.loaded);
+        if made != 1 {
+            eprintln!("the ball's light transport table was made {made} times, not once");
+            exit.write(AppExit::error());
+        }
+        *step = 4;
+        return;
+    }
+    for mut t in &mut ball {
+        t.translation.x += 0.04;
+        t.rotate_y(0.4);
+    }
+    for mut t in &mut lamp {
+        t.translation.z -= 0.1 + 0.05 * *step as f32;
+    }
+    *step += 1;
 }
 
 /// Arrow keys move the ball, W/A/S/D the light, 2 m/s.
@@ -127,10 +138,7 @@ fn switch_settings(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<Illumin
     }
 }
 
-fn spawn_scene(world: &mut World, target: RenderTarget, settings: IlluminationTexturesSettings, bunny: &TriMesh) {
-    world.insert_resource(settings);
-    world.insert_resource(GlobalAmbientLight { brightness: 80.0, ..default() });
-    world.insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.06)));
+fn spawn_scene(world: &mut World, bunny: &TriMesh) {
     support::textured_floor(world, support::wood(), Affine2::from_scale(Vec2::splat(2.0)), 2.0, 0.85);
 
     // The bunny, 0.48 m tall, in clay: it receives the ball's caustic and shadow.
@@ -165,7 +173,6 @@ fn spawn_scene(world: &mut World, target: RenderTarget, settings: IlluminationTe
     world.spawn((
         Camera3d::default(),
         Caustics::default(),
-        target,
         Exposure { ev100: 8.0 },
         Transform::from_xyz(1.1, 1.2, 1.8).looking_at(Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
     ));

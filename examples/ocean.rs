@@ -13,36 +13,32 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::Exposure;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::prelude::*;
-use std::process::ExitCode;
 
 /// The water surface's height above the sea floor (m).
 const DEPTH: f32 = 3.0;
 /// The ocean patch's side (m).
 const PATCH: f32 = 12.0;
 
-fn main() -> ExitCode {
-    support::exit_code("ocean", run)
+fn main() -> AppExit {
+    let resolution: u32 = support::option("resolution", 32);
+    let wind: f32 = support::option("wind", 7.0);
+    let shaft_downsample: u32 = support::option("shaft-downsample", WarpedVolumesSettings::default().shaft_downsample);
+    App::new()
+        .add_plugins((support::plugins("ocean", "ocean", (800, 450), 8), CausticsPlugin))
+        .insert_resource(WarpedVolumesSettings { shaft_downsample, ..default() })
+        .insert_resource(GlobalAmbientLight { brightness: 600.0, color: Color::srgb(0.5, 0.7, 0.9), ..default() })
+        .insert_resource(ClearColor(Color::srgb(0.02, 0.12, 0.18)))
+        .add_systems(Startup, move |world: &mut World| spawn_sea(world, resolution, wind))
+        .run()
 }
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("ocean", &["resolution", "wind", "shaft-downsample"], &[])?;
-    let resolution: u32 = args.number("resolution", 32)?;
-    let wind: f32 = args.number("wind", 7.0)?;
-    let shaft_downsample: u32 = args.number("shaft-downsample", WarpedVolumesSettings::default().shaft_downsample)?;
-    let spawn = move |world: &mut World, target: RenderTarget| {
-        world.insert_resource(WarpedVolumesSettings { shaft_downsample, ..default() });
-        spawn_sea(world, target, resolution, wind)
-    };
-    support::show(&args, "ocean", (800, 450), 8, spawn, || {})
-}
-
-fn spawn_sea(world: &mut World, target: RenderTarget, resolution: u32, wind_speed: f32) {
-    world.insert_resource(GlobalAmbientLight { brightness: 600.0, color: Color::srgb(0.5, 0.7, 0.9), ..default() });
-    world.insert_resource(ClearColor(Color::srgb(0.02, 0.12, 0.18)));
+/// The sandy floor, the ocean over it under the sun, the water body's medium and a
+/// camera under the surface.
+fn spawn_sea(world: &mut World, resolution: u32, wind_speed: f32) {
     support::textured_floor(world, support::sand(), bevy::math::Affine2::from_scale(Vec2::splat(6.0)), PATCH / 2.0, 0.95);
     // Seen from below too (no culling), and glowing faintly as the sky seen through it
     // would (Bevy does not refract: this stands in for Snell's window).
@@ -80,7 +76,6 @@ fn spawn_sea(world: &mut World, target: RenderTarget, resolution: u32, wind_spee
     world.spawn((
         Camera3d::default(),
         Caustics::default(),
-        target,
         Exposure { ev100: 12.0 },
         Transform::from_xyz(-4.5, 1.6, 4.5).looking_at(Vec3::new(0.5, 0.4, -0.5), Vec3::Y),
     ));

@@ -13,12 +13,11 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::RenderTarget;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy::window::PrimaryWindow;
+use bevy_caustics::debug_panel::bevy_egui::EguiPrimaryContextPass;
 use bevy_caustics::prelude::*;
-use std::process::ExitCode;
 use std::time::Duration;
 
 const WIDTH: u32 = 960;
@@ -33,20 +32,24 @@ const PEBBLE: f32 = 0.015;
 /// Frames rendered headless, 50 ms apart.
 const FRAMES: u32 = 30;
 
-fn main() -> ExitCode {
-    support::exit_code("pool", run)
+fn main() -> AppExit {
+    let kernel_radius: u32 = support::option("kernel", 6);
+    let depth: f32 = support::option("depth", 1.0);
+    let mut app = App::new();
+    app.add_plugins((support::plugins("pool", "pool", (WIDTH, HEIGHT), FRAMES), CausticsPlugin))
+        .add_systems(Startup, move |world: &mut World| spawn_pool(world, kernel_radius, depth))
+        .add_systems(Update, drop_pebble_on_click);
+    if support::headless() {
+        // Frames 50 ms apart, and pebbles on a script.
+        app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50))).add_systems(Update, drop_scripted_pebbles);
+    } else {
+        app.add_systems(EguiPrimaryContextPass, pool_sliders);
+    }
+    app.run()
 }
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("pool", &["kernel", "depth"], &[])?;
-    let kernel_radius: u32 = args.number("kernel", 6)?;
-    let depth: f32 = args.number("depth", 1.0)?;
-    let headless = args.headless;
-    let spawn = move |world: &mut World, target: RenderTarget| spawn_pool(world, target, kernel_radius, depth, headless);
-    support::show(&args, "pool", (WIDTH, HEIGHT), FRAMES, spawn, drop_pebble_on_click)
-}
-
-fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth: f32, headless: bool) {
+/// The tiled pool, its water under the afternoon sun, and a camera above it.
+fn spawn_pool(world: &mut World, kernel_radius: u32, depth: f32) {
     let tiles = support::tiles();
     let floor = support::textured_floor(world, tiles.clone(), bevy::math::Affine2::from_scale(Vec2::splat(8.0)), SIZE / 2.0, 0.9);
     world.entity_mut(floor).insert(Transform::from_xyz(0.0, -depth, 0.0));
@@ -77,19 +80,8 @@ fn spawn_pool(world: &mut World, target: RenderTarget, kernel_radius: u32, depth
         Caustics::default(),
         // A white floor under the midday sun.
         bevy::camera::Exposure { ev100: 11.0 },
-        target,
         Transform::from_xyz(0.0, 4.8, 3.4).looking_at(Vec3::new(0.0, -0.8, 0.1), Vec3::Y),
     ));
-    if headless {
-        world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
-        world.schedule_scope(Update, |_, schedule| {
-            schedule.add_systems(drop_scripted_pebbles);
-        });
-    } else {
-        world.schedule_scope(bevy_caustics::debug_panel::bevy_egui::EguiPrimaryContextPass, |_, schedule| {
-            schedule.add_systems(pool_sliders);
-        });
-    }
 }
 
 /// The pool's light settings as sliders in the window.

@@ -9,30 +9,27 @@
 #[path = "support/mod.rs"]
 mod support;
 
-use bevy::camera::{Exposure, RenderTarget};
+use bevy::camera::Exposure;
 use bevy::prelude::*;
 use bevy_caustics::prelude::*;
-use std::process::ExitCode;
 
-fn main() -> ExitCode {
-    support::exit_code("ring", run)
+fn main() -> AppExit {
+    let segments: usize = support::option("segments", 64);
+    let intensity = if support::flag("constant") { VolumeIntensity::Constant } else { VolumeIntensity::Conserving };
+    App::new()
+        .add_plugins((support::plugins("ring", "ring", (800, 500), 6), CausticsPlugin))
+        .add_systems(Startup, move |world: &mut World| support::ring_scene(world, segments, intensity))
+        .add_systems(Startup, camera)
+        .run()
 }
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("ring", &["segments"], &["constant"])?;
-    let segments: usize = args.number("segments", 64)?;
-    let intensity = if args.has("constant") { VolumeIntensity::Constant } else { VolumeIntensity::Conserving };
-    let spawn = move |world: &mut World, target: RenderTarget| {
-        support::ring_scene(world, segments, intensity);
-        let sky = support::sky(world, 1000.0);
-        world.spawn((
-            sky,
-            Camera3d::default(),
-            Caustics::default(),
-            target,
-            Exposure { ev100: 12.0 },
-            Transform::from_xyz(-0.6, 2.6, 2.4).looking_at(Vec3::new(0.1, 0.0, 0.0), Vec3::Y),
-        ));
-    };
-    support::show(&args, "ring", (800, 500), 6, spawn, || {})
+/// Looking down at the ring, the sun behind it, with a sky for the metal to reflect.
+fn camera(mut commands: Commands, mut images: ResMut<Assets<Image>>) {
+    commands.spawn((
+        support::sky(&mut images, 1000.0),
+        Camera3d::default(),
+        Caustics::default(),
+        Exposure { ev100: 12.0 },
+        Transform::from_xyz(-0.6, 2.6, 2.4).looking_at(Vec3::new(0.1, 0.0, 0.0), Vec3::Y),
+    ));
 }

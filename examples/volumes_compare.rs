@@ -26,11 +26,18 @@ const PANELS: [(usize, VolumeIntensity); 4] = [
 ];
 
 fn main() -> ExitCode {
-    support::exit_code("volumes_compare", run)
+    match run(&support::out_path("volumes_compare")) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("volumes_compare: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
-fn run() -> Result<(), String> {
-    let args = support::Args::parse("volumes_compare", &[], &[])?;
+/// Renders the four panels in one headless renderer, the ring's mesh and the volumes'
+/// intensity changed between them, and writes them side by side to `out`.
+fn run(out: &std::path::Path) -> Result<(), String> {
     let mut renderer = HeadlessRenderer::new(PANEL, PANEL).map_err(|e| e.to_string())?;
     let target = renderer.render_target();
     let world = renderer.world_mut();
@@ -54,8 +61,8 @@ fn run() -> Result<(), String> {
         panels.push(renderer.render(4).map_err(|e| e.to_string())?);
         eprintln!("{segments} segments, {intensity:?}: rendered");
     }
-    side_by_side(&panels).save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
-    eprintln!("wrote {} (left to right: {PANELS:?})", args.out.display());
+    side_by_side(&panels).save_png(out, 1.0).map_err(|e| e.to_string())?;
+    eprintln!("wrote {} (left to right: {PANELS:?})", out.display());
     Ok(())
 }
 

@@ -1,130 +1,189 @@
-//! What every example shares: its command line, the window-or-PNG runner and a few
-//! procedural textures. Included by each example with `#[path = "support/mod.rs"]`;
-//! each uses a part of it.
+//! What the examples share: the plugins that open a window, or write a PNG without
+//! one for CI ([`plugins`]), their command-line options, and a few procedural textures
+//! and scenes. Included by each example with `#[path = "support/mod.rs"]`; each uses a
+//! part of it.
 #![allow(dead_code)]
 
+use bevy::app::{PluginGroupBuilder, ScheduleRunnerPlugin};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
-use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
-use bevy::window::WindowResolution;
+use bevy::render::render_resource::{
+    CachedPipelineState, Extent3d, PipelineCache, PipelineDescriptor, TextureDimension, TextureFormat, TextureUsages,
+};
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured, save_to_disk};
+use bevy::render::{Render, RenderApp, RenderPlugin, RenderSystems};
+use bevy::shader::ShaderCacheError;
+use bevy::time::TimeUpdateStrategy;
+use bevy::window::{ExitCondition, WindowResolution};
+use bevy::winit::WinitPlugin;
+use bevy_caustics::CausticPassReport;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
 use bevy_caustics::reference::bevy_mesh;
-use bevy_caustics::headless::HeadlessRenderer;
 use std::path::PathBuf;
-use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
-/// The options every example takes, and its own ones by name.
-pub struct Args {
-    pub headless: bool,
-    pub out: PathBuf,
-    /// `--name value` pairs the example reads with [`Args::number`].
-    pub extra: Vec<(String, String)>,
-    /// The example's own switches given (`--name`, no value).
-    pub switches: Vec<String>,
+/// Whether the example runs without a window: `--headless`, or no display to open one on.
+pub fn headless() -> bool {
+    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
+    flag("headless") || !has_display
 }
 
-impl Args {
-    /// Parses `--headless`, `--out PATH`, the example's own `--name value` options
-    /// (`options`) and `--name` switches (`switches`). Without a display the example
-    /// runs headless.
-    pub fn parse(name: &str, options: &[&str], switches: &[&str]) -> Result<Self, String> {
-        let mut args = Args {
-            headless: false,
-            out: PathBuf::from(format!("target/{name}.png")),
-            extra: Vec::new(),
-            switches: Vec::new(),
-        };
-        let mut it = std::env::args().skip(1);
-        while let Some(arg) = it.next() {
-            let bare = arg.trim_start_matches("--");
-            match arg.as_str() {
-                "--headless" => args.headless = true,
-                "--out" => args.out = it.next().ok_or("--out needs a path")?.into(),
-                _ if arg.starts_with("--") && options.contains(&bare) => {
-                    let value = it.next().ok_or(format!("{arg} needs a value"))?;
-                    args.extra.push((bare.to_string(), value));
-                }
-                _ if arg.starts_with("--") && switches.contains(&bare) => args.switches.push(bare.to_string()),
-                other => {
-                    let own: Vec<String> = options.iter().map(|k| format!("--{k} N")).chain(switches.iter().map(|k| format!("--{k}"))).collect();
-                    return Err(format!("unknown argument {other:?} (use --headless, --out PATH {})", own.join(" ")));
-                }
-            }
-        }
-        let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
-        args.headless |= !has_display;
-        Ok(args)
-    }
+/// Whether `--name` is on the command line.
+pub fn flag(name: &str) -> bool {
+    std::env::args().any(|a| a.strip_prefix("--") == Some(name))
+}
 
-    /// Whether the switch `--name` was given.
-    pub fn has(&self, name: &str) -> bool {
-        self.switches.iter().any(|s| s == name)
-    }
-
-    /// The value of `--name`, or `default`.
-    pub fn number<T: std::str::FromStr>(&self, name: &str, default: T) -> Result<T, String> {
-        match self.extra.iter().rev().find(|(k, _)| k == name) {
-            Some((_, v)) => v.parse().map_err(|_| format!("--{name} needs a number, not {v:?}")),
-            None => Ok(default),
+/// The value after `--name` on the command line, or `default`; a value that does not
+/// parse ends the example with a message.
+pub fn option<T: std::str::FromStr>(name: &str, default: T) -> T {
+    let args: Vec<String> = std::env::args().collect();
+    let Some(at) = args.iter().position(|a| a.strip_prefix("--") == Some(name)) else { return default };
+    match args.get(at + 1).map(|v| v.parse()) {
+        Some(Ok(value)) => value,
+        _ => {
+            eprintln!("--{name} needs a value of the right kind");
+            std::process::exit(2);
         }
     }
 }
 
-/// Runs `main`, printing its error on one line and exiting non-zero on failure.
-pub fn exit_code(name: &str, main: impl FnOnce() -> Result<(), String>) -> ExitCode {
-    match main() {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("{name}: {e}");
-            ExitCode::FAILURE
-        }
-    }
+/// Where a headless run writes its PNG: `--out PATH`, or `target/NAME.png`.
+pub fn out_path(name: &str) -> PathBuf {
+    option("out", PathBuf::from(format!("target/{name}.png")))
 }
 
-/// Shows the scene `spawn` builds: in a window (with `animate` running every frame),
-/// or headless, `frames` updates rendered offscreen and written to `args.out`.
-pub fn show<M>(
-    args: &Args,
-    title: &str,
-    (width, height): (u32, u32),
-    frames: u32,
-    spawn: impl Fn(&mut World, RenderTarget) + Send + Sync + 'static,
-    animate: impl IntoScheduleConfigs<bevy::ecs::system::ScheduleSystem, M>,
-) -> Result<(), String> {
-    if args.headless {
-        let mut renderer = HeadlessRenderer::new(width, height).map_err(|e| e.to_string())?;
-        let target = renderer.render_target();
-        spawn(renderer.world_mut(), target);
-        let image = renderer.render(frames).map_err(|e| e.to_string())?;
-        let report = renderer.pass_report();
-        for (entity, choice) in &report.generators {
-            eprintln!("generator {entity}: {choice}");
-        }
-        let passes: Vec<String> = report.passes.iter().map(|(pass, views)| format!("{pass} ({views} views)")).collect();
-        eprintln!("caustics passes in the last frame: {}", if passes.is_empty() { "none".to_string() } else { passes.join(", ") });
-        image.save_png(&args.out, 1.0).map_err(|e| e.to_string())?;
-        eprintln!("wrote {}", args.out.display());
-        return Ok(());
-    }
-    let mut app = App::new();
-    app.add_plugins(DefaultPlugins.set(WindowPlugin {
-        primary_window: Some(Window {
+/// Bevy's default plugins for an example: a window titled `title`, `width × height`,
+/// with the "Caustics" panel; or, headless ([`headless`]), no window, every camera
+/// drawing into an image, and the frame after `frames` updates (or, with `frames` 0,
+/// the frame in which the app sends [`Shoot`]) written to [`out_path`] before the app
+/// exits (with an error if a pipeline failed to build).
+pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), frames: u32) -> PluginGroupBuilder {
+    if !headless() {
+        let window = Window {
             title: format!("bevy_caustics — {title}"),
             resolution: WindowResolution::new(width, height).with_scale_factor_override(1.0),
             ..default()
-        }),
-        ..default()
-    }))
-    .add_plugins((CausticsPlugin, bevy_caustics::debug_panel::CausticsDebugPanelPlugin));
-    app.add_systems(Startup, move |world: &mut World| spawn(world, RenderTarget::default()))
-        .add_systems(Update, animate);
-    app.run();
-    Ok(())
+        };
+        return DefaultPlugins.set(WindowPlugin { primary_window: Some(window), ..default() }).add(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
+    }
+    DefaultPlugins
+        .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
+        .set(RenderPlugin { synchronous_pipeline_compilation: true, ..default() })
+        .disable::<WinitPlugin>()
+        .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>()
+        // Without winit's loop, Bevy's own runs the frames.
+        .add(ScheduleRunnerPlugin::run_loop(Duration::ZERO))
+        .add(HeadlessShot { out: out_path(name), size: UVec2::new(width, height), frames })
+}
+
+/// Headless, with no fixed number of frames: take the picture now.
+#[derive(Message, Clone, Copy)]
+pub struct Shoot;
+
+/// Headless: draws every camera into an image, writes the frame after `frames`
+/// updates (time advancing 1/60 s each) to `out`, prints the caustics passes that ran
+/// and each generator's technique, and exits.
+struct HeadlessShot {
+    out: PathBuf,
+    size: UVec2,
+    frames: u32,
+}
+
+/// The image the cameras draw into, where to write it, after how many updates, and a
+/// pipeline that failed to build.
+#[derive(Resource, Clone)]
+struct Shot {
+    image: Handle<Image>,
+    out: PathBuf,
+    frames: u32,
+    failed: Arc<Mutex<Option<String>>>,
+}
+
+impl Plugin for HeadlessShot {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(1.0 / 60.0)))
+            .add_message::<Shoot>()
+            .add_systems(PostStartup, draw_into_image)
+            .add_systems(Last, take_shot);
+    }
+
+    fn finish(&self, app: &mut App) {
+        let mut image = Image::new_target_texture(self.size.x, self.size.y, TextureFormat::Rgba8UnormSrgb, None);
+        image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
+        let image = app.world_mut().resource_mut::<Assets<Image>>().add(image);
+        let failed = Arc::<Mutex<Option<String>>>::default();
+        app.insert_resource(Shot { image, out: self.out.clone(), frames: self.frames, failed: failed.clone() });
+        if let Some(render) = app.get_sub_app_mut(RenderApp) {
+            render.add_systems(Render, (move |cache: Res<PipelineCache>| note_failed_pipeline(&cache, &failed)).in_set(RenderSystems::Cleanup));
+        }
+    }
+}
+
+/// Every camera draws into the shot's image.
+fn draw_into_image(mut commands: Commands, cameras: Query<Entity, With<Camera>>, shot: Res<Shot>) {
+    for camera in &cameras {
+        commands.entity(camera).insert(RenderTarget::Image(shot.image.clone().into()));
+    }
+}
+
+/// Notes a render or compute pipeline that failed to build (a WGSL error, say), not
+/// one still waiting for its shader to load.
+fn note_failed_pipeline(cache: &PipelineCache, failed: &Mutex<Option<String>>) {
+    let Ok(mut failed) = failed.lock() else { return };
+    *failed = cache.pipelines().find_map(|p| match &p.state {
+        CachedPipelineState::Err(ShaderCacheError::ShaderNotLoaded(_) | ShaderCacheError::ShaderImportNotYetAvailable) => None,
+        CachedPipelineState::Err(error) => {
+            let label = match &p.descriptor {
+                PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
+                PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
+            };
+            Some(format!("{}: {error}", label.as_deref().unwrap_or("unlabelled")))
+        }
+        _ => None,
+    });
+}
+
+/// After `frames` updates, or on [`Shoot`]: a screenshot of the image, written to disk,
+/// then the exit.
+fn take_shot(
+    mut commands: Commands,
+    mut updates: Local<u32>,
+    mut shoot: MessageReader<Shoot>,
+    shot: Res<Shot>,
+    report: Res<CausticPassReport>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    *updates += 1;
+    let shoot = shoot.read().count() > 0;
+    if !(shot.frames == 0 && shoot || shot.frames > 0 && *updates == shot.frames) {
+        return;
+    }
+    if let Some(failed) = shot.failed.lock().ok().and_then(|f| f.clone()) {
+        eprintln!("a pipeline failed to build: {failed}");
+        exit.write(AppExit::error());
+        return;
+    }
+    for (entity, choice) in &report.generators {
+        eprintln!("generator {entity}: {choice}");
+    }
+    let passes: Vec<String> = report.passes.iter().map(|(pass, views)| format!("{pass} ({views} views)")).collect();
+    eprintln!("caustics passes in the last frame: {}", if passes.is_empty() { "none".to_string() } else { passes.join(", ") });
+    if let Some(dir) = shot.out.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    let out = shot.out.clone();
+    commands.spawn(Screenshot::image(shot.image.clone())).observe(save_to_disk(out.clone())).observe(
+        move |_: On<ScreenshotCaptured>, mut exit: MessageWriter<AppExit>| {
+            eprintln!("wrote {}", out.display());
+            exit.write(AppExit::Success);
+        },
+    );
 }
 
 /// Where the cursor's ray meets the water's rest level `y = 0` (the pool examples'
@@ -200,10 +259,9 @@ pub fn sand() -> Image {
 
 /// A sky to reflect in metal (blue above, a pale horizon, brown ground), for a camera:
 /// without one, a polished metal shows only the sun's highlight and reads as grey paint.
-pub fn sky(world: &mut World, intensity: f32) -> bevy::light::EnvironmentMapLight {
-    let mut images = world.resource_mut::<Assets<Image>>();
+pub fn sky(images: &mut Assets<Image>, intensity: f32) -> bevy::light::EnvironmentMapLight {
     let (top, horizon, ground) = (Color::srgb(0.35, 0.55, 0.9), Color::srgb(0.85, 0.85, 0.8), Color::srgb(0.3, 0.22, 0.15));
-    bevy::light::EnvironmentMapLight { intensity, ..bevy::light::EnvironmentMapLight::hemispherical_gradient(&mut images, top, horizon, ground) }
+    bevy::light::EnvironmentMapLight { intensity, ..bevy::light::EnvironmentMapLight::hemispherical_gradient(images, top, horizon, ground) }
 }
 
 /// The sun of the ring scene: low, so that the ring's far wall focuses it into the cardioid.
