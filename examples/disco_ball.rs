@@ -14,7 +14,7 @@ use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use std::f32::consts::{PI, TAU};
 
 /// The room: 4 m wide, deep and high, open at the front (+z).

@@ -21,7 +21,7 @@ use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 
 fn main() -> AppExit {
     let photons: u32 = support::option("photons", 1024);

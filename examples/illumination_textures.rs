@@ -20,7 +20,7 @@ use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::illumination_textures::{IlluminationFrames, LightTransportTables};
 use bevy_caustics::prelude::*;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 
 /// The glass ball.
 #[derive(Component)]

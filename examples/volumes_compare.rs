@@ -14,7 +14,7 @@ use bevy::prelude::*;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::prelude::*;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use std::process::ExitCode;
 
 const PANEL: u32 = 320;

@@ -38,7 +38,8 @@
 //! | `illumination-textures` | yes | illumination textures (Iwasaki et al.) |
 //! | `convolution` | yes | convolution caustics (Trendall & Stewart 2000) and `PoolRipples` |
 //! | `ocean` | yes | the animated FFT `Ocean` |
-//! | `egui` | no | the "Caustics" debug panel (`debug_panel`) |
+//! | `egui` | no | the "Caustics" debug panel (`debug_panel`), with `reference` |
+//! | `reference` | no | the ground-truth tracer as a caustics source (`reference`) and the live comparison against it (`comparison`) |
 //! | `headless` | no | `headless::HeadlessRenderer`, rendering without a window for tests and tools |
 //!
 //! The library asks Bevy only for `bevy_render`, `bevy_core_pipeline`, `bevy_pbr`,

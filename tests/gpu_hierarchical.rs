@@ -21,7 +21,7 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::{CausticMapGather, CausticMapPlan, CausticMapsGpu, HierarchicalMapsSettings};
-use bevy_caustics::reference::{bevy_mesh, core_light};
+use bevy_caustics::read_scene::{bevy_mesh, core_light};
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
 use caustics_core::glam::{Vec2 as V2, Vec3 as V3};
 use caustics_core::hierarchical::hierarchy::{self, GatherEntry, PhotonPyramid};

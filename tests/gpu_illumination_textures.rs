@@ -18,7 +18,7 @@ use bevy::render::render_resource::TextureFormat;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::pixels::decode_rgba16f;
 use bevy_caustics::illumination_textures::{IlluminationFrames, IlluminationTexturesGpu, IlluminationTexturesSettings, LightTransportTables};
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
 use caustics_core::glam::{Vec3 as V3, Vec4 as V4};
 use caustics_core::illumination_textures::{Cosine, IlluminationTextures};

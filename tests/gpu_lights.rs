@@ -15,7 +15,7 @@ use bevy::camera::visibility::RenderLayers;
 use bevy::light::{GlobalAmbientLight, NotShadowCaster};
 use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;

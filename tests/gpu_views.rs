@@ -23,7 +23,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::AsBindGroup;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::irradiance::CausticReceiverMaterialPlugin;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, ParticipatingMedium, PoolRipples};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;

@@ -17,7 +17,7 @@ use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy::mesh::VertexAttributeValues;
-use bevy_caustics::reference::{bevy_mesh, core_mesh, to_core};
+use bevy_caustics::read_scene::{bevy_mesh, core_mesh, to_core};
 use bevy_caustics::convolution::PoolSurface;
 use bevy_caustics::warped_volumes::CausticVolumes;
 use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, DropPebble, Ocean, PoolRipples};

@@ -10,7 +10,7 @@ use bevy::camera::visibility::RenderLayers;
 use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
-use bevy_caustics::reference::{bevy_mesh, to_core};
+use bevy_caustics::read_scene::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, ParticipatingMedium};

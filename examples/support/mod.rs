@@ -23,7 +23,7 @@ use bevy::winit::WinitPlugin;
 use bevy_caustics::CausticPassReport;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
-use bevy_caustics::reference::bevy_mesh;
+use bevy_caustics::read_scene::bevy_mesh;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;

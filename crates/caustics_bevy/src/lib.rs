@@ -2,8 +2,9 @@
 //!
 //! Components ([`CausticGenerator`], [`CausticReceiver`], [`ParticipatingMedium`]),
 //! the per-view caustic irradiance buffer and its composite onto receivers, a pass
-//! report, glTF tagging and, with the `headless` feature, a renderer without a window
-//! for tests and tools. The math lives in `caustics_core`; this crate is a thin layer
+//! report and glTF tagging. Tools live behind features: `reference` (the ground-truth
+//! tracer as a caustics source, and the live comparison against it), `headless` (a
+//! renderer without a window for tests and tools). The math lives in `caustics_core`; this crate is a thin layer
 //! of components, systems and passes.
 //!
 //! Every buffer and texture the plugin makes is labelled `caustic_…`, so that a GPU
@@ -13,6 +14,7 @@
 #![cfg_attr(docsrs, feature(doc_cfg))]
 #![warn(missing_docs)]
 
+#[cfg(feature = "reference")]
 pub mod comparison;
 pub mod components;
 pub mod cpu_time;
@@ -38,6 +40,8 @@ mod mesh_vertices;
 #[cfg(feature = "ocean")]
 pub mod ocean;
 pub mod pixels;
+pub mod read_scene;
+#[cfg(feature = "reference")]
 pub mod reference;
 pub mod report;
 pub mod technique;
@@ -100,6 +104,7 @@ impl Plugin for CausticsPlugin {
         technique::build(app);
         report::build(app);
         irradiance::build(app);
+        #[cfg(feature = "reference")]
         comparison::build(app);
         #[cfg(feature = "warped-volumes")]
         warped_volumes::build(app);

@@ -10,7 +10,7 @@ use bevy::light::RectLight;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 
-use crate::reference::AnyLight;
+use crate::read_scene::AnyLight;
 
 /// Warns once per light about what the caustics do not follow of it.
 pub fn warn_unsupported_lights(

@@ -15,11 +15,7 @@ use bevy::render::{
 };
 use std::num::NonZeroU64;
 
-/// Marks an entity whose mesh a compute pass in [`WriteMeshVertices`] rewrites every
-/// frame on the GPU (an ocean): its mesh asset does not change, and whatever reads its
-/// vertices reads them again each frame.
-#[derive(Component)]
-pub(crate) struct MovesOnGpu;
+pub(crate) use crate::read_scene::MovesOnGpu;
 
 /// In the `RenderGraph` schedule, before the cameras: the compute passes that write
 /// meshes' vertices. Passes that read them run after it.

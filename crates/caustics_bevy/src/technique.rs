@@ -7,7 +7,7 @@
 //! without a warning.
 
 use crate::components::{CausticGenerator, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
-use crate::reference::{core_mesh, world_aabb};
+use crate::read_scene::{core_mesh, world_aabb};
 use bevy::camera::primitives::Aabb;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -146,7 +146,7 @@ type OceanMarker = NeverPresent;
 /// Stands in for a marker whose feature is off; never inserted.
 #[cfg(any(not(feature = "convolution"), not(feature = "ocean")))]
 #[derive(Component)]
-struct NeverPresent;
+pub struct NeverPresent;
 
 /// The valid participating media, for whether a generator lies in one.
 type Media<'w, 's> =

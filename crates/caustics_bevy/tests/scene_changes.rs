@@ -7,7 +7,7 @@
 use bevy::light::NotShadowCaster;
 use bevy::prelude::*;
 use caustics_bevy::components::validate_caustic_params;
-use caustics_bevy::reference::{ChangedParts, SceneChanges};
+use caustics_bevy::read_scene::{ChangedParts, SceneChanges};
 use caustics_bevy::technique::{AvailableCausticTechniques, choose_techniques};
 use caustics_bevy::{CausticGenerator, CausticReceiver};
 

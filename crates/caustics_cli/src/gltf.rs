@@ -15,7 +15,7 @@ use bevy::render::{RenderPlugin, settings::WgpuSettings};
 use bevy::window::ExitCondition;
 use bevy::winit::WinitPlugin;
 use bevy::world_serialization::WorldAsset;
-use caustics_bevy::reference::{core_light, core_mesh, to_core};
+use caustics_bevy::read_scene::{core_light, core_mesh, to_core};
 use caustics_core::estimate::GridRegion;
 use caustics_core::glam;
 use caustics_core::scene::{Generator, Receiver, Scene, SurfaceRole, role_from_material};
@@ -161,7 +161,7 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
     });
     let camera = camera.map(|(t, p)| PinholeCamera {
             position: to_core(t.translation()),
-            look_at: to_core(t.translation() + caustics_bevy::reference::facing(&t)),
+            look_at: to_core(t.translation() + caustics_bevy::read_scene::facing(&t)),
             up: to_core(Vec3::from(t.affine().matrix3 * bevy::math::Vec3A::Y).normalize_or(Vec3::Y)),
             fov_y: p.fov,
             width: 0,

@@ -110,7 +110,7 @@ impl PoolRipples {
     pub fn to_view(&self, generator: usize, transform: &GlobalTransform, surface: &PoolSurface, time: f32) -> PoolView {
         PoolView {
             generator,
-            transform: crate::reference::to_core_affine(&transform.affine()),
+            transform: crate::read_scene::to_core_affine(&transform.affine()),
             columns: self.columns,
             rows: self.rows,
             cell_size: self.cell_size,

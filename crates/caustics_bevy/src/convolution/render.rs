@@ -243,7 +243,7 @@ fn pool_sun<'a>(
     suns: impl Iterator<Item = (&'a DirectionalLight, &'a GlobalTransform, &'a InheritedVisibility)>,
 ) -> Option<(&'a DirectionalLight, Vec3)> {
     suns.filter(|(.., visible)| visible.get())
-        .map(|(sun, t, _)| (sun, pool_from_world.transform_vector3(crate::reference::facing(t)).normalize_or_zero()))
+        .map(|(sun, t, _)| (sun, pool_from_world.transform_vector3(crate::read_scene::facing(t)).normalize_or_zero()))
         .filter(|(_, direction)| direction.y < 0.0)
         .max_by(|a, b| a.0.illuminance.total_cmp(&b.0.illuminance))
 }

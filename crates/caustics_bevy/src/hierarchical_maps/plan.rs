@@ -6,7 +6,7 @@ use super::HierarchicalMapsSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
-use crate::reference::{
+use crate::read_scene::{
     AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb,
 };
 use bevy::platform::collections::HashSet;
@@ -215,7 +215,7 @@ fn plan_caustic_maps(
             let color = Vec3::from_array(light.color.to_array()) * light_intensity(&light);
             let cone = s.map(|s| {
                 let (cos_outer, cos_inner) = (s.outer_angle.cos(), s.inner_angle.min(s.outer_angle).cos());
-                (crate::reference::facing(t), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
+                (crate::read_scene::facing(t), cos_outer, 1.0 / (cos_inner - cos_outer).max(1e-4))
             });
             for view in LightView::for_light(&light, core_bounds(generators), core_bounds(receivers)) {
                 next.views.push(PlannedLightView { view, color, cone, inverse_range_squared: light.inverse_range_squared() });

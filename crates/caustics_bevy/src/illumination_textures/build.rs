@@ -7,7 +7,7 @@ use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use crate::reference::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, core_mesh};
+use crate::read_scene::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, core_mesh};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;

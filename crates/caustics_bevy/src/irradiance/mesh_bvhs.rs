@@ -5,7 +5,7 @@
 //! [`InstancedBvh`] over the placed meshes, rebuilt from their transforms when one
 //! moves. A mesh that moves costs its instance's transform, not its triangles.
 
-use crate::reference::core_mesh;
+use crate::read_scene::core_mesh;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Buffer, BufferInitDescriptor, BufferUsages};

@@ -9,7 +9,7 @@ use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::reference::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, to_core, world_aabb};
+use crate::read_scene::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
