@@ -9,6 +9,7 @@
 pub mod bvh;
 pub mod convolution;
 pub mod estimate;
+#[cfg(feature = "fuzz")]
 pub mod fuzz;
 pub mod hierarchical;
 pub mod illumination_textures;
