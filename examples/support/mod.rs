@@ -11,16 +11,14 @@ use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
-use bevy::render::render_resource::{
-    CachedPipelineState, Extent3d, PipelineCache, PipelineDescriptor, TextureDimension, TextureFormat, TextureUsages,
-};
+use bevy::render::render_resource::{Extent3d, PipelineCache, TextureDimension, TextureFormat, TextureUsages};
 use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured, save_to_disk};
 use bevy::render::{Render, RenderApp, RenderPlugin, RenderSystems};
-use bevy::shader::ShaderCacheError;
 use bevy::time::TimeUpdateStrategy;
 use bevy::window::{ExitCondition, WindowResolution};
 use bevy::winit::WinitPlugin;
 use bevy_caustics::CausticPassReport;
+use bevy_caustics::headless::failed_pipeline;
 use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
 use bevy_caustics::read_scene::bevy_mesh;
@@ -120,7 +118,13 @@ impl Plugin for HeadlessShot {
         let failed = Arc::<Mutex<Option<String>>>::default();
         app.insert_resource(Shot { image, out: self.out.clone(), frames: self.frames, failed: failed.clone() });
         if let Some(render) = app.get_sub_app_mut(RenderApp) {
-            render.add_systems(Render, (move |cache: Res<PipelineCache>| note_failed_pipeline(&cache, &failed)).in_set(RenderSystems::Cleanup));
+            // A pipeline that failed to build (a WGSL error, say), noted each frame.
+            let note = move |cache: Res<PipelineCache>| {
+                if let Ok(mut failed) = failed.lock() {
+                    *failed = failed_pipeline(&cache);
+                }
+            };
+            render.add_systems(Render, note.in_set(RenderSystems::Cleanup));
         }
     }
 }
@@ -132,22 +136,6 @@ fn draw_into_image(mut commands: Commands, cameras: Query<Entity, With<Camera>>,
     }
 }
 
-/// Notes a render or compute pipeline that failed to build (a WGSL error, say), not
-/// one still waiting for its shader to load.
-fn note_failed_pipeline(cache: &PipelineCache, failed: &Mutex<Option<String>>) {
-    let Ok(mut failed) = failed.lock() else { return };
-    *failed = cache.pipelines().find_map(|p| match &p.state {
-        CachedPipelineState::Err(ShaderCacheError::ShaderNotLoaded(_) | ShaderCacheError::ShaderImportNotYetAvailable) => None,
-        CachedPipelineState::Err(error) => {
-            let label = match &p.descriptor {
-                PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
-                PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
-            };
-            Some(format!("{}: {error}", label.as_deref().unwrap_or("unlabelled")))
-        }
-        _ => None,
-    });
-}
 
 /// After `frames` updates, or on [`Shoot`]: a screenshot of the image, written to disk,
 /// then the exit.

@@ -349,20 +349,27 @@ impl HeadlessRenderer {
         Some(by_label)
     }
 
-    /// The first pipeline whose shader did not compile or whose pipeline was refused,
-    /// with its label and why: a frame drawn without it is not the frame asked for.
+    /// [`failed_pipeline`] of the app's render world.
     fn failed_pipeline(&self) -> Option<String> {
-        use bevy::render::render_resource::{CachedPipelineState, PipelineCache, PipelineDescriptor};
-        let cache = self.app.get_sub_app(bevy::render::RenderApp)?.world().get_resource::<PipelineCache>()?;
-        cache.pipelines().find_map(|p| match &p.state {
-            CachedPipelineState::Err(error) => {
-                let label = match &p.descriptor {
-                    PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
-                    PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
-                };
-                Some(format!("{}: {error}", label.as_deref().unwrap_or("unlabelled")))
-            }
-            _ => None,
-        })
+        failed_pipeline(self.app.get_sub_app(bevy::render::RenderApp)?.world().get_resource()?)
     }
+}
+
+/// The first pipeline whose shader did not compile or whose pipeline was refused, with
+/// its label and why: a frame drawn without it is not the frame asked for. A pipeline
+/// still waiting for its shader to load has not failed.
+pub fn failed_pipeline(cache: &bevy::render::render_resource::PipelineCache) -> Option<String> {
+    use bevy::render::render_resource::{CachedPipelineState, PipelineDescriptor};
+    use bevy::shader::ShaderCacheError;
+    cache.pipelines().find_map(|p| match &p.state {
+        CachedPipelineState::Err(ShaderCacheError::ShaderNotLoaded(_) | ShaderCacheError::ShaderImportNotYetAvailable) => None,
+        CachedPipelineState::Err(error) => {
+            let label = match &p.descriptor {
+                PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
+                PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
+            };
+            Some(format!("{}: {error}", label.as_deref().unwrap_or("unlabelled")))
+        }
+        _ => None,
+    })
 }
