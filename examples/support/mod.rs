@@ -136,7 +136,6 @@ fn draw_into_image(mut commands: Commands, cameras: Query<Entity, With<Camera>>,
     }
 }
 
-
 /// After `frames` updates, or on [`Shoot`]: a screenshot of the image, written to disk,
 /// then the exit.
 fn take_shot(
