@@ -69,7 +69,7 @@ fn spawn_pool(world: &mut World, kernel_radius: u32, depth: f32) {
     ));
     // An afternoon sun, 20° off zenith: the lobe is expanded about its refracted
     // direction (the paper's expansion about the vertical holds only a few degrees
-    // from overhead; see the README's error tables).
+    // from overhead; see docs/convolution.md's error tables).
     world.spawn((
         // The water casts the sun's shadow: below it the caustics carry the transmitted light.
         DirectionalLight { illuminance: light_consts::lux::AMBIENT_DAYLIGHT, shadow_maps_enabled: true, ..default() },
