@@ -120,10 +120,11 @@ fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Asse
 
 /// Main world: plans the caustic maps (light views, instances) and bumps the
 /// generation when the plan, or a mesh it draws, changed. The plan is made again only
-/// when change detection says a generator, occluder, light, mesh or the settings did. The shadow test that leaves
-/// out generators in full shadow casts a ray from every generator vertex, so it runs
-/// once the plan has held still for a frame, never while anything moves: a moving
-/// scene keeps every generator, and the photon kernel drops what the occluders hide.
+/// when change detection says a generator, occluder, light, mesh or the settings did.
+/// The shadow test that leaves out generators in full shadow casts a ray from every
+/// generator vertex, so it runs once the plan has held still for a frame, never while
+/// anything moves: a moving scene keeps every generator, and the photon kernel drops
+/// what the occluders hide.
 #[allow(clippy::too_many_arguments)]
 fn plan_caustic_maps(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
@@ -156,9 +157,10 @@ fn plan_caustic_maps(
         }
     };
     // Generation 0 until it is planned: `planned` keeps what the last plan was made of.
-    let used: HashSet<AssetId<Mesh>> = planned.generators.iter().chain(&planned.occluders).map(|i| i.mesh).collect();
     let mesh_changed = mesh_events.read().any(|e| match e {
-        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => used.contains(id),
+        AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } => {
+            planned.generators.iter().chain(&planned.occluders).any(|i| i.mesh == *id)
+        }
         _ => false,
     });
     if !(changes.read().any() || mesh_changed || settings.is_changed()) && *shadows_tested {

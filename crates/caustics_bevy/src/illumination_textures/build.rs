@@ -161,11 +161,11 @@ fn set_up_planes(
             None
         }
     };
-    let used: HashSet<AssetId<Mesh>> = state.last.generators.iter().map(|g| g.1).chain(state.last.occluders.iter().map(|o| o.0)).collect();
     let mut mesh_changed = false;
     for event in mesh_events.read() {
         if let AssetEvent::Modified { id } | AssetEvent::Added { id } | AssetEvent::LoadedWithDependencies { id } = event {
-            mesh_changed |= used.contains(id);
+            let last = &state.last;
+            mesh_changed |= last.generators.iter().any(|g| g.1 == *id) || last.occluders.iter().any(|o| o.0 == *id);
             state.local_meshes.retain(|key, _| key.mesh != *id);
         }
     }
