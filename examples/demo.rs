@@ -12,16 +12,15 @@
 //! switches each generator's technique and graphs every pass's GPU time. Without a
 //! display, or with `--headless`, it runs 1.2 seconds of the pool offscreen (the ball
 //! bobbing, a shower of rain setting the water rippling) and writes the last frame as
-//! a PNG (`--out`, default `target/demo.png`); `--frames N` sets how many 50 ms frames.
+//! a PNG (`--out`, default `target/demo.png`); `--frames N` sets how many 50 ms frames,
+//! and `--sequence N` writes that frame and the `N − 1` after it (`scripts/animation.sh`).
 //!
 //! In a corner, a second camera looks from under the water towards the sun. Water
 //! scatters light forwards, so the shafts under the ripples show best from there,
 //! against the surface; from above they stand in front of their own bright floor.
-//! (`--compare` measures the main view alone.)
 //!
-//! `--compare` (headless) measures that last frame against the ground-truth tracer: see
-//! [`compare`]; `--photons N` sets the tracer's photons per light. `--sequence N` writes
-//! the `N` frames after it as PNGs (see [`write_sequence`]).
+//! The scene is one plugin, [`Pool`]; `tests/demo_comparison.rs` measures it against
+//! the ground-truth tracer, as the panel's "Compare with reference" button does.
 
 #[path = "support/mod.rs"]
 mod support;
@@ -32,14 +31,13 @@ use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy::window::PrimaryWindow;
-use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::prelude::*;
 use std::f32::consts::{FRAC_PI_2, TAU};
-use std::path::Path;
 use std::time::Duration;
 
-const WIDTH: u32 = 960;
-const HEIGHT: u32 = 540;
+/// The window's (or the headless image's) size in pixels.
+pub const WIDTH: u32 = 960;
+pub const HEIGHT: u32 = 540;
 /// The pool is `SIZE` metres square and `DEPTH` deep; its walls stand `COPING` above
 /// the water.
 const SIZE: f32 = 4.0;
@@ -62,7 +60,7 @@ const TOUCH: f32 = 0.02;
 const SHOWER: (f32, f32) = (60.0, 0.8);
 const DRIZZLE: f32 = 2.0;
 /// Headless: frames rendered 50 ms apart.
-const FRAMES: u32 = 24;
+pub const FRAMES: u32 = 24;
 /// The sun: Bevy's daylight illuminance, from `SUN_AZIMUTH` (radians about +y from +x)
 /// and `SUN_ELEVATION` above the horizon.
 const SUN_LUX: f32 = light_consts::lux::AMBIENT_DAYLIGHT;
@@ -74,23 +72,24 @@ const EV100: f32 = 11.5;
 
 fn main() -> AppExit {
     let frames: u32 = support::option("frames", FRAMES);
-    let out = support::out_path("demo");
-    if support::flag("compare") {
-        return harness(compare(&out, frames, support::option("photons", 1u64 << 23)));
-    }
-    let sequence: u32 = support::option("sequence", 0);
-    if sequence > 0 {
-        return harness(write_sequence(&out, frames, sequence));
-    }
     let mut app = App::new();
-    app.add_plugins((support::plugins("demo", "pool", (WIDTH, HEIGHT), frames), CausticsPlugin))
-        .add_systems(Startup, spawn_scene)
-        .add_systems(Update, (bob_ball, rain, place_underwater_view, touch_water, move_sun));
+    app.add_plugins((support::plugins("demo", "pool", (WIDTH, HEIGHT), frames), CausticsPlugin, Pool))
+        .add_systems(Update, (touch_water, move_sun));
     if support::headless() {
         // Frames 50 ms apart.
         app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
     }
     app.run()
+}
+
+/// The pool with its rippling water and bobbing ball, under the sun, and the view from
+/// under its water.
+pub struct Pool;
+
+impl Plugin for Pool {
+    fn build(&self, app: &mut App) {
+        app.add_systems(Startup, spawn_scene).add_systems(Update, (bob_ball, rain, place_underwater_view));
+    }
 }
 
 /// The pool, and the view from under its water.
@@ -99,119 +98,13 @@ fn spawn_scene(world: &mut World) {
     spawn_underwater_view(world, sky);
 }
 
-/// A harness mode's outcome as the process's exit.
-fn harness(outcome: Result<(), String>) -> AppExit {
-    outcome.map_or_else(
-        |e| {
-            eprintln!("demo: {e}");
-            AppExit::error()
-        },
-        |()| AppExit::Success,
-    )
-}
-
-/// The demo in a [`HeadlessRenderer`], for the harness modes: the pool (and, with
-/// `underwater`, the view from under the water) drawn into the renderer's image, moving
-/// as in the app, frames 50 ms apart; `timed` for GPU times and counts.
-fn demo_renderer(timed: bool, underwater: bool) -> Result<HeadlessRenderer, String> {
-    let renderer = if timed { HeadlessRenderer::timed(WIDTH, HEIGHT) } else { HeadlessRenderer::new(WIDTH, HEIGHT) };
-    let mut renderer = renderer.map_err(|e| e.to_string())?;
-    renderer.app.add_systems(Update, (bob_ball, rain, place_underwater_view));
-    let target = renderer.render_target();
-    let world = renderer.world_mut();
-    world.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
-    let sky = spawn_pool(world);
-    if underwater {
-        spawn_underwater_view(world, sky);
-    }
-    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
-    for camera in cameras {
-        world.entity_mut(camera).insert(target.clone());
-    }
-    Ok(renderer)
-}
-
-/// `--sequence N` (headless): after the usual frames, the next `N` rendered frames as
-/// `<out stem>-000.png`, … (`scripts/animation.sh` makes the README's animation of them).
-fn write_sequence(out: &Path, frames: u32, count: u32) -> Result<(), String> {
-    let mut renderer = demo_renderer(false, true)?;
-    renderer.render(frames).map_err(|e| e.to_string())?;
-    let stem = out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
-    for i in 0..count {
-        let image = renderer.render(0).map_err(|e| e.to_string())?;
-        let path = out.with_file_name(format!("{stem}-{i:03}.png"));
-        image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
-        eprintln!("wrote {} ({} of {count})", path.display(), i + 1);
-    }
-    Ok(())
-}
-
-/// `--compare`: renders the demo headless to its last frame, then measures it as the
-/// panel's "compare with reference" button does (`bevy_caustics::comparison`): time
-/// stops, the tracer traces the frame (`photons` per light, on its own thread) while
-/// every generator is asked for each technique in turn. Prints a Markdown table of
-/// each one's relative L2 and L1 against the tracer over the receivers in view and its
-/// GPU time, and writes beside `--out` the frame traced (`<stem>-frame.json`, for
-/// `caustics bench --scene`) and the split view per technique: left the technique,
-/// right the reference.
-fn compare(out: &Path, frames: u32, photons: u64) -> Result<(), String> {
-    use bevy_caustics::comparison::{ReferenceComparison, compare_headless};
-    let mut renderer = demo_renderer(true, false)?;
-    renderer.render(frames).map_err(|e| e.to_string())?;
-    let world = renderer.world_mut();
-    let camera = world.query_filtered::<Entity, (With<Camera3d>, Without<UnderwaterView>)>().single(world).map_err(|e| e.to_string())?;
-    compare_headless(&mut renderer, camera, (photons, 0))?;
-    let adapter = renderer.adapter.name.clone();
-    let rows = renderer.world_mut().resource::<ReferenceComparison>().rows.clone();
-    println!(
-        "| asked of every generator | drawn with | relative L2 in view | relative L1 | caustics GPU ms ({adapter}) | caustics invocations (M) | caustics fragments (M) | main pass fragments (M) |"
-    );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|");
-    for row in &rows {
-        let error = row.error.map_or("no receiver in view | –".into(), |e| format!("{:.3} | {:.3}", e.l2, e.l1));
-        let w = &row.work;
-        println!(
-            "| {} | {} | {error} | {:.1} | {:.2} | {:.2} | {:.2} |",
-            row.technique.label(),
-            row.drawn.join("; "),
-            w.caustics_ms(),
-            w.caustics_invocations() / 1e6,
-            w.caustics_fragments() / 1e6,
-            w.main_pass.fragments.unwrap_or(0.0) / 1e6
-        );
-    }
-    let stem = out.file_stem().unwrap_or_default().to_string_lossy().into_owned();
-    let comparison = renderer.world_mut().resource::<ReferenceComparison>();
-    println!("\nThe reference's own noise: relative L2 {:.3}.", comparison.reference_noise.unwrap_or(f32::NAN));
-    let frame = out.with_file_name(format!("{stem}-frame.json"));
-    comparison.save_frame(&frame)?;
-    eprintln!("wrote {} (`caustics bench --scenes '' --scene {}` measures it again)", frame.display(), frame.display());
-    // The split view of each technique, as the panel shows it.
-    renderer.world_mut().resource_mut::<ReferenceComparison>().split = true;
-    for row in rows {
-        let world = renderer.world_mut();
-        for mut generator in world.query::<&mut CausticGenerator>().iter_mut(world) {
-            generator.technique = row.technique;
-        }
-        // Time stands still: a dozen frames let the volumes' build catch up.
-        let mut image = renderer.render(12).map_err(|e| e.to_string())?;
-        // A white line where the halves meet.
-        let (width, middle) = (image.width as usize, image.width as usize / 2);
-        image.pixels.iter_mut().skip(middle).step_by(width).for_each(|p| *p = Vec4::ONE);
-        let path = out.with_file_name(format!("{stem}-{}-vs-reference.png", row.technique.label().to_lowercase().replace(' ', "-")));
-        image.save_png(&path, 1.0).map_err(|e| e.to_string())?;
-        eprintln!("wrote {}", path.display());
-    }
-    Ok(())
-}
-
 /// The glass ball, bobbing on the water.
 #[derive(Component)]
 struct Ball;
 
 /// The camera under the water, drawn in the image's bottom right corner.
 #[derive(Component)]
-struct UnderwaterView;
+pub struct UnderwaterView;
 
 /// The underwater view's share of the image's width, and its margin (pixels).
 const INSET: (f32, u32) = (0.4, 8);

@@ -1,14 +1,12 @@
 //! What the examples share: the plugins that open a window, or write a PNG without
-//! one for CI ([`plugins`]), their command-line options, and a few procedural textures
-//! and scenes. Included by each example with `#[path = "support/mod.rs"]`; each uses a
-//! part of it.
+//! one for CI ([`plugins`]), their command-line options, and a few procedural textures.
+//! Included by each example with `#[path = "support/mod.rs"]`; each uses a part of it.
 #![allow(dead_code)]
 
 use bevy::app::{PluginGroupBuilder, ScheduleRunnerPlugin};
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::image::{ImageAddressMode, ImageSampler, ImageSamplerDescriptor};
-use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, PipelineCache, TextureDimension, TextureFormat, TextureUsages};
@@ -19,10 +17,9 @@ use bevy::window::{ExitCondition, WindowResolution};
 use bevy::winit::WinitPlugin;
 use bevy_caustics::CausticPassReport;
 use bevy_caustics::headless::failed_pipeline;
-use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
-use bevy_caustics::read_scene::bevy_mesh;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -60,7 +57,8 @@ pub fn out_path(name: &str) -> PathBuf {
 /// with the "Caustics" panel; or, headless ([`headless`]), no window, every camera
 /// drawing into an image, and the frame after `frames` updates (or, with `frames` 0,
 /// the frame in which the app sends [`Shoot`]) written to [`out_path`] before the app
-/// exits (with an error if a pipeline failed to build).
+/// exits (with an error if a pipeline failed to build). `--sequence N` writes that
+/// frame and the `N − 1` after it instead, as `<out stem>-000.png`, …
 pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), frames: u32) -> PluginGroupBuilder {
     if !headless() {
         let window = Window {
@@ -77,7 +75,7 @@ pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), fra
         .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>()
         // Without winit's loop, Bevy's own runs the frames.
         .add(ScheduleRunnerPlugin::run_loop(Duration::ZERO))
-        .add(HeadlessShot { out: out_path(name), size: UVec2::new(width, height), frames })
+        .add(HeadlessShot { out: out_path(name), size: UVec2::new(width, height), frames, sequence: option("sequence", 0) })
 }
 
 /// Headless, with no fixed number of frames: take the picture now.
@@ -85,21 +83,25 @@ pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), fra
 pub struct Shoot;
 
 /// Headless: draws every camera into an image, writes the frame after `frames`
-/// updates (time advancing 1/60 s each) to `out`, prints the caustics passes that ran
-/// and each generator's technique, and exits.
+/// updates (time advancing 1/60 s each) to `out` (or `sequence` frames from there),
+/// prints the caustics passes that ran and each generator's technique, and exits.
 struct HeadlessShot {
     out: PathBuf,
     size: UVec2,
     frames: u32,
+    sequence: u32,
 }
 
-/// The image the cameras draw into, where to write it, after how many updates, and a
-/// pipeline that failed to build.
+/// The image the cameras draw into, where to write it, after how many updates, how
+/// many frames (0: one, at `out` itself), the frames written so far, and a pipeline
+/// that failed to build.
 #[derive(Resource, Clone)]
 struct Shot {
     image: Handle<Image>,
     out: PathBuf,
     frames: u32,
+    sequence: u32,
+    written: Arc<AtomicU32>,
     failed: Arc<Mutex<Option<String>>>,
 }
 
@@ -116,7 +118,8 @@ impl Plugin for HeadlessShot {
         image.texture_descriptor.usage |= TextureUsages::COPY_SRC;
         let image = app.world_mut().resource_mut::<Assets<Image>>().add(image);
         let failed = Arc::<Mutex<Option<String>>>::default();
-        app.insert_resource(Shot { image, out: self.out.clone(), frames: self.frames, failed: failed.clone() });
+        let (out, frames, sequence) = (self.out.clone(), self.frames, self.sequence);
+        app.insert_resource(Shot { image, out, frames, sequence, written: Arc::default(), failed: failed.clone() });
         if let Some(render) = app.get_sub_app_mut(RenderApp) {
             // A pipeline that failed to build (a WGSL error, say), noted each frame.
             let note = move |cache: Res<PipelineCache>| {
@@ -136,8 +139,8 @@ fn draw_into_image(mut commands: Commands, cameras: Query<Entity, With<Camera>>,
     }
 }
 
-/// After `frames` updates, or on [`Shoot`]: a screenshot of the image, written to disk,
-/// then the exit.
+/// After `frames` updates, or on [`Shoot`]: a screenshot of the image, written to disk
+/// (or the next `sequence` frames), then the exit.
 fn take_shot(
     mut commands: Commands,
     mut updates: Local<u32>,
@@ -148,7 +151,9 @@ fn take_shot(
 ) {
     *updates += 1;
     let shoot = shoot.read().count() > 0;
-    if !(shot.frames == 0 && shoot || shot.frames > 0 && *updates == shot.frames) {
+    let shots = shot.sequence.max(1);
+    let index = updates.wrapping_sub(shot.frames);
+    if !(shot.frames == 0 && shoot || shot.frames > 0 && index < shots) {
         return;
     }
     if let Some(failed) = shot.failed.lock().ok().and_then(|f| f.clone()) {
@@ -156,19 +161,29 @@ fn take_shot(
         exit.write(AppExit::error());
         return;
     }
-    for (entity, choice) in &report.generators {
-        eprintln!("generator {entity}: {choice}");
+    if index == 0 || shot.frames == 0 {
+        for (entity, choice) in &report.generators {
+            eprintln!("generator {entity}: {choice}");
+        }
+        let passes: Vec<String> = report.passes.iter().map(|(pass, views)| format!("{pass} ({views} views)")).collect();
+        eprintln!("caustics passes in the last frame: {}", if passes.is_empty() { "none".to_string() } else { passes.join(", ") });
     }
-    let passes: Vec<String> = report.passes.iter().map(|(pass, views)| format!("{pass} ({views} views)")).collect();
-    eprintln!("caustics passes in the last frame: {}", if passes.is_empty() { "none".to_string() } else { passes.join(", ") });
     if let Some(dir) = shot.out.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
-    let out = shot.out.clone();
+    let out = if shot.sequence == 0 {
+        shot.out.clone()
+    } else {
+        let stem = shot.out.file_stem().unwrap_or_default().to_string_lossy();
+        shot.out.with_file_name(format!("{stem}-{index:03}.png"))
+    };
+    let written = shot.written.clone();
     commands.spawn(Screenshot::image(shot.image.clone())).observe(save_to_disk(out.clone())).observe(
         move |_: On<ScreenshotCaptured>, mut exit: MessageWriter<AppExit>| {
             eprintln!("wrote {}", out.display());
-            exit.write(AppExit::Success);
+            if written.fetch_add(1, Ordering::Relaxed) + 1 == shots {
+                exit.write(AppExit::Success);
+            }
         },
     );
 }
@@ -249,34 +264,4 @@ pub fn sand() -> Image {
 pub fn sky(images: &mut Assets<Image>, intensity: f32) -> bevy::light::EnvironmentMapLight {
     let (top, horizon, ground) = (Color::srgb(0.35, 0.55, 0.9), Color::srgb(0.85, 0.85, 0.8), Color::srgb(0.3, 0.22, 0.15));
     bevy::light::EnvironmentMapLight { intensity, ..bevy::light::EnvironmentMapLight::hemispherical_gradient(images, top, horizon, ground) }
-}
-
-/// The sun of the ring scene: low, so that the ring's far wall focuses it into the cardioid.
-const RING_SUN_LUX: f32 = 20_000.0;
-const RING_SUN_DIRECTION: Vec3 = Vec3::new(1.0, -0.45, 0.0);
-
-/// Ernst et al.'s Fig. 1: a solid metal ring of `segments` around on a wooden floor,
-/// under a low sun (the `ring` and `volumes_compare` examples), drawn by warped volumes
-/// (`Auto` would pick the caustic maps for a mirror).
-pub fn ring_scene(world: &mut World, segments: usize, intensity: VolumeIntensity) {
-    world.insert_resource(WarpedVolumesSettings { intensity, ..default() });
-    world.insert_resource(GlobalAmbientLight { brightness: 300.0, ..default() });
-    world.insert_resource(ClearColor(Color::srgb(0.05, 0.05, 0.06)));
-    // Planks 0.75 m wide, their seams off the ring's axis of symmetry (z = 0).
-    let planks = Affine2::from_scale_angle_translation(Vec2::splat(2.0), 0.0, Vec2::new(0.0, 0.125));
-    textured_floor(world, wood(), planks, 3.0, 0.8);
-    let metal = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::srgb(0.95, 0.93, 0.88),
-        metallic: 1.0,
-        perceptual_roughness: 0.08,
-        ..default()
-    });
-    let ring = bevy_mesh(&TriMesh::solid_ring(glam::Vec3::ZERO, 1.0, 1.05, 0.3, segments));
-    let ring = world.resource_mut::<Assets<Mesh>>().add(ring);
-    let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };
-    world.spawn((Mesh3d(ring), MeshMaterial3d(metal), mirror));
-    world.spawn((
-        DirectionalLight { illuminance: RING_SUN_LUX, shadow_maps_enabled: true, ..default() },
-        Transform::default().looking_to(RING_SUN_DIRECTION, Vec3::Y),
-    ));
 }

@@ -1,6 +1,6 @@
 //! The frame a camera shows now, measured against the ground-truth tracer while the
 //! game runs: what the debug panel's "compare with reference" button starts, and what
-//! `demo --compare` reports.
+//! the demo comparison (`tests/demo_comparison.rs`) reports.
 //!
 //! A [`ReferenceComparisonRequest::Start`] stops virtual time, so the scene holds
 //! still, and traces that scene ([`frame_of_world`], [`trace_view`]) on a thread of
@@ -433,7 +433,7 @@ fn show_split(world: &mut World) {
 
 /// Runs a comparison of `camera` in `renderer` to the end, one frame at a time, with
 /// `photons` per light from photon stream `seed`, printing the tracer's progress:
-/// what `demo --compare` and `caustics bench` on a saved frame do. Afterwards
+/// what `tests/demo_comparison.rs` and `caustics bench` on a saved frame do. Afterwards
 /// [`ReferenceComparison`] holds the rows; time stays stopped.
 #[cfg(feature = "headless")]
 pub fn compare_headless(renderer: &mut HeadlessRenderer, camera: Entity, (photons, seed): (u64, u64)) -> Result<(), String> {

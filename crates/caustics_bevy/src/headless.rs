@@ -172,6 +172,13 @@ impl HeadlessRenderer {
         Self::build(width, height, true, None, |_| {})
     }
 
+    /// [`Self::timed`] with more plugins, as [`Self::with_plugins`].
+    pub fn timed_with_plugins<M>(width: u32, height: u32, plugins: impl bevy::app::Plugins<M>) -> Result<Self, HeadlessError> {
+        Self::build(width, height, true, None, |app| {
+            app.add_plugins(plugins);
+        })
+    }
+
     fn build(width: u32, height: u32, timed: bool, assets: Option<&Path>, more: impl FnOnce(&mut App)) -> Result<Self, HeadlessError> {
         use bevy::render::settings::{RenderCreation, WgpuSettings};
         let adapter = probe_adapter()?;

@@ -38,7 +38,7 @@ pub struct BenchArgs {
     pub scenes: Vec<String>,
     /// A scene of one's own (.gltf, .glb or .json), run after the built-in ones; repeat
     /// for more. `--scenes ''` runs only these. A frame saved by the live comparison
-    /// (the debug panel's "save frame", `demo --compare`) is measured from its camera,
+    /// (the debug panel's "save frame", `tests/demo_comparison.rs`) is measured from its camera,
     /// as the panel measures it, into `views.csv` and `views.md`.
     #[arg(long = "scene")]
     pub files: Vec<String>,

@@ -1,5 +1,5 @@
 //! `caustics bench --scene frame.json` on a frame saved by the live comparison (the
-//! debug panel's "save frame", `demo --compare`): a [`SceneView`]. Its view is
+//! debug panel's "save frame", `tests/demo_comparison.rs`): a [`SceneView`]. Its view is
 //! measured as the panel measured it (`caustics_bevy::comparison`), in a headless
 //! renderer of this program with the scene rebuilt from the file: every technique
 //! asked of every generator in turn, its caustic irradiance read back at each pixel
