@@ -40,6 +40,7 @@ mod mesh_vertices;
 #[cfg(feature = "ocean")]
 pub mod ocean;
 pub mod pixels;
+pub mod quality;
 pub mod read_scene;
 #[cfg(feature = "reference")]
 pub mod reference;
@@ -60,6 +61,7 @@ pub use convolution::{DropPebble, PoolImpulses, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
 pub use cpu_time::CausticCpuTime;
+pub use quality::{CausticQuality, QualityPreset};
 pub use report::CausticPassReport;
 pub use technique::{AvailableCausticTechniques, CausticTechniqueChoice};
 
@@ -89,6 +91,7 @@ impl Plugin for CausticsPlugin {
             .register_type::<ParticipatingMedium>()
             .register_type::<TagCausticsFromMaterials>()
             .register_type::<CausticGpuBudget>()
+            .register_type::<CausticQuality>()
             .init_resource::<CausticGpuBudget>()
             .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<CausticGpuBudget>::default())
             .add_systems(Update, timed(&cpu, gltf_tagging::tag_from_materials))
@@ -132,8 +135,8 @@ pub mod prelude {
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{ShaftIntegral, VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
-        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticReceiver, CausticReceiverMaterialPlugin,
-        CausticTechnique,
+        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticQuality, CausticReceiver,
+        CausticReceiverMaterialPlugin, CausticTechnique, QualityPreset,
         CausticTechniqueChoice, CausticGpuBudget, CausticsPlugin, Caustics,
         GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
     };

@@ -20,6 +20,7 @@ use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{IntensityMode, VolumeSettings, build_drawn_volumes};
 use crate::render::{GpuTimes, Method};
+use caustics_bevy::CausticQuality;
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -46,7 +47,8 @@ pub struct BenchArgs {
     #[arg(long)]
     pub cpu_only: bool,
     /// Methods to run, comma-separated, by their names in the CSV (`auto`, `volumes`,
-    /// `maps` for every caustic-map gather, `textures`...); all when not given.
+    /// `maps` for every caustic-map gather, `textures`..., `presets` for the quality
+    /// presets by the GPU passes); all when not given.
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
     /// The frame-cost bench instead: every technique on scenes of growing size in the
@@ -138,7 +140,7 @@ pub struct GpuColumns {
 /// caustic maps' photon buffer and map sides); a failure is reported and leaves them
 /// empty.
 pub fn gpu_columns(method: Method, scene: &BenchScene, maps: Option<(u32, u32)>) -> Option<GpuColumns> {
-    match crate::render::gpu_run(method, scene, maps) {
+    match crate::render::gpu_run(method, scene, maps, None) {
         Ok(run) => Some(GpuColumns { adapter: run.adapter, times: run.times }),
         Err(e) => {
             eprintln!("{:>8} {method:?}: no GPU run: {e}", scene.name);
@@ -714,6 +716,9 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
         if name == "sphere" && args.runs("textures") {
             notes.push_str(&crate::illumination::bench_scenes(args.quick, args.cpu_only, &mut rows)?);
         }
+        if !args.cpu_only && args.runs("presets") {
+            notes.push_str(&presets_note(name, own, &truth));
+        }
         if name == "pool" {
             let start = Instant::now();
             notes.push_str(&convolution_vs_direct(scene)?);
@@ -722,6 +727,34 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     }
     let throughput = photon_throughput(if args.quick { 1 << 20 } else { 1 << 23 })?;
     write_outputs(&args.out, &rows, throughput, &notes)
+}
+
+/// The quality presets ([`CausticQuality`]) by the plugin's GPU passes on the scene as
+/// it is, against the reference `truth`: `Auto` on every scene, and the illumination
+/// textures on the glass sphere (the closed refractor `Auto` gives the caustic maps).
+/// Each preset's row: relative L2 and L1, and the GPU time of the technique's passes.
+fn presets_note(name: &str, scene: &BenchScene, truth: &[f32]) -> String {
+    let mut methods = vec![(Method::Auto, "auto")];
+    if name == "sphere" {
+        methods.push((Method::IlluminationTextures, "illumination textures"));
+    }
+    let mut note = format!("\n### Quality presets on {name}\n\n| asked of every generator | preset | relative L2 | relative L1 | GPU ms (adapter) |\n|---|---|---:|---:|---|\n");
+    for (method, label) in methods {
+        for quality in CausticQuality::ALL {
+            let row = match crate::render::gpu_run(method, scene, None, Some(quality)) {
+                Ok(run) => {
+                    let image: Vec<f32> = run.irradiance.iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
+                    let error = Errors::between(&image, truth);
+                    let ms = run.times.map_or("no timestamps".into(), |t| format!("{:.1}", t.technique_ms));
+                    eprintln!("{name:>8} {label:>16} preset {:>6}: relative L2 {:.4}, {ms} ms", quality.label(), error.l2);
+                    format!("{:.4} | {:.4} | {ms} ({})", error.l2, error.l1, run.adapter)
+                }
+                Err(e) => format!("– | – | no GPU run: {e}"),
+            };
+            writeln!(note, "| {label} | {} | {row} |", quality.label()).unwrap();
+        }
+    }
+    note
 }
 
 /// Photons per second of the reference tracer on the 128 × 128-vertex rippled pool.

@@ -3,6 +3,7 @@
 use crate::bench::{Auto, BenchMethod, CONVOLUTION_GRIDS, CONVOLUTION_METHODS, SUPERSAMPLE, volumes_irradiance};
 use crate::images::{percentile_white, write_exr, write_png};
 use crate::scenes::{LoadedScene, default_camera, open};
+use caustics_bevy::CausticQuality;
 use crate::{prepare_output, progress};
 use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
@@ -161,7 +162,7 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                 grid.irradiance()
             }
             (_, true) => twin_plane(method, &args.scene, &bench)?.into_iter().map(Vec3::splat).collect(),
-            (_, false) => gpu_run(method, &bench, None)?.irradiance,
+            (_, false) => gpu_run(method, &bench, None, None)?.irradiance,
         };
         (pixels, width, width)
     } else {
@@ -256,11 +257,12 @@ const TIMING_FRAMES: u32 = 4;
 /// A method's caustic irradiance on the region by the plugin's GPU passes in the
 /// headless renderer, and their GPU time: the scene spawned with every generator
 /// asking for the method's technique (`maps`: the caustic maps' photon buffer and map
-/// sides, the plugin's when not given), a
+/// sides, the plugin's when not given; `quality`: a preset over every technique's
+/// settings, applied after them), a
 /// top-down orthographic view of the region [`SUPERSAMPLE`]² pixels per cell, its
 /// caustic irradiance buffer read back with the exposure divided out and averaged per
 /// cell (the estimator of the twins and the tracer: cell means).
-pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> Result<GpuRun, String> {
+pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>, quality: Option<CausticQuality>) -> Result<GpuRun, String> {
     use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy::prelude::{Camera3d, OrthographicProjection, Projection, Transform};
     let technique = method.technique().ok_or("the reference is traced on the CPU")?;
@@ -276,6 +278,9 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>) -> 
     }
     world.insert_resource(volumes);
     world.insert_resource(maps_settings);
+    if let Some(quality) = quality {
+        world.insert_resource(quality);
+    }
     spawn_scene_content(world, &bench.scene, bench.scene.receivers.len(), Some(technique));
     let size = region.edge_u.length();
     let centre = region.origin + 0.5 * (region.edge_u + region.edge_v);

@@ -147,6 +147,16 @@ impl HierarchicalMapsSettings {
     }
 }
 
+/// The photon buffer and the caustic maps at 512², 1024² or 2048² a light view; `Low`
+/// follows no Fresnel-reflected branch.
+impl crate::QualityPreset for HierarchicalMapsSettings {
+    fn set_quality(&mut self, quality: crate::CausticQuality) {
+        let side = quality.pick([512, 1024, 2048]);
+        (self.photon_resolution, self.map_resolution) = (side, side);
+        self.fresnel_branches = quality.pick([0, Self::TRACED.fresnel_branches, Self::TRACED.fresnel_branches]);
+    }
+}
+
 impl Default for HierarchicalMapsSettings {
     fn default() -> Self {
         Self::TRACED
@@ -159,6 +169,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "caustic_map.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     app.register_type::<HierarchicalMapsSettings>().init_resource::<HierarchicalMapsSettings>();
+    crate::quality::build::<HierarchicalMapsSettings>(app);
     plan::build(app);
     render::build(app);
 }

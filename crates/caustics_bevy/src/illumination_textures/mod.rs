@@ -72,6 +72,13 @@ pub struct IlluminationTexturesSettings {
     pub cache_dir: Option<PathBuf>,
 }
 
+/// The planes' textures at 256², 512² or 1024² texels (the paper's four planes each).
+impl crate::QualityPreset for IlluminationTexturesSettings {
+    fn set_quality(&mut self, quality: crate::CausticQuality) {
+        self.texture_size = quality.pick([256, 512, 1024]);
+    }
+}
+
 impl Default for IlluminationTexturesSettings {
     /// The paper's 4 planes of 512², the table's 16² directions a vertex, at most
     /// 64 MB a table, cached in the system's temporary directory.
@@ -131,6 +138,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "draw.wgsl");
     bevy::asset::embedded_asset!(app, "project.wgsl");
     app.register_type::<IlluminationTexturesSettings>().init_resource::<IlluminationTexturesSettings>();
+    crate::quality::build::<IlluminationTexturesSettings>(app);
     build::build(app);
     render::build(app);
 }

@@ -131,6 +131,17 @@ pub enum VolumeIntensity {
     Constant,
 }
 
+/// The shafts: `Low` marches a 64-cell grid at one pixel in sixteen, `High` a
+/// 128-cell grid at one pixel in four. The surface caustics are the same at every
+/// preset: their accuracy is the generator's tessellation.
+impl crate::QualityPreset for WarpedVolumesSettings {
+    fn set_quality(&mut self, quality: crate::CausticQuality) {
+        self.shaft_downsample = quality.pick([4, 4, 2]);
+        self.shaft_grid = quality.pick([64, 96, 128]);
+        self.shaft_steps = quality.pick([192, 256, 384]);
+    }
+}
+
 impl WarpedVolumesSettings {
     /// The pixels a shaft sample stands for, across: [`Self::shaft_downsample`] as 1, 2 or 4.
     pub fn shaft_scale(&self) -> u32 {
@@ -161,6 +172,7 @@ pub(crate) fn build(app: &mut App) {
     bevy::asset::embedded_asset!(app, "beam_grid.wgsl");
     bevy::shader::load_shader_library!(app, "types.wgsl");
     app.register_type::<WarpedVolumesSettings>().init_resource::<WarpedVolumesSettings>();
+    crate::quality::build::<WarpedVolumesSettings>(app);
     crate::mesh_vertices::build(app);
     build::build(app);
     render::build(app);
