@@ -55,8 +55,9 @@ pub struct HierarchicalMapsSettings {
     pub photon_resolution: u32,
     /// Caustic map side (a power of two, 16 to 4096). A point light's cube face that
     /// the scene extends past spreads its maps over four times its own image (they
-    /// reach 63°, `caustics_core::hierarchical::light_view::CUBE_FACE_REACH`): twice the
-    /// side keeps the sharpness of a face that does not.
+    /// reach 63°, `caustics_core::hierarchical::light_view::CUBE_FACE_REACH`), so the
+    /// plugin then draws every view's maps at twice this side (at most 4096;
+    /// `CausticMapSettings::for_views`), four times the memory.
     pub map_resolution: u32,
     /// How the maps gather photons onto the receivers (§3.2).
     pub gather: CausticMapGather,

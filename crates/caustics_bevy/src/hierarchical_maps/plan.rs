@@ -225,6 +225,8 @@ fn plan_caustic_maps(
             core_lights.push(light);
         }
     }
+    // A cube face that reaches past its edge doubles the maps' side (the CPU twin's rule).
+    next.settings = Some(core_settings.for_views(next.views.iter().map(|v| &v.view)));
     let changed = mesh_changed || next != *planned;
     if changed {
         *planned = next.clone();
