@@ -18,7 +18,7 @@ use caustics_core::hierarchical::{
 };
 use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
 use caustics_core::glam::Vec3;
-use caustics_core::scene::Scene;
+use caustics_core::scene::{Light, Scene};
 use caustics_core::scenes::BenchScene;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -282,8 +282,9 @@ fn drawn_irradiance_at(
 }
 
 /// Every light view of `scene` with its light maps (ray cast) and photon buffers under
-/// `settings` (of the light the generators `drawn` picks meet first), and the seconds
-/// the maps and the photon trace took.
+/// `settings` for those views (`CausticMapSettings::for_views`, as the plugin plans
+/// them; of the light the generators `drawn` picks meet first), and the seconds the
+/// maps and the photon trace took.
 fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<Traced>, f64, f64), String> {
     let generators = scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
     let receivers = scene
@@ -294,13 +295,14 @@ fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn F
         .ok_or("caustic maps: the scene has no receivers")?;
     let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
     let clock = Instant::now();
+    let lit: Vec<(&Light, LightView)> =
+        scene.lights.iter().flat_map(|light| LightView::for_light(light, generators, receivers).into_iter().map(move |view| (light, view))).collect();
+    let settings = &settings.for_views(lit.iter().map(|(_, view)| view));
     let mut views = Vec::new();
-    for light in &scene.lights {
-        for view in LightView::for_light(light, generators, receivers) {
-            let maps = LightMaps::ray_cast(scene, &view, settings.photon_resolution, settings.map_resolution);
-            let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
-            views.push((view, light, intensity, maps));
-        }
+    for (light, view) in lit {
+        let maps = LightMaps::ray_cast(scene, &view, settings.photon_resolution, settings.map_resolution);
+        let intensity = light_intensity(light) * light.color.element_sum() / 3.0;
+        views.push((view, light, intensity, maps));
     }
     let maps_seconds = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
@@ -323,9 +325,11 @@ struct Gathered {
     seconds: [f64; 3],
 }
 
-/// Gathers and splats one light view's photons by `variant` and adds the resolved
-/// map's irradiance at `points` (receivers facing `up`) into `irradiance`.
+/// Gathers and splats one light view's photons by `variant` (into maps of the side its
+/// light maps were cast at) and adds the resolved map's irradiance at `points`
+/// (receivers facing `up`) into `irradiance`.
 fn gather_view(t: &Traced, settings: &CausticMapSettings, points: &[(Vec3, Vec3)], irradiance: &mut [f32]) -> Gathered {
+    let settings = &CausticMapSettings { map_resolution: t.maps.map_resolution, ..*settings };
     let mut map = CausticMap::for_splats(settings.splats, settings.map_resolution);
     let (mut stats, mut splat_stats) = (hierarchy::GatherStats::default(), caustic_map::SplatStats::default());
     let mut times = StageTimes::default();
