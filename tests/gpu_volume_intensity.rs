@@ -10,12 +10,11 @@
 mod support;
 
 use bevy::camera::visibility::RenderLayers;
-use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::read_scene::bevy_mesh;
 use bevy_caustics::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
+use bevy_caustics::{CausticGenerator, CausticTechnique};
 use caustics_core::glam;
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l1;
@@ -42,11 +41,7 @@ fn the_conserving_interpolation_keeps_the_flux_and_nears_the_fine_ring() {
     let mut renderer = HeadlessRenderer::new(SIZE, SIZE).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let world = renderer.world_mut();
-    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
-    world.insert_resource(ClearColor(Color::BLACK));
-    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh());
-    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
-    world.spawn((Mesh3d(floor), MeshMaterial3d(white.clone()), CausticReceiver));
+    let white = support::white_floor_in_the_dark(world);
     // The ring reflects the sun but is not in the camera's layer: the view sees the
     // whole floor.
     let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };

@@ -7,13 +7,12 @@
 mod support;
 
 use bevy::camera::visibility::RenderLayers;
-use bevy::light::GlobalAmbientLight;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::read_scene::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
 use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, ParticipatingMedium};
+use bevy_caustics::{CausticGenerator, CausticTechnique, Caustics, GeneratorInteraction, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
@@ -44,11 +43,7 @@ fn water_mesh() -> TriMesh {
 fn spawn_scene(renderer: &mut HeadlessRenderer, generator_mesh: &TriMesh, generator: CausticGenerator, sun: Vec3) -> Entity {
     let target = renderer.render_target();
     let world = renderer.world_mut();
-    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
-    world.insert_resource(ClearColor(Color::BLACK));
-    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh());
-    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
-    world.spawn((Mesh3d(floor), MeshMaterial3d(white.clone()), CausticReceiver));
+    let white = support::white_floor_in_the_dark(world);
     let water = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(generator_mesh));
     let generator = world.spawn((Mesh3d(water), MeshMaterial3d(white), generator, RenderLayers::layer(1))).id();
     world.spawn((

@@ -46,6 +46,19 @@ pub fn caustic_irradiance(with: &RenderedImage, without: &RenderedImage) -> Vec<
     with.pixels.iter().zip(&without.pixels).map(|(a, b)| (a.x - b.x) * PI / exposure()).collect()
 }
 
+/// No ambient light, a black background, and a white matte floor 4 m square at y = 0
+/// that receives caustics: the scene around a generator under test. Returns the white
+/// material, for the generator.
+pub fn white_floor_in_the_dark(world: &mut World) -> Handle<StandardMaterial> {
+    use bevy::light::GlobalAmbientLight;
+    world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
+    world.insert_resource(ClearColor(Color::BLACK));
+    let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh());
+    let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() });
+    world.spawn((Mesh3d(floor), MeshMaterial3d(white.clone()), bevy_caustics::CausticReceiver));
+    white
+}
+
 /// The bytes of a GPU buffer of the render world (`COPY_SRC`), copied back.
 pub fn read_buffer(renderer: &mut HeadlessRenderer, buffer: &bevy::render::render_resource::Buffer) -> Vec<u8> {
     use bevy::render::render_resource::{BufferDescriptor, BufferUsages, CommandEncoderDescriptor, MapMode, PollType};
