@@ -9,9 +9,10 @@ use bevy::prelude::*;
 /// the illumination textures' planes) whenever it is inserted or changed, leaving
 /// their other fields (modes, caches) as they are; a field set by hand afterwards keeps
 /// its value until the preset changes again. `Medium` is the settings' defaults.
-/// `docs/cli-and-performance.md` has each preset's measured cost and error
-/// (`caustics bench`). A rippling pool's convolution takes its quality from its own
-/// `PoolRipples` (`columns`, `kernel_radius`), which no preset touches.
+/// `docs/cli-and-performance.md` ("Quality presets and the plugin's defaults") has
+/// each preset's cost and error, measured by `caustics bench --methods presets`. A
+/// rippling pool's convolution takes its quality from its own `PoolRipples`
+/// (`columns`, `kernel_radius`), which no preset touches.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 #[reflect(Resource)]
 pub enum CausticQuality {

@@ -48,7 +48,8 @@ pub struct BenchArgs {
     pub cpu_only: bool,
     /// Methods to run, comma-separated, by their names in the CSV (`auto`, `volumes`,
     /// `maps` for every caustic-map gather, `textures`..., `presets` for the quality
-    /// presets by the GPU passes); all when not given.
+    /// presets and every technique at the plugin's defaults by the GPU passes); all
+    /// when not given.
     #[arg(long, value_delimiter = ',')]
     pub methods: Vec<String>,
     /// The frame-cost bench instead: every technique on scenes of growing size in the
@@ -729,30 +730,41 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     write_outputs(&args.out, &rows, throughput, &notes)
 }
 
-/// The quality presets ([`CausticQuality`]) by the plugin's GPU passes on the scene as
-/// it is, against the reference `truth`: `Auto` on every scene, and the illumination
-/// textures on the glass sphere (the closed refractor `Auto` gives the caustic maps).
-/// Each preset's row: relative L2 and L1, and the GPU time of the technique's passes.
+/// What a game gets, by the plugin's GPU passes on the scene as it is, against the
+/// reference `truth`: `Auto` at each quality preset ([`CausticQuality`], `medium` the
+/// defaults) and the illumination textures' presets on the glass sphere (the closed
+/// refractor `Auto` gives the caustic maps); then every technique asked of every
+/// generator at the plugin's defaults, where it applies to them all. Each row:
+/// relative L2 and L1, and the GPU time of the technique's passes.
 fn presets_note(name: &str, scene: &BenchScene, truth: &[f32]) -> String {
-    let mut methods = vec![(Method::Auto, "auto")];
+    let mut runs: Vec<(Method, &str, Option<CausticQuality>)> = CausticQuality::ALL.map(|q| (Method::Auto, "auto", Some(q))).into();
     if name == "sphere" {
-        methods.push((Method::IlluminationTextures, "illumination textures"));
+        runs.extend(CausticQuality::ALL.map(|q| (Method::IlluminationTextures, "illumination textures", Some(q))));
     }
-    let mut note = format!("\n### Quality presets on {name}\n\n| asked of every generator | preset | relative L2 | relative L1 | GPU ms (adapter) |\n|---|---|---:|---:|---|\n");
-    for (method, label) in methods {
-        for quality in CausticQuality::ALL {
-            let row = match crate::render::gpu_run(method, scene, None, Some(quality)) {
-                Ok(run) => {
-                    let image: Vec<f32> = run.irradiance.iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
-                    let error = Errors::between(&image, truth);
-                    let ms = run.times.map_or("no timestamps".into(), |t| format!("{:.1}", t.technique_ms));
-                    eprintln!("{name:>8} {label:>16} preset {:>6}: relative L2 {:.4}, {ms} ms", quality.label(), error.l2);
-                    format!("{:.4} | {:.4} | {ms} ({})", error.l2, error.l1, run.adapter)
-                }
-                Err(e) => format!("– | – | no GPU run: {e}"),
-            };
-            writeln!(note, "| {label} | {} | {row} |", quality.label()).unwrap();
-        }
+    runs.extend([
+        (Method::Volumes, "warped volumes", None),
+        (Method::Maps, "hierarchical maps", None),
+        (Method::IlluminationTextures, "illumination textures", None),
+        (Method::Convolution, "convolution", None),
+    ]);
+    let mut note = format!(
+        "\n### Quality presets and plugin defaults on {name}\n\n| asked of every generator | settings | relative L2 | relative L1 | GPU ms (adapter) |\n|---|---|---:|---:|---|\n"
+    );
+    for (method, label, quality) in runs {
+        let settings = quality.map_or("plugin defaults", CausticQuality::label);
+        let row = match crate::render::gpu_run(method, scene, None, quality) {
+            Ok(run) => {
+                let image: Vec<f32> = run.irradiance.iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
+                let error = Errors::between(&image, truth);
+                let ms = run.times.map_or("no timestamps".into(), |t| format!("{:.1}", t.technique_ms));
+                eprintln!("{name:>8} {label:>21} {settings:>15}: relative L2 {:.4}, {ms} ms", error.l2);
+                format!("{:.4} | {:.4} | {ms} ({})", error.l2, error.l1, run.adapter)
+            }
+            // A technique that does not apply to some generator has no row.
+            Err(_) if quality.is_none() => continue,
+            Err(e) => format!("– | – | no GPU run: {e}"),
+        };
+        writeln!(note, "| {label} | {settings} | {row} |").unwrap();
     }
     note
 }
