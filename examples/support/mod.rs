@@ -57,8 +57,9 @@ pub fn out_path(name: &str) -> PathBuf {
 /// with the "Caustics" panel; or, headless ([`headless`]), no window, every camera
 /// drawing into an image, and the frame after `frames` updates (or, with `frames` 0,
 /// the frame in which the app sends [`Shoot`]) written to [`out_path`] before the app
-/// exits (with an error if a pipeline failed to build). `--sequence N` writes that
-/// frame and the `N − 1` after it instead, as `<out stem>-000.png`, …
+/// exits (with an error if a pipeline failed to build). With `frames` > 0,
+/// `--sequence N` writes that frame and the `N − 1` after it instead, as
+/// `<out stem>-000.png`, …
 pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), frames: u32) -> PluginGroupBuilder {
     if !headless() {
         let window = Window {
@@ -151,7 +152,9 @@ fn take_shot(
 ) {
     *updates += 1;
     let shoot = shoot.read().count() > 0;
-    let shots = shot.sequence.max(1);
+    // A sequence follows a fixed number of frames; a shot on `Shoot` is one picture.
+    let sequence = if shot.frames == 0 { 0 } else { shot.sequence };
+    let shots = sequence.max(1);
     let index = updates.wrapping_sub(shot.frames);
     if !(shot.frames == 0 && shoot || shot.frames > 0 && index < shots) {
         return;
@@ -171,7 +174,7 @@ fn take_shot(
     if let Some(dir) = shot.out.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
-    let out = if shot.sequence == 0 {
+    let out = if sequence == 0 {
         shot.out.clone()
     } else {
         let stem = shot.out.file_stem().unwrap_or_default().to_string_lossy();
