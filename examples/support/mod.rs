@@ -76,7 +76,8 @@ pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), fra
         .disable::<bevy::render::pipelined_rendering::PipelinedRenderingPlugin>()
         // Without winit's loop, Bevy's own runs the frames.
         .add(ScheduleRunnerPlugin::run_loop(Duration::ZERO))
-        .add(HeadlessShot { out: out_path(name), size: UVec2::new(width, height), frames, sequence: option("sequence", 0) })
+        // A sequence follows a fixed number of frames; a shot on `Shoot` is one picture.
+        .add(HeadlessShot { out: out_path(name), size: UVec2::new(width, height), frames, sequence: if frames == 0 { 0 } else { option("sequence", 0) } })
 }
 
 /// Headless, with no fixed number of frames: take the picture now.
@@ -94,8 +95,8 @@ struct HeadlessShot {
 }
 
 /// The image the cameras draw into, where to write it, after how many updates, how
-/// many frames (0: one, at `out` itself), the frames written so far, and a pipeline
-/// that failed to build.
+/// many frames (0: one, at `out` itself; always 0 with no fixed number of updates),
+/// the frames written so far, and a pipeline that failed to build.
 #[derive(Resource, Clone)]
 struct Shot {
     image: Handle<Image>,
@@ -152,9 +153,7 @@ fn take_shot(
 ) {
     *updates += 1;
     let shoot = shoot.read().count() > 0;
-    // A sequence follows a fixed number of frames; a shot on `Shoot` is one picture.
-    let sequence = if shot.frames == 0 { 0 } else { shot.sequence };
-    let shots = sequence.max(1);
+    let shots = shot.sequence.max(1);
     let index = updates.wrapping_sub(shot.frames);
     if !(shot.frames == 0 && shoot || shot.frames > 0 && index < shots) {
         return;
@@ -174,7 +173,7 @@ fn take_shot(
     if let Some(dir) = shot.out.parent() {
         let _ = std::fs::create_dir_all(dir);
     }
-    let out = if sequence == 0 {
+    let out = if shot.sequence == 0 {
         shot.out.clone()
     } else {
         let stem = shot.out.file_stem().unwrap_or_default().to_string_lossy();

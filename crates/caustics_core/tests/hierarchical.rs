@@ -269,22 +269,21 @@ fn a_glass_ball_under_a_point_light_matches_the_tracer_at_the_defaults() {
     let mut grid = IrradianceGrid::new(region);
     tracer.trace(&TraceSettings { photons_per_light: 1 << 22, ..Default::default() }, &mut grid, &|_, _| {});
     let truth = grid.irradiance_mean();
-    let (du, dv) = (region.edge_u / 128.0, region.edge_v / 128.0);
-    let ours: Vec<f32> = (0..128 * 128)
-        .map(|i| {
-            let corner = region.cell_center(i / 128, i % 128) - 0.5 * (du + dv);
-            let sample = |k: usize| corner + du * ((k % 2) as f32 * 0.5 + 0.25) + dv * ((k / 2) as f32 * 0.5 + 0.25);
-            (0..4).map(|k| irradiance_at(&views, sample(k), Vec3::Y)).sum::<f32>() / 4.0
-        })
-        .collect();
+    let ours = cell_means_of(&region, |p| irradiance_at(&views, p, Vec3::Y));
     let l2 = caustics_core::metrics::relative_l2(&ours, &truth);
     eprintln!("glass ball under a point light over a wide floor, at the defaults: relative L2 {l2:.4}");
     assert_eq!(views.iter().map(|v| (v.view.emission, v.maps.map_resolution)).collect::<Vec<_>>(), [(0.5, 2048)], "one face reaching past its edge, its maps at twice the side");
     assert!(l2 <= 0.08, "relative L2 {l2} against the tracer");
 }
 
-/// Mean irradiance of 2 × 2 samples per cell of a horizontal region facing up.
+/// Mean irradiance of 2 × 2 samples per cell of a horizontal region facing up, from
+/// one view's map.
 fn cell_means(view: &ViewCaustics, region: &GridRegion) -> Vec<f32> {
+    cell_means_of(region, |p| view.irradiance_at(p, Vec3::Y))
+}
+
+/// Mean of `irradiance` at 2 × 2 points per cell of a horizontal region.
+fn cell_means_of(region: &GridRegion, irradiance: impl Fn(Vec3) -> f32) -> Vec<f32> {
     let (du, dv) = (region.edge_u / region.nu as f32, region.edge_v / region.nv as f32);
     (0..region.nu * region.nv)
         .map(|i| {
@@ -292,7 +291,7 @@ fn cell_means(view: &ViewCaustics, region: &GridRegion) -> Vec<f32> {
             (0..4)
                 .map(|k| {
                     let (a, b) = ((k % 2) as f32 * 0.5 + 0.25, (k / 2) as f32 * 0.5 + 0.25);
-                    view.irradiance_at(corner + du * a + dv * b, Vec3::Y)
+                    irradiance(corner + du * a + dv * b)
                 })
                 .sum::<f32>()
                 / 4.0

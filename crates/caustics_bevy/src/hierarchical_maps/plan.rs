@@ -167,7 +167,7 @@ fn plan_caustic_maps(
         active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
         return;
     }
-    let mut next = CausticMapPlan { settings: Some(core_settings), ..default() };
+    let mut next = CausticMapPlan::default();
     let mut generator_bounds: Option<(Vec3, Vec3)> = None;
     let traced = core_settings.paths == PhotonPaths::Traced;
     for (entity, generator, choice, (mesh, transform, visible, aabb)) in &generators {
@@ -225,7 +225,8 @@ fn plan_caustic_maps(
             core_lights.push(light);
         }
     }
-    // A cube face that reaches past its edge doubles the maps' side (the CPU twin's rule).
+    // The settings for these views: a cube face that reaches past its edge doubles the
+    // maps' side (the CPU twin's rule).
     next.settings = Some(core_settings.for_views(next.views.iter().map(|v| &v.view)));
     let changed = mesh_changed || next != *planned;
     if changed {
