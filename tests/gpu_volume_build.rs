@@ -6,7 +6,8 @@
 //! the rays). In each frame the GPU's irradiance matches the CPU build of the mesh that
 //! frame drew (and not the frame before's); paused, the GPU keeps and drops the same
 //! volumes as the CPU, with the same flux, lost light (total internal reflection,
-//! grazing rays) included.
+//! grazing rays) included. A glass raft afloat on the sea is shadowed by the waves as
+//! the frame draws them: the sea's BVH among the raft's occluders is refit on the GPU.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
@@ -56,14 +57,15 @@ fn white(world: &mut World) -> Handle<StandardMaterial> {
     world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 1.0, ..default() })
 }
 
-/// The scene as the app holds it now, for the CPU build: the water's mesh as this
-/// frame drew it (an ocean's evaluated by the core crate at the app's time: the twin
-/// of the GPU's waves), every receiver, the sun.
-fn cpu_scene(renderer: &mut HeadlessRenderer, water: Entity) -> Scene {
+/// The scene as the app holds it now, for the CPU build: the generators' meshes as this
+/// frame drew them (an ocean's evaluated by the core crate at the app's time: the twin
+/// of the GPU's waves; with `as_assets`, as their mesh assets stand instead), every
+/// receiver, the sun.
+fn cpu_scene(renderer: &mut HeadlessRenderer, generators: &[Entity], as_assets: bool) -> Scene {
     let world = renderer.world_mut();
     let mesh = |world: &mut World, entity: Entity| {
         let (handle, transform) = (world.get::<Mesh3d>(entity).unwrap().0.clone(), *world.get::<GlobalTransform>(entity).unwrap());
-        if let Some(ocean) = world.get::<Ocean>(entity).filter(|o| o.on_gpu) {
+        if let Some(ocean) = world.get::<Ocean>(entity).filter(|o| o.on_gpu && !as_assets) {
             let time = world.resource::<Time>().elapsed_secs() * ocean.time_scale;
             let sea = OceanSpectrum::new(&ocean.settings()).unwrap().evaluate(time).mesh();
             return core_mesh(&bevy_mesh(&sea), &transform).unwrap();
@@ -75,10 +77,16 @@ fn cpu_scene(renderer: &mut HeadlessRenderer, water: Entity) -> Scene {
     };
     let receivers: Vec<Entity> = world.query_filtered::<Entity, With<CausticReceiver>>().iter(world).collect();
     let sun = world.query_filtered::<&GlobalTransform, With<DirectionalLight>>().single(world).unwrap().forward();
-    let generator = world.get::<CausticGenerator>(water).unwrap().clone();
+    let generators = generators
+        .iter()
+        .map(|&g| {
+            let generator = world.get::<CausticGenerator>(g).unwrap().clone();
+            Generator { double_sided: generator.double_sided, ..Generator::new(mesh(world, g), generator.specular_interaction()) }
+        })
+        .collect();
     Scene {
         lights: vec![Light::white(LightKind::Directional { direction: to_core(sun.as_vec3()), irradiance: ILLUMINANCE })],
-        generators: vec![Generator { double_sided: generator.double_sided, ..Generator::new(mesh(world, water), generator.specular_interaction()) }],
+        generators,
         receivers: receivers.into_iter().map(|r| Receiver { mesh: mesh(world, r), albedo: V::ONE }).collect(),
     }
 }
@@ -111,7 +119,7 @@ fn follow(renderer: &mut HeadlessRenderer, camera: Entity, water: Entity, frames
     for frame in 0..frames {
         render(renderer, 1);
         let gpu = gpu_irradiance(renderer, camera);
-        let scene = cpu_scene(renderer, water);
+        let scene = cpu_scene(renderer, &[water], false);
         let cpu = cpu_irradiance(&scene, &build_scene_volumes(&scene, &Default::default()));
         let mean = cpu.iter().sum::<f32>() / cpu.len() as f32;
         assert!(mean > 0.3 * ILLUMINANCE, "{name}, frame {frame}: the CPU build sees too little light ({mean})");
@@ -125,14 +133,18 @@ fn follow(renderer: &mut HeadlessRenderer, camera: Entity, water: Entity, frames
     (worst, late)
 }
 
+/// A build's counts of volumes kept and dropped, by why.
+fn counts(s: &BuildStats) -> [usize; 6] {
+    [s.volumes, s.unlit, s.shadowed, s.total_internal_reflection, s.grazing, s.degenerate]
+}
+
 /// Paused, the GPU build's counts as read back against the CPU build's.
-fn assert_same_volumes(renderer: &mut HeadlessRenderer, water: Entity, name: &str) -> BuildStats {
+fn assert_same_volumes(renderer: &mut HeadlessRenderer, generators: &[Entity], name: &str) -> BuildStats {
     render(renderer, 4);
     let gpu = renderer.world_mut().resource::<CausticVolumes>().stats;
-    let scene = cpu_scene(renderer, water);
+    let scene = cpu_scene(renderer, generators, false);
     let cpu = build_scene_volumes(&scene, &Default::default()).stats;
     eprintln!("{name}: GPU {gpu:?}\n{name}: CPU {cpu:?}");
-    let counts = |s: &BuildStats| (s.volumes, s.unlit, s.shadowed, s.total_internal_reflection, s.grazing, s.degenerate);
     assert_eq!(counts(&gpu), counts(&cpu), "{name}: the GPU keeps and drops other volumes than the CPU");
     assert!(cpu.volumes + cpu.total_internal_reflection + cpu.grazing + cpu.degenerate > 1000, "{name}: {cpu:?}");
     // f32 sums in different orders: a few 10⁻⁷ a term, ~10⁻⁵ over thousands.
@@ -172,7 +184,7 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     // The live comparison traces this frame's waves, not the mesh asset of the moment
     // the ocean was made.
     let traced = bevy_caustics::reference::scene_from_world(renderer.world_mut()).scene.generators[0].mesh.clone();
-    assert_eq!(traced.positions(), cpu_scene(&mut renderer, ocean).generators[0].mesh.positions(), "the reference traces stale waves");
+    assert_eq!(traced.positions(), cpu_scene(&mut renderer, &[ocean], false).generators[0].mesh.positions(), "the reference traces stale waves");
     assert!(worst < 0.01, "ocean: the GPU build's irradiance is {worst} from the CPU build's");
     assert!(late > 5.0 * worst, "ocean: a frame's caustics are as near the frame before's mesh ({late}) as to its own ({worst})");
     // Choppy waves: four transforms (the displacement and its derivatives) on the GPU.
@@ -181,7 +193,26 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     let (worst, _) = follow(&mut renderer, camera, ocean, 2, "choppy ocean");
     assert!(worst < 0.01, "choppy ocean: the GPU build's irradiance is {worst} from the CPU build's");
     renderer.world_mut().get_mut::<Ocean>(ocean).unwrap().time_scale = 0.0;
-    assert_same_volumes(&mut renderer, ocean, "ocean");
+    assert_same_volumes(&mut renderer, &[ocean], "ocean");
+
+    // A glass raft afloat on the waves, a second generator: the sea hides the raft's
+    // vertices its waves rise over, and the raft the sea's beneath it. The sea's tree
+    // among the occluders is refit on the GPU to the waves of the frame, which the
+    // app's paused clock holds away from the mesh asset's.
+    let raft = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(0.7)).mesh().subdivisions(23));
+    let glass = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
+    let raft = renderer.world_mut().spawn((Mesh3d(raft), glass, Transform::from_xyz(0.1, 0.8, -0.1), RenderLayers::layer(1))).id();
+    renderer.world_mut().get_mut::<Ocean>(ocean).unwrap().time_scale = 4.0;
+    render(&mut renderer, 12);
+    renderer.world_mut().resource_mut::<Time<Virtual>>().pause();
+    let stats = assert_same_volumes(&mut renderer, &[ocean, raft], "raft on the sea");
+    let passes = renderer.world_mut().resource::<CausticPassReport>().passes.clone();
+    assert!(passes.iter().any(|(pass, _)| *pass == "occluder refit"), "the sea's tree was not refit: {passes:?}");
+    let stale = build_scene_volumes(&cpu_scene(&mut renderer, &[ocean, raft], true), &Default::default()).stats;
+    eprintln!("raft on the sea as the mesh asset stands: {stale:?}");
+    assert_ne!(counts(&stale), counts(&stats), "the waves of the frame hide no other vertices than the mesh asset's: the test shows nothing");
+    renderer.world_mut().resource_mut::<Time<Virtual>>().unpause();
+    renderer.world_mut().despawn(raft);
     renderer.world_mut().despawn(ocean);
 
     // A pool rippled by two pebbles, three stones on its floor.
@@ -211,7 +242,7 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     assert!(worst < 0.01, "pool: the GPU build's irradiance is {worst} from the CPU build's");
     assert!(late > 5.0 * worst, "pool: a frame's caustics are as near the frame before's mesh ({late}) as to its own ({worst})");
     renderer.world_mut().entity_mut(pool).remove::<PoolRipples>();
-    assert_same_volumes(&mut renderer, pool, "pool");
+    assert_same_volumes(&mut renderer, &[pool], "pool");
     renderer.world_mut().despawn(pool);
 
     // Dropped volumes are counted alike: light entering glass from its inside side
@@ -229,11 +260,11 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     let glass = renderer.world_mut().spawn((Mesh3d(inverted.clone()), CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..inside }, RenderLayers::layer(1))).id();
     let mut light = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
     *light.single_mut(renderer.world_mut()).unwrap() = Transform::default().looking_to(Vec3::new(1.43, -1.0, 0.0), Vec3::Y);
-    let stats = assert_same_volumes(&mut renderer, glass, "inverted glass");
+    let stats = assert_same_volumes(&mut renderer, &[glass], "inverted glass");
     assert!(stats.total_internal_reflection > 50 && stats.dropped_flux.x > 0.0, "{stats:?}");
     renderer.world_mut().entity_mut(glass).insert(CausticGenerator { technique: CausticTechnique::WarpedVolumes, double_sided: true, ..CausticGenerator::mirror() });
     let mut light = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
     *light.single_mut(renderer.world_mut()).unwrap() = Transform::default().looking_to(Vec3::new(57.0, -1.0, 0.0), Vec3::Y);
-    let stats = assert_same_volumes(&mut renderer, glass, "grazing mirror");
+    let stats = assert_same_volumes(&mut renderer, &[glass], "grazing mirror");
     assert!(stats.grazing > 50, "{stats:?}");
 }

@@ -48,6 +48,11 @@ pub struct BvhTriangle {
 }
 
 impl BvhTriangle {
+    /// The triangle of vertices `corners` of `positions` and `normals`.
+    fn of(positions: &[Vec3], normals: &[Vec3], corners: [u32; 3]) -> Self {
+        Self { positions: corners.map(|i| positions[i as usize].extend(0.0).to_array()), normals: corners.map(|i| normals[i as usize].extend(0.0).to_array()) }
+    }
+
     fn corner(&self, i: usize) -> Vec3 {
         Vec4::from_array(self.positions[i]).truncate()
     }
@@ -73,26 +78,67 @@ pub struct GeneratorHit {
 /// One mesh's triangles in a binary BVH, in the mesh's own space.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MeshBvh {
-    /// The nodes, root first.
+    /// The nodes, root first; a node's children come after it.
     pub nodes: Vec<BvhNode>,
     /// The triangles in BVH order: a leaf's `first` and `count` index them.
     pub triangles: Vec<BvhTriangle>,
+    /// Each triangle's three vertices in the mesh it was built from, in BVH order: what
+    /// a refit ([`Self::refit`], `bvh_refit.wgsl`) reads the moved vertices by.
+    pub corners: Vec<[u32; 3]>,
 }
 
 impl MeshBvh {
     /// One mesh's BVH in its own space, as an [`InstancedBvh`] places it. Degenerate
     /// triangles are kept: the intersection test never hits them.
     pub fn of_mesh(mesh: &TriMesh) -> Self {
-        let mut triangles: Vec<BvhTriangle> = mesh
-            .triangles()
-            .iter()
-            .map(|tri| BvhTriangle {
-                positions: tri.map(|i| mesh.positions()[i as usize].extend(0.0).to_array()),
-                normals: tri.map(|i| mesh.normals()[i as usize].extend(0.0).to_array()),
-            })
-            .collect();
-        let nodes = build_nodes(&mut triangles, LEAF_SIZE, bounds, BvhTriangle::centroid);
-        Self { nodes, triangles }
+        let mut triangles: Vec<(BvhTriangle, [u32; 3])> = mesh.triangles().iter().map(|&tri| (BvhTriangle::of(mesh.positions(), mesh.normals(), tri), tri)).collect();
+        let nodes = build_nodes(
+            &mut triangles,
+            LEAF_SIZE,
+            |items| items.iter().flat_map(|(t, _)| (0..3).map(|i| t.corner(i))).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(p), b.max(p))),
+            |(t, _)| t.centroid(),
+        );
+        let (triangles, corners) = triangles.into_iter().unzip();
+        Self { nodes, triangles, corners }
+    }
+
+    /// The same tree over the mesh's vertices moved to `positions` and `normals` (the
+    /// mesh it was built from, deformed: the same vertices and triangles): each
+    /// triangle read again and each node's box made again from its triangles' or its
+    /// children's, children first. The CPU twin of `bvh_refit.wgsl`. The tree's shape
+    /// stays, so a mesh deformed far from its build is traversed more slowly, never
+    /// wrongly. An error, with nothing changed, when a vertex is missing.
+    pub fn refit(&mut self, positions: &[Vec3], normals: &[Vec3]) -> Result<(), String> {
+        let vertices = positions.len().min(normals.len());
+        if let Some(bad) = self.corners.iter().flatten().find(|&&v| v as usize >= vertices) {
+            return Err(format!("the tree reads vertex {bad}, past the {vertices} given"));
+        }
+        for (triangle, &corners) in self.triangles.iter_mut().zip(&self.corners) {
+            *triangle = BvhTriangle::of(positions, normals, corners);
+        }
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            let (lo, hi) = if node.count > 0 {
+                bounds(&self.triangles[node.first as usize..(node.first + node.count) as usize])
+            } else {
+                let (a, b) = (self.nodes[node.first as usize], self.nodes[node.first as usize + 1]);
+                (Vec3::from_array(a.min).min(Vec3::from_array(b.min)), Vec3::from_array(a.max).max(Vec3::from_array(b.max)))
+            };
+            (self.nodes[n].min, self.nodes[n].max) = (lo.to_array(), hi.to_array());
+        }
+        Ok(())
+    }
+
+    /// The nodes by depth, root first: a level's boxes depend only on deeper levels', so
+    /// the GPU's refit makes one level a dispatch, deepest first.
+    pub fn levels(&self) -> Vec<Vec<u32>> {
+        let mut levels: Vec<Vec<u32>> = Vec::new();
+        let mut level = if self.nodes.is_empty() { Vec::new() } else { vec![0u32] };
+        while !level.is_empty() {
+            let next = level.iter().map(|&n| self.nodes[n as usize]).filter(|n| n.count == 0).flat_map(|n| [n.first, n.first + 1]).collect();
+            levels.push(std::mem::replace(&mut level, next));
+        }
+        levels
     }
 
     /// The BVH as `triangle_bvh.wgsl` reads it: the nodes, then the triangles.
@@ -202,13 +248,20 @@ impl InstancedBvh {
     /// or with a transform that is not invertible hits nothing and is left out; meshes
     /// shared by [`Arc`] are laid out once.
     pub fn new(placed: impl IntoIterator<Item = (Arc<MeshBvh>, Mat4, u32)>) -> Self {
+        Self::with_bounds(placed.into_iter().map(|(bvh, world_from_local, index)| (bvh, world_from_local, index, None)))
+    }
+
+    /// [`Self::new`], where an instance may bring its own box in its mesh's space for
+    /// the top level instead of its BVH's root box: one that holds every shape a mesh
+    /// deformed on the GPU takes, whose BVH is refit there ([`MeshBvh::refit`]).
+    pub fn with_bounds(placed: impl IntoIterator<Item = (Arc<MeshBvh>, Mat4, u32, Option<(Vec3, Vec3)>)>) -> Self {
         let mut meshes: Vec<Arc<MeshBvh>> = Vec::new();
         // Each distinct mesh's place in `meshes`, by its allocation.
         let mut laid_out: std::collections::HashMap<*const MeshBvh, usize> = std::collections::HashMap::new();
         let mut placed: Vec<(BvhInstance, (Vec3, Vec3))> = placed
             .into_iter()
-            .filter(|(bvh, world_from_local, _)| !bvh.nodes.is_empty() && world_from_local.is_finite() && world_from_local.determinant() != 0.0)
-            .map(|(bvh, world_from_local, index)| {
+            .filter(|(bvh, world_from_local, ..)| !bvh.nodes.is_empty() && world_from_local.is_finite() && world_from_local.determinant() != 0.0)
+            .map(|(bvh, world_from_local, index, local_bounds)| {
                 let mesh = *laid_out.entry(Arc::as_ptr(&bvh)).or_insert_with(|| {
                     meshes.push(bvh.clone());
                     meshes.len() - 1
@@ -217,7 +270,7 @@ impl InstancedBvh {
                 let local_from_world = [m.x_axis.to_array(), m.y_axis.to_array(), m.z_axis.to_array()];
                 let flags = if world_from_local.determinant() < 0.0 { MIRRORED } else { 0 };
                 let root = &bvh.nodes[0];
-                let (lo, hi) = (Vec3::from_array(root.min), Vec3::from_array(root.max));
+                let (lo, hi) = local_bounds.unwrap_or((Vec3::from_array(root.min), Vec3::from_array(root.max)));
                 let world = (0..8)
                     .map(|k| world_from_local.transform_point3(Vec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][k >> 1 & 1], [lo.z, hi.z][k >> 2])))
                     .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(p), b.max(p)));
@@ -232,21 +285,27 @@ impl InstancedBvh {
         );
         let mut instances: Vec<BvhInstance> = placed.into_iter().map(|(instance, _)| instance).collect();
         let instance_meshes: Vec<usize> = instances.iter().map(|i| i.ids[0] as usize).collect();
-        // Where each mesh starts, past the top level and the instances.
-        let mut start = (2 * top.len() + 4 * instances.len()) as u32;
-        let starts: Vec<u32> = meshes
+        let mut bvh = Self { meshes, top, instances: Vec::new(), instance_meshes };
+        let starts = bvh.gpu_mesh_starts();
+        for (instance, &mesh) in instances.iter_mut().zip(&bvh.instance_meshes) {
+            [instance.ids[0], instance.ids[1]] = starts[mesh];
+        }
+        bvh.instances = instances;
+        bvh
+    }
+
+    /// Where each of [`Self::meshes`] starts in the buffer, in `vec4`s: its nodes, its
+    /// triangles. They lie past the top level and the instances.
+    pub fn gpu_mesh_starts(&self) -> Vec<[u32; 2]> {
+        let mut start = (2 * self.top.len() + 4 * self.instance_meshes.len()) as u32;
+        self.meshes
             .iter()
             .map(|m| {
-                let at = start;
+                let at = [start, start + 2 * m.nodes.len() as u32];
                 start += m.gpu_len();
                 at
             })
-            .collect();
-        for (instance, &mesh) in instances.iter_mut().zip(&instance_meshes) {
-            instance.ids[0] = starts[mesh];
-            instance.ids[1] = starts[mesh] + 2 * meshes[mesh].nodes.len() as u32;
-        }
-        Self { meshes, top, instances, instance_meshes }
+            .collect()
     }
 
     /// Meshes in world space, each its own instance with its place in the list as

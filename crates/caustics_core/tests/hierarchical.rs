@@ -774,6 +774,51 @@ fn placed_meshes_hit_where_their_world_space_copies_do() {
     assert_eq!(skipped, hits, "a skipped mesh is passed through");
 }
 
+#[test]
+fn a_refit_tree_hits_where_a_tree_built_on_the_deformed_mesh_does() {
+    // Water built still and refit to waves (`MeshBvh::refit`, the twin of the GPU's
+    // refit of a surface deformed there), placed with a box that holds every wave:
+    // against a tree built on the waves themselves. Refit back to the still water, the
+    // tree is the one first built.
+    use caustics_core::scenes::{Wave, wave_heightfield};
+    use caustics_core::triangle_bvh::{InstancedBvh, MeshBvh, NO_MESH};
+    use glam::{Mat4, Quat};
+    use std::sync::Arc;
+    let still = wave_heightfield(24, 3.0, 0.0, &[]);
+    let waves = wave_heightfield(24, 3.0, 0.0, &[Wave { kx: 5.0, kz: 1.0, amplitude: 0.2, phase: 0.3 }, Wave { kx: -1.0, kz: 6.0, amplitude: 0.15, phase: 1.1 }]);
+    let built = MeshBvh::of_mesh(&still);
+    let mut refit = built.clone();
+    refit.refit(waves.positions(), waves.normals()).unwrap();
+    assert_ne!(refit.nodes[0], built.nodes[0], "the waves rise past the still water's box");
+    let at = Mat4::from_rotation_translation(Quat::from_rotation_z(0.2), Vec3::new(0.1, 0.5, -0.2));
+    let bound = (Vec3::new(-1.5, -0.35, -1.5), Vec3::new(1.5, 0.35, 1.5));
+    let placed = InstancedBvh::with_bounds([(Arc::new(refit.clone()), at, 0, Some(bound))]);
+    let fresh = InstancedBvh::new([(Arc::new(MeshBvh::of_mesh(&waves)), at, 0)]);
+    let mut rng = caustics_core::rng::Pcg32::for_photon(13, 0, 1);
+    let (mut hits, mut agree) = (0, 0);
+    for _ in 0..20_000 {
+        let origin = Vec3::new(rng.next_f32() - 0.5, 1.0, rng.next_f32() - 0.5) * 3.0;
+        let towards = Vec3::new(rng.next_f32() - 0.5, 0.3, rng.next_f32() - 0.5) * 2.4;
+        let dir = (towards - origin).normalize();
+        let (a, b) = (placed.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH), fresh.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH));
+        if let Some(b) = b {
+            hits += 1;
+            if a.is_some_and(|a| (a.t - b.t).abs() < 1e-5 * b.t.max(1.0) && a.geometric_normal.dot(b.geometric_normal) > 0.999 && a.normal.dot(b.normal) > 0.999) {
+                agree += 1;
+            }
+        }
+    }
+    assert!(hits > 10_000, "{hits} hits");
+    // Rays through a shared edge or vertex may slip through one test and not the other.
+    assert!(agree as f64 > 0.999 * hits as f64, "{agree} of {hits} hits agree");
+    refit.refit(still.positions(), still.normals()).unwrap();
+    assert_eq!(refit, built, "refit to the mesh it was built on, the tree is the same");
+    assert!(refit.refit(&still.positions()[1..], still.normals()).is_err(), "a vertex short");
+    let levels = built.levels();
+    assert_eq!(levels.iter().map(Vec::len).sum::<usize>(), built.nodes.len(), "every node on one level");
+    assert!(levels.windows(2).all(|w| w[1].iter().all(|&c| w[0].iter().any(|&p| built.nodes[p as usize].first == c || built.nodes[p as usize].first + 1 == c))));
+}
+
 /// A glass ball high beside a vertical mirror under a low sun: the ball focuses its
 /// light onto the mirror, which sends it back down onto the floor; the region is the
 /// floor where it lands.

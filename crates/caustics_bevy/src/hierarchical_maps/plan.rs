@@ -253,7 +253,7 @@ fn plan_caustic_maps(
         // (a generator whose mesh is not loaded is left out of it).
         next.bvh = match &plan.bvh {
             Some(bvh) if !mesh_changed && next.generators == plan.generators => Some(bvh.clone()),
-            _ => Some(Arc::new(bvhs.place(next.generators.iter().enumerate().map(|(k, g)| (g.mesh, g.world_from_local, k as u32)), &meshes))),
+            _ => Some(Arc::new(bvhs.place(next.generators.iter().enumerate().map(|(k, g)| (g.mesh, g.world_from_local, k as u32, None)), &meshes))),
         };
     }
     next.generation = plan.generation + 1;

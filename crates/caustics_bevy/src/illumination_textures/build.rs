@@ -263,7 +263,7 @@ fn set_up_planes(
     // Tables and meshes no generator uses any more are let go.
     tables.tables.retain(|key, _| keys.contains(key));
     state.local_meshes.retain(|key, _| keys.contains(key));
-    let receivers = Arc::new(bvhs.place(next.occluders.iter().enumerate().map(|(k, (mesh, transform))| (*mesh, transform.to_matrix(), k as u32)), &meshes));
+    let receivers = Arc::new(bvhs.place(next.occluders.iter().enumerate().map(|(k, (mesh, transform))| (*mesh, transform.to_matrix(), k as u32, None)), &meshes));
     let lights = next.lights;
     let fitted = fitting(core_settings, lights.len(), device.as_deref(), budget.bytes);
     let builds = !inputs.is_empty() && !lights.is_empty();

@@ -7,6 +7,7 @@
 
 use crate::read_scene::core_mesh;
 use bevy::platform::collections::HashMap;
+use bevy::camera::primitives::Aabb;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Buffer, BufferInitDescriptor, BufferUsages};
 use bevy::render::renderer::{RenderDevice, RenderQueue};
@@ -30,11 +31,15 @@ impl MeshBvhs {
         built
     }
 
-    /// The instances `placed` (mesh, `world_from_local`, mesh index) over their meshes'
-    /// BVHs; a mesh not loaded or malformed is left out.
-    pub fn place(&mut self, placed: impl IntoIterator<Item = (AssetId<Mesh>, Mat4, u32)>, meshes: &Assets<Mesh>) -> InstancedBvh {
-        let placed: Vec<_> = placed.into_iter().filter_map(|(mesh, at, index)| Some((self.get(mesh, meshes)?, at, index))).collect();
-        InstancedBvh::new(placed)
+    /// The instances `placed` (mesh, `world_from_local`, mesh index, and for a mesh
+    /// deformed on the GPU the entity's `Aabb`, which holds every shape it takes) over
+    /// their meshes' BVHs; a mesh not loaded or malformed is left out.
+    pub fn place(&mut self, placed: impl IntoIterator<Item = (AssetId<Mesh>, Mat4, u32, Option<Aabb>)>, meshes: &Assets<Mesh>) -> InstancedBvh {
+        let placed: Vec<_> = placed
+            .into_iter()
+            .filter_map(|(mesh, at, index, aabb)| Some((self.get(mesh, meshes)?, at, index, aabb.map(|a| (Vec3::from(a.min()), Vec3::from(a.max()))))))
+            .collect();
+        InstancedBvh::with_bounds(placed)
     }
 }
 

@@ -18,6 +18,8 @@
 //! [`Caustics`], which brings Bevy's `Hdr` (the composite adds linear light
 //! before tonemapping) and the prepasses the techniques read receiver points from.
 
+#[cfg(feature = "warped-volumes")]
+pub(crate) mod bvh_refit;
 mod composite;
 pub mod kept_bind_group;
 pub mod mesh_bvhs;
@@ -357,6 +359,8 @@ pub(crate) fn build(app: &mut App) {
     bevy::shader::load_shader_library!(app, "receiver_view.wgsl");
     bevy::shader::load_shader_library!(app, "optics.wgsl");
     bevy::shader::load_shader_library!(app, "triangle_bvh.wgsl");
+    #[cfg(feature = "warped-volumes")]
+    bevy::asset::embedded_asset!(app, "bvh_refit.wgsl");
     let cpu = crate::CausticCpuTime::of(app);
     app.register_type::<InjectedIrradiance>()
         .init_resource::<ActiveCausticTechniques>()

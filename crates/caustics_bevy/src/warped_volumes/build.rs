@@ -16,7 +16,8 @@ use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::glam;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use caustics_core::triangle_bvh::InstancedBvh;
+use bevy::camera::primitives::Aabb;
+use caustics_core::triangle_bvh::{InstancedBvh, MeshBvh};
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::Light;
@@ -98,6 +99,9 @@ pub(super) struct VolumeSources {
     /// Receivers, shadow casters and, with two or more generators, every generator,
     /// placed over their meshes' BVHs.
     pub occluders: Arc<InstancedBvh>,
+    /// The meshes of `occluders` deformed on the GPU, whose BVHs the render world
+    /// refits each frame (`bvh_refit.rs`).
+    pub deformed: Vec<(AssetId<Mesh>, Arc<MeshBvh>)>,
     /// The receivers' world bounds: every volume ends beyond them.
     pub bounds: Option<(glam::Vec3, glam::Vec3)>,
     pub settings: VolumeSettings,
@@ -140,6 +144,9 @@ struct GatherState {
     /// their changes.
     occluder_meshes: HashSet<AssetId<Mesh>>,
     generator_meshes: HashSet<AssetId<Mesh>>,
+    /// The bounds the occluders deformed on the GPU were placed with: they are placed
+    /// again when their surface outgrows them.
+    deformed_bounds: HashMap<AssetId<Mesh>, Aabb>,
     warned: HashSet<Entity>,
 }
 
@@ -222,6 +229,7 @@ fn gather_sources(
     generators: Generators<'_, '_>,
     lights: Query<LightComponents, AnyLight>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
+    deformed: Query<(&Mesh3d, &Aabb), With<MovesOnGpu>>,
     mut changes: SceneChanges,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
@@ -246,7 +254,10 @@ fn gather_sources(
         || changed.generators
         // A mesh that had not loaded at the last gathering.
         || generators.iter().any(|(_, _, _, m, ..)| !state.generator_meshes.contains(&m.id()));
-    let occluders_changed = occluder_mesh_changed || changed.occluders || (several_generators && generators_changed);
+    let outgrown = deformed.iter().any(|(mesh3d, aabb)| {
+        state.deformed_bounds.get(&mesh3d.id()).is_some_and(|placed| (aabb.min().cmplt(placed.min()) | aabb.max().cmpgt(placed.max())).any())
+    });
+    let occluders_changed = occluder_mesh_changed || changed.occluders || (several_generators && generators_changed) || outgrown;
     if !(occluders_changed || generators_changed || settings.is_changed() || changed.lights) {
         return;
     }
@@ -262,7 +273,7 @@ fn gather_sources(
     // Every generator shadows the others (`occluders_of`): the volumes' own, and the
     // ones other techniques draw; each passes through its own mesh.
     let mut volume_generators = Vec::new();
-    let mut occluder_meshes: Vec<(AssetId<Mesh>, Mat4, u32)> = Vec::new();
+    let mut occluder_meshes: Vec<(AssetId<Mesh>, Mat4, u32, Option<Aabb>)> = Vec::new();
     state.generator_meshes.clear();
     let mut index = 0;
     for (entity, generator, choice, mesh3d, transform, visible, moves_on_gpu) in &generators {
@@ -273,7 +284,7 @@ fn gather_sources(
         index += 1;
         // A malformed mesh shadows nothing; the warning below says why it is skipped.
         if several_generators && occluders_changed {
-            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), index));
+            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), index, None));
         }
         if choice.technique() != CausticTechnique::WarpedVolumes {
             continue;
@@ -323,8 +334,20 @@ fn gather_sources(
                 continue;
             }
             state.occluder_meshes.insert(mesh3d.id());
-            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), SHADOW_CASTER));
+            occluder_meshes.push((mesh3d.id(), transform.to_matrix(), SHADOW_CASTER, None));
         }
+        // A surface deformed on the GPU is held in the top level by its bounds, and its
+        // tree refit to each frame's vertices in the render world.
+        state.deformed_bounds = deformed.iter().map(|(mesh3d, aabb)| (mesh3d.id(), *aabb)).collect();
+        for (mesh, _, _, bounds) in &mut occluder_meshes {
+            *bounds = state.deformed_bounds.get(mesh).copied();
+        }
+        let mut seen = HashSet::new();
+        sources.deformed = occluder_meshes
+            .iter()
+            .filter(|(mesh, ..)| state.deformed_bounds.contains_key(mesh) && seen.insert(*mesh))
+            .filter_map(|(mesh, ..)| Some((*mesh, bvhs.get(*mesh, &meshes)?)))
+            .collect();
         sources.occluders = Arc::new(bvhs.place(occluder_meshes, &meshes));
     }
     active.warped_volumes = !volume_generators.is_empty() && !sources.lights.is_empty() && sources.bounds.is_some();

@@ -28,6 +28,7 @@ use bevy::render::{
 };
 use caustics_core::glam;
 use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup};
+use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
@@ -192,6 +193,8 @@ pub(super) struct VolumeBuild {
     generators: HashMap<Entity, GeneratorBuffers>,
     /// The occluders' `InstancedBvh` as last uploaded, with the one it holds.
     occluders: Option<(Arc<InstancedBvh>, InstancedBvhBuffer, Buffer)>,
+    /// The refit of the occluders deformed on the GPU, every frame they move.
+    refit: BvhRefit,
     jobs: DynamicUniformBuffer<GpuBuildJob>,
     /// What `jobs` holds, and each one's offset: the same jobs are not uploaded again.
     written_jobs: (Vec<GpuBuildJob>, Vec<u32>),
@@ -220,11 +223,13 @@ impl VolumeBuild {
     }
 }
 
-/// The build's pipelines (vertex rays, slicing axis, triangle volumes) and layout.
+/// The build's pipelines (vertex rays, slicing axis, triangle volumes) and layout, and
+/// the occluders' refit.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {
     layout: BindGroupLayoutDescriptor,
     pipelines: [CachedComputePipelineId; 3],
+    refit: BvhRefitPipelines,
 }
 
 pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache: Res<PipelineCache>) {
@@ -249,7 +254,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
     let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "triangle_volumes"]);
-    commands.insert_resource(VolumeBuildPipelines { layout, pipelines });
+    commands.insert_resource(VolumeBuildPipelines { layout, pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
 fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
@@ -301,12 +306,11 @@ impl GeneratorBuffers {
     }
 }
 
-/// What reading a mesh's vertices in Bevy's buffers takes.
-type DrawnMeshes<'a> = (&'a RenderAssets<RenderMesh>, &'a MeshAllocator, &'a RenderDevice, &'a RenderQueue);
 
-/// When the sources are new, a generator's mesh moves on the GPU or the last build
-/// missed a mesh's vertices: uploads the topology and occluders that changed, writes
-/// the jobs when they changed and sizes the volumes for every triangle of every job.
+/// When the sources are new, a generator's or an occluder's mesh moves on the GPU or
+/// the last build missed a mesh's vertices: uploads the topology and occluders that
+/// changed, plans the refit of the deformed occluders, writes the jobs when they
+/// changed and sizes the volumes for every triangle of every job.
 pub(super) fn prepare_build(
     extracted: Res<ExtractedSources>,
     mut build: ResMut<VolumeBuild>,
@@ -320,7 +324,7 @@ pub(super) fn prepare_build(
     if let Some((generation, volumes)) = build.counted.lock().ok().and_then(|mut c| c.take()) {
         buffers.empty = generation == extracted.generation && volumes == 0;
     }
-    let moving = extracted.sources.generators.iter().any(|(_, g)| g.moves_on_gpu);
+    let moving = extracted.sources.generators.iter().any(|(_, g)| g.moves_on_gpu) || !extracted.sources.deformed.is_empty();
     if !(extracted.new || moving || build.retry) {
         return;
     }
@@ -369,7 +373,7 @@ pub(super) fn prepare_build(
         // Nothing to build: the GPU memory goes back (the counters' readback buffer
         // once no copy is on its way).
         (buffers.volumes, buffers.counters, build.occluders, build.empty_counters) = (None, None, None, None);
-        (build.jobs, build.written_jobs) = default();
+        (build.jobs, build.written_jobs, build.refit) = default();
         return;
     }
     let occluders = match &mut build.occluders {
@@ -381,6 +385,7 @@ pub(super) fn prepare_build(
             buffer
         }
     };
+    build.refit.prepare(&sources.occluders, &occluders, &sources.deformed, &pipelines.refit, (&meshes, &allocator, &device, &queue), &cache);
     let volume_bytes = GpuCausticVolume::min_size().get();
     let bindable = largest_binding(&device).min(budget.bytes) / volume_bytes;
     if capacity > bindable {
@@ -469,12 +474,20 @@ pub(super) fn build_volumes(
     let Some(kernels) = pipelines.pipelines.iter().map(|id| cache.get_compute_pipeline(*id)).collect::<Option<Vec<_>>>() else {
         return;
     };
+    let build = &mut *build;
     let (Some(counters), Some(empty), false) = (buffers.counters.as_ref(), build.empty_counters.as_ref(), build.dispatches.is_empty()) else {
         return;
     };
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();
+    if build.refit.is_planned() {
+        let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_occluder_refit"), ..default() });
+        let span = diagnostics.pass_span(&mut pass, "caustics/occluder_refit");
+        build.refit.dispatch(&mut pass, &pipelines.refit, &cache);
+        span.end(&mut pass);
+        recorder.record("occluder refit");
+    }
     encoder.copy_buffer_to_buffer(empty, 0, counters, 0, empty.size());
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
