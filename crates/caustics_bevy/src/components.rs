@@ -129,11 +129,11 @@ impl CausticGenerator {
 pub struct CausticReceiver;
 
 /// A homogeneous participating medium in which caustic light scatters into visible
-/// shafts (Ernst et al. 2005 §3.5). Unlike Bevy's `FogVolume`, which scatters the
-/// *direct* light of shadow-mapped lights (volumetric fog), this medium scatters the
-/// light that generators focus, and its coefficients are physical: σₛ and σₐ per metre
-/// and a Henyey–Greenstein phase. Use both together: fog for sunbeams, this for the
-/// caustic shafts under waves.
+/// shafts (Ernst et al. 2005 §3.5), with physical coefficients: σₛ and σₐ per metre
+/// and a Henyey–Greenstein phase. It brings a Bevy `FogVolume` of the same box and
+/// coefficients ([`crate::medium_fog`]), so that Bevy's volumetric fog dims what is
+/// seen through it and scatters the direct light of shadow-mapped suns, while the
+/// plugin scatters the light the generators focus.
 ///
 /// The medium fills the unit cube `[-½, ½]³` of its entity's transform (as a
 /// `FogVolume` does): scale the transform to the water body or the room.

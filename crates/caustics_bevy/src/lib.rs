@@ -35,6 +35,7 @@ pub mod hierarchical_maps;
 pub mod illumination_textures;
 pub mod irradiance;
 pub mod lights;
+pub mod medium_fog;
 #[cfg(any(feature = "ocean", feature = "warped-volumes", feature = "convolution"))]
 mod mesh_vertices;
 #[cfg(feature = "ocean")]
@@ -107,6 +108,7 @@ impl Plugin for CausticsPlugin {
         technique::build(app);
         report::build(app);
         irradiance::build(app);
+        medium_fog::build(app);
         #[cfg(feature = "reference")]
         comparison::build(app);
         #[cfg(feature = "warped-volumes")]

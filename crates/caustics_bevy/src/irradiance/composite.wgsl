@@ -2,7 +2,8 @@
 // after the opaque pass, depth-tested against the scene (so only where it is visible),
 // with additive blending of the Lambertian radiance (albedo / π) · E · exposure, as
 // the rest of the frame sees it: scaled by the view's `Caustics::intensity`,
-// dimmed along the eye ray by the participating media it crosses, and fogged by the
+// dimmed along the eye ray by the participating media it crosses (none where Bevy's
+// volumetric fog draws them and dims the whole pixel), and fogged by the
 // view's `DistanceFog` as bevy_pbr fogs the receiver's own light. The buffer already
 // holds E · exposure, each pass's share capped; their sum is capped again here.
 

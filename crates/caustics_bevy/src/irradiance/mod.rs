@@ -558,7 +558,7 @@ fn mark_views_with_work(
 #[expect(clippy::too_many_arguments)]
 fn prepare_irradiance_buffers(
     mut commands: Commands,
-    mut views: Query<(Entity, &ExtractedCamera, &ViewCausticWork, Option<&mut ViewCausticIrradiance>)>,
+    mut views: Query<(Entity, &ExtractedCamera, &ViewCausticWork, Option<&mut ViewCausticIrradiance>, Has<bevy::light::VolumetricFog>)>,
     media: Res<ExtractedMedia>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
@@ -567,7 +567,7 @@ fn prepare_irradiance_buffers(
     pipeline_cache: Res<PipelineCache>,
 ) {
     let (padded_media, medium_count) = media.padded();
-    for (entity, camera, work, kept) in &mut views {
+    for (entity, camera, work, kept, bevy_fog) in &mut views {
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
             continue;
         };
@@ -585,6 +585,9 @@ fn prepare_irradiance_buffers(
                 view_formats: &[],
             },
         );
+        // Where Bevy's volumetric fog draws the media (`medium_fog.rs`), it dims the
+        // caustics with the rest of the pixel.
+        let medium_count = if bevy_fog { 0 } else { medium_count };
         let value = GpuViewCaustics { intensity: work.0.applied_intensity(), medium_count, media: padded_media };
         let viewport = camera.viewport.clone();
         // The same texture as last frame: the bind group stands, the settings are

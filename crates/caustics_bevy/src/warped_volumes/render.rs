@@ -313,7 +313,9 @@ pub(super) fn build(app: &mut App) {
                     .after(crate::irradiance::inject_irradiance)
                     .after(Core3dSystems::Prepass)
                     .before(Core3dSystems::MainPass),
-                timed(&cpu, pass::volumetric_pass).after(Core3dSystems::MainPass).before(Core3dSystems::EarlyPostProcess),
+                // After Bevy's volumetric fog (which runs before the early post-processing):
+                // the shafts, dimmed along the eye ray already, are not dimmed again.
+                timed(&cpu, pass::volumetric_pass).in_set(Core3dSystems::EarlyPostProcess),
             ),
         );
 }

@@ -1,0 +1,125 @@
+//! A [`ParticipatingMedium`] drawn by Bevy's own volumetric fog as well: the medium
+//! keeps a `FogVolume` of the same box (the unit cube of the same transform) and
+//! coefficients, so that Bevy dims everything seen through it by exp(−σₜ ℓ) and
+//! scatters the shadow-mapped directional lights in it, while the plugin adds only the
+//! caustic light: the surface caustics it composites are dimmed once, by Bevy's fog,
+//! and the shafts, already dimmed along the eye ray, are added after it.
+//!
+//! Bevy 0.19 draws no fog at all without a camera that has `VolumetricFog` and a light
+//! that has `VolumetricLight`: while a medium is in the scene, every 3D camera and
+//! every directional light that has none gets one from the plugin (taken back when
+//! the last medium goes). Point and spot lights are left as the game set them: Bevy
+//! marches them without a phase function. Bevy attenuates the light on its way into
+//! the fog by a constant, exp(−σₜ R) with R the box's half-diagonal, whatever the
+//! point: the fog's `light_intensity` cancels it, which leaves the light unattenuated
+//! inside the box (exact for a thin medium, or one the light enters through a
+//! generator, whose light the plugin carries).
+
+use crate::components::{InvalidCausticParams, ParticipatingMedium};
+use bevy::light::{FogVolume, VolumetricFog, VolumetricLight};
+use bevy::prelude::*;
+
+/// On a medium's entity: its `FogVolume` is the plugin's, taken away with the medium.
+#[derive(Component)]
+pub struct MediumFogVolume;
+
+/// On a camera or light: the plugin gave it `VolumetricFog` or `VolumetricLight` for
+/// the media, taken back when the last one goes.
+#[derive(Component)]
+pub struct AddedForMedia;
+
+/// The march of the fog the plugin gives a camera: no ambient term (the plugin's media
+/// scatter only the lights), no jitter (the image stays still), Bevy's 64 steps.
+pub fn medium_fog() -> VolumetricFog {
+    VolumetricFog { ambient_intensity: 0.0, jitter: 0.0, ..default() }
+}
+
+pub(crate) fn build(app: &mut App) {
+    let cpu = crate::CausticCpuTime::of(app).main;
+    app.add_systems(
+        PostUpdate,
+        (crate::cpu_time::timed(&cpu, keep_fog_volumes), crate::cpu_time::timed(&cpu, give_fog_to_views)).chain().in_set(crate::CausticSystems::ReadScene),
+    );
+}
+
+/// The `FogVolume` of `medium` in a box placed by `transform`.
+fn fog_volume(medium: &ParticipatingMedium, transform: &GlobalTransform, kept: Option<&FogVolume>) -> FogVolume {
+    let extinction = medium.scattering + medium.absorption;
+    let half_diagonal = (transform.affine().matrix3 * Vec3A::splat(0.5)).length();
+    FogVolume {
+        density_factor: 1.0,
+        absorption: medium.absorption,
+        scattering: medium.scattering,
+        scattering_asymmetry: medium.asymmetry,
+        light_intensity: (extinction * half_diagonal).min(80.0).exp(),
+        ..kept.cloned().unwrap_or_default()
+    }
+}
+
+/// Whether two fog volumes draw the same medium.
+fn same_medium(a: &FogVolume, b: &FogVolume) -> bool {
+    (a.density_factor, a.absorption, a.scattering, a.scattering_asymmetry, a.light_intensity) == (b.density_factor, b.absorption, b.scattering, b.scattering_asymmetry, b.light_intensity)
+}
+
+/// Keeps each visible, valid medium's `FogVolume` in step with it, and takes away the
+/// plugin's fog where the medium went, turned invalid or is hidden (Bevy's fog draws
+/// every `FogVolume`, hidden or not).
+fn keep_fog_volumes(
+    mut commands: Commands,
+    mut media: Query<(Entity, &ParticipatingMedium, &GlobalTransform, &InheritedVisibility, Option<&mut FogVolume>, Has<InvalidCausticParams>)>,
+    kept: Query<(), With<MediumFogVolume>>,
+    mut removed: RemovedComponents<ParticipatingMedium>,
+) {
+    for entity in removed.read() {
+        if kept.contains(entity) && let Ok(mut entity) = commands.get_entity(entity) {
+            entity.remove::<(FogVolume, MediumFogVolume)>();
+        }
+    }
+    for (entity, medium, transform, visible, fog, invalid) in &mut media {
+        if invalid || !visible.get() {
+            if kept.contains(entity) {
+                commands.entity(entity).remove::<(FogVolume, MediumFogVolume)>();
+            }
+            continue;
+        }
+        match fog {
+            Some(mut fog) => {
+                let next = fog_volume(medium, transform, Some(&fog));
+                if !same_medium(&fog, &next) {
+                    *fog = next;
+                }
+            }
+            None => {
+                commands.entity(entity).insert((fog_volume(medium, transform, None), MediumFogVolume));
+            }
+        }
+    }
+}
+
+/// While a medium is drawn, gives every 3D camera `VolumetricFog` and every
+/// directional light `VolumetricLight` where they have none; takes them back when no
+/// medium is left.
+fn give_fog_to_views(
+    mut commands: Commands,
+    media: Query<(), (With<ParticipatingMedium>, With<FogVolume>)>,
+    cameras: Query<Entity, (With<Camera3d>, Without<VolumetricFog>)>,
+    lights: Query<Entity, (With<DirectionalLight>, Without<VolumetricLight>)>,
+    given_fog: Query<Entity, (With<AddedForMedia>, With<VolumetricFog>)>,
+    given_light: Query<Entity, (With<AddedForMedia>, With<VolumetricLight>)>,
+) {
+    if media.is_empty() {
+        for entity in &given_fog {
+            commands.entity(entity).remove::<(VolumetricFog, AddedForMedia)>();
+        }
+        for entity in &given_light {
+            commands.entity(entity).remove::<(VolumetricLight, AddedForMedia)>();
+        }
+        return;
+    }
+    for entity in &cameras {
+        commands.entity(entity).insert((medium_fog(), AddedForMedia));
+    }
+    for entity in &lights {
+        commands.entity(entity).insert((VolumetricLight, AddedForMedia));
+    }
+}
