@@ -165,7 +165,8 @@ fn spawn_pool(world: &mut World) -> EnvironmentMapLight {
         CausticGenerator::refractive(1.333),
         MeshMaterial3d(water),
     ));
-    // The water body scatters the focused light into shafts.
+    // The water body: it scatters the focused light into shafts, and Bevy's fog dims
+    // what is seen through it (the underwater view).
     world.spawn((
         Name::new("pool water (medium)"),
         ParticipatingMedium { scattering: 0.4, absorption: 0.05, asymmetry: 0.6 },
@@ -226,11 +227,6 @@ fn spawn_underwater_view(world: &mut World, sky: EnvironmentMapLight) {
         Caustics::default(),
         sky,
         Exposure { ev100: EV100 },
-        // Bevy's own light does not know the `ParticipatingMedium`: under the water a
-        // fog stands in for the water's extinction of it, and for the sky light the
-        // water scatters. (The fog dims the caustics too, which the medium already
-        // dims: the view is drawn for the look, not measured.)
-        DistanceFog { color: Color::srgb(0.03, 0.15, 0.22), falloff: FogFalloff::Exponential { density: 0.45 }, ..default() },
         Projection::from(PerspectiveProjection { fov: 1.0, ..default() }),
         Transform::from_xyz(1.6, -0.9, -1.6).looking_at(Vec3::new(-1.0, 0.15, 0.4), Vec3::Y),
     ));
