@@ -61,12 +61,15 @@ fn same_medium(a: &FogVolume, b: &FogVolume) -> bool {
     (a.density_factor, a.absorption, a.scattering, a.scattering_asymmetry, a.light_intensity) == (b.density_factor, b.absorption, b.scattering, b.scattering_asymmetry, b.light_intensity)
 }
 
+/// The media, with their fog volumes and whether they are invalid.
+type Media = (Entity, &'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static mut FogVolume>, Has<InvalidCausticParams>);
+
 /// Keeps each visible, valid medium's `FogVolume` in step with it, and takes away the
 /// plugin's fog where the medium went, turned invalid or is hidden (Bevy's fog draws
 /// every `FogVolume`, hidden or not).
 fn keep_fog_volumes(
     mut commands: Commands,
-    mut media: Query<(Entity, &ParticipatingMedium, &GlobalTransform, &InheritedVisibility, Option<&mut FogVolume>, Has<InvalidCausticParams>)>,
+    mut media: Query<Media>,
     kept: Query<(), With<MediumFogVolume>>,
     mut removed: RemovedComponents<ParticipatingMedium>,
 ) {

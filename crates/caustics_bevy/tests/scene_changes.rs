@@ -68,13 +68,13 @@ fn each_change_is_reported_in_its_part_and_a_still_frame_in_none() {
     assert_eq!(frame(&mut app), (false, false, false), "only the generator's bounds changed");
     assert!(app.world().resource::<Seen>().0.generator_bounds, "the generator's bounds changed");
     app.world_mut().get_mut::<CausticGenerator>(generator).unwrap().double_sided = true;
-    assert_eq!(frame(&mut app).0, true, "the generator became double-sided");
+    assert!(frame(&mut app).0, "the generator became double-sided");
 
     app.world_mut().get_mut::<DirectionalLight>(sun).unwrap().illuminance *= 2.0;
     assert_eq!(frame(&mut app), (false, false, true), "the sun brightened");
     app.world_mut().despawn(sun);
     assert_eq!(frame(&mut app), (false, false, true), "the sun went away");
     app.world_mut().despawn(generator);
-    assert_eq!(frame(&mut app).0, true, "the generator went away");
+    assert!(frame(&mut app).0, "the generator went away");
     assert_eq!(frame(&mut app), (false, false, false), "nothing moved");
 }

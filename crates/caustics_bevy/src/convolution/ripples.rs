@@ -151,6 +151,12 @@ fn replay_impulses(mut commands: Commands, mut pools: Query<(Entity, &PoolImpuls
     }
 }
 
+/// Pools whose `PoolRipples` went away: their surface, mesh and whether it moved on
+/// the GPU.
+type Orphans = (Entity, &'static PoolSurface, Option<&'static Mesh3d>, Has<MovesOnGpu>);
+/// What sizes a pool's water: the device's limits, the budget, the clock, the meshes.
+type PoolResources<'w> = (Option<Res<'w, RenderDevice>>, Res<'w, CausticGpuBudget>, Res<'w, Time>, ResMut<'w, Assets<Mesh>>);
+
 /// Starts the water of pools that are new or whose grid or waves changed (a still
 /// pool), and redraws the kernels of those whose light changed (the water keeps
 /// moving); a grid too large for the GPU or the budget is lowered
@@ -159,10 +165,10 @@ fn replay_impulses(mut commands: Commands, mut pools: Query<(Entity, &PoolImpuls
 fn configure_pools(
     mut commands: Commands,
     mut pools: Query<(Entity, &PoolRipples, Option<&mut PoolSurface>), Changed<PoolRipples>>,
-    orphans: Query<(Entity, &PoolSurface, Option<&Mesh3d>, Has<MovesOnGpu>), Without<PoolRipples>>,
+    orphans: Query<Orphans, Without<PoolRipples>>,
     mut removed: RemovedComponents<PoolRipples>,
     mut warned: Local<HashSet<Entity>>,
-    (device, budget, time, mut meshes): (Option<Res<RenderDevice>>, Res<CausticGpuBudget>, Res<Time>, ResMut<Assets<Mesh>>),
+    (device, budget, time, mut meshes): PoolResources,
 ) {
     let largest = device.as_deref().map_or(u64::MAX, largest_binding);
     for entity in removed.read() {

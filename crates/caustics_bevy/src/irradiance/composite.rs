@@ -357,11 +357,11 @@ pub(super) fn prepare_receiver_bind_groups(
             fog_enabled: albedo.fog_enabled as u32,
         };
         let texture = image.texture_view.id();
-        if let Some(kept) = bind_groups.0.get_mut(entity) {
-            if kept.texture == texture {
-                write_changed(&mut kept.uniform, value, &device, &queue);
-                continue;
-            }
+        if let Some(kept) = bind_groups.0.get_mut(entity)
+            && kept.texture == texture
+        {
+            write_changed(&mut kept.uniform, value, &device, &queue);
+            continue;
         }
         let mut uniform = UniformBuffer::from(value);
         uniform.set_label(Some("caustic_receiver_albedo"));

@@ -555,10 +555,13 @@ fn mark_views_with_work(
     }
 }
 
+/// The views' caustics buffers, and whether Bevy's volumetric fog draws the media there.
+type IrradianceViews = (Entity, &'static ExtractedCamera, &'static ViewCausticWork, Option<&'static mut ViewCausticIrradiance>, Has<bevy::light::VolumetricFog>);
+
 #[expect(clippy::too_many_arguments)]
 fn prepare_irradiance_buffers(
     mut commands: Commands,
-    mut views: Query<(Entity, &ExtractedCamera, &ViewCausticWork, Option<&mut ViewCausticIrradiance>, Has<bevy::light::VolumetricFog>)>,
+    mut views: Query<IrradianceViews>,
     media: Res<ExtractedMedia>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
