@@ -95,7 +95,7 @@ impl MeshBvh {
         let nodes = build_nodes(
             &mut triangles,
             LEAF_SIZE,
-            |items| items.iter().flat_map(|(t, _)| (0..3).map(|i| t.corner(i))).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(p), b.max(p))),
+            |items| bounds(items.iter().map(|(t, _)| t)),
             |(t, _)| t.centroid(),
         );
         let (triangles, corners) = triangles.into_iter().unzip();
@@ -439,8 +439,8 @@ fn build_nodes<T>(items: &mut [T], leaf_size: usize, bounds: impl Fn(&[T]) -> (V
     nodes
 }
 
-fn bounds(triangles: &[BvhTriangle]) -> (Vec3, Vec3) {
-    triangles.iter().flat_map(|t| (0..3).map(|i| t.corner(i))).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(p), b.max(p)))
+fn bounds<'a>(triangles: impl IntoIterator<Item = &'a BvhTriangle>) -> (Vec3, Vec3) {
+    triangles.into_iter().flat_map(|t| (0..3).map(|i| t.corner(i))).fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), p| (a.min(p), b.max(p)))
 }
 
 /// Whether the ray meets the node's box within `(t_min, t_max)`.

@@ -338,16 +338,15 @@ fn gather_sources(
         }
         // A surface deformed on the GPU is held in the top level by its bounds, and its
         // tree refit to each frame's vertices in the render world.
-        state.deformed_bounds = deformed.iter().map(|(mesh3d, aabb)| (mesh3d.id(), *aabb)).collect();
+        let moving: HashMap<AssetId<Mesh>, Aabb> = deformed.iter().map(|(mesh3d, aabb)| (mesh3d.id(), *aabb)).collect();
+        state.deformed_bounds.clear();
         for (mesh, _, _, bounds) in &mut occluder_meshes {
-            *bounds = state.deformed_bounds.get(mesh).copied();
+            *bounds = moving.get(mesh).copied();
+            if let Some(aabb) = bounds {
+                state.deformed_bounds.insert(*mesh, *aabb);
+            }
         }
-        let mut seen = HashSet::new();
-        sources.deformed = occluder_meshes
-            .iter()
-            .filter(|(mesh, ..)| state.deformed_bounds.contains_key(mesh) && seen.insert(*mesh))
-            .filter_map(|(mesh, ..)| Some((*mesh, bvhs.get(*mesh, &meshes)?)))
-            .collect();
+        sources.deformed = state.deformed_bounds.keys().filter_map(|mesh| Some((*mesh, bvhs.get(*mesh, &meshes)?))).collect();
         sources.occluders = Arc::new(bvhs.place(occluder_meshes, &meshes));
     }
     active.warped_volumes = !volume_generators.is_empty() && !sources.lights.is_empty() && sources.bounds.is_some();

@@ -306,7 +306,6 @@ impl GeneratorBuffers {
     }
 }
 
-
 /// When the sources are new, a generator's or an occluder's mesh moves on the GPU or
 /// the last build missed a mesh's vertices: uploads the topology and occluders that
 /// changed, plans the refit of the deformed occluders, writes the jobs when they
