@@ -42,23 +42,25 @@ pub(crate) fn build(app: &mut App) {
     );
 }
 
-/// The `FogVolume` of `medium` in a box placed by `transform`.
-fn fog_volume(medium: &ParticipatingMedium, transform: &GlobalTransform, kept: Option<&FogVolume>) -> FogVolume {
-    let extinction = medium.scattering + medium.absorption;
+/// What Bevy's fog draws of a medium: density, σₐ, σₛ, g and the light intensity that
+/// cancels Bevy's constant attenuation of the light into the box.
+type FogCoefficients = [f32; 5];
+
+/// The coefficients of `medium` in a box placed by `transform`.
+fn fog_coefficients(medium: &ParticipatingMedium, transform: &GlobalTransform) -> FogCoefficients {
     let half_diagonal = (transform.affine().matrix3 * Vec3A::splat(0.5)).length();
-    FogVolume {
-        density_factor: 1.0,
-        absorption: medium.absorption,
-        scattering: medium.scattering,
-        scattering_asymmetry: medium.asymmetry,
-        light_intensity: (extinction * half_diagonal).min(80.0).exp(),
-        ..kept.cloned().unwrap_or_default()
-    }
+    let light_intensity = ((medium.scattering + medium.absorption) * half_diagonal).min(80.0).exp();
+    [1.0, medium.absorption, medium.scattering, medium.asymmetry, light_intensity]
 }
 
-/// Whether two fog volumes draw the same medium.
-fn same_medium(a: &FogVolume, b: &FogVolume) -> bool {
-    (a.density_factor, a.absorption, a.scattering, a.scattering_asymmetry, a.light_intensity) == (b.density_factor, b.absorption, b.scattering, b.scattering_asymmetry, b.light_intensity)
+/// The coefficients `fog` draws.
+fn coefficients_of(fog: &FogVolume) -> FogCoefficients {
+    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity]
+}
+
+/// `fog` drawing `coefficients`; its colours and texture stay.
+fn set_coefficients(fog: &mut FogVolume, coefficients: FogCoefficients) {
+    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity] = coefficients;
 }
 
 /// The media, with their fog volumes and whether they are invalid.
@@ -85,15 +87,17 @@ fn keep_fog_volumes(
             }
             continue;
         }
+        let coefficients = fog_coefficients(medium, transform);
         match fog {
             Some(mut fog) => {
-                let next = fog_volume(medium, transform, Some(&fog));
-                if !same_medium(&fog, &next) {
-                    *fog = next;
+                if coefficients_of(&fog) != coefficients {
+                    set_coefficients(&mut fog, coefficients);
                 }
             }
             None => {
-                commands.entity(entity).insert((fog_volume(medium, transform, None), MediumFogVolume));
+                let mut fog = FogVolume::default();
+                set_coefficients(&mut fog, coefficients);
+                commands.entity(entity).insert((fog, MediumFogVolume));
             }
         }
     }
