@@ -5,11 +5,11 @@
 // `convolve` (the three kernels of §4.1, pass 6), then `deficit_ratios` and `lift`
 // (`lift_negative_irradiance`: no texel below zero, the flux kept).
 
-#import bevy_caustics::convolution::Pool
+#import bevy_caustics::convolution::{Pool, Waves}
 #import bevy_caustics::optics::fresnel_transmittance
 
 @group(0) @binding(0) var<uniform> pool: Pool;
-@group(0) @binding(1) var<storage, read> images: array<vec4<f32>>;  // x, z, strength, drop time
+@group(0) @binding(1) var<storage, read> waves: Waves;
 @group(0) @binding(2) var<storage, read> taps: array<vec4<f32>>;    // k₁, k₂, k₀ over −r..=r², per mirror parity
 @group(0) @binding(3) var<storage, read_write> heights: array<f32>;
 @group(0) @binding(4) var<storage, read_write> terms: array<vec4<f32>>;  // w: the lift's deficit ratio
@@ -47,9 +47,9 @@ fn ripple_heights(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let point = (vec2<f32>(id.xy) + 0.5) * pool.cell_size;
     var h = 0.0;
-    for (var i = 0u; i < pool.image_count; i++) {
-        let image = images[i];
-        let elapsed = pool.time - image.w;
+    for (var i = 0u; i < waves.image_count; i++) {
+        let image = waves.images[i];
+        let elapsed = waves.time - image.w;
         let front = pool.angular_frequency * elapsed / pool.wave_number;
         let distance = length(point - image.xy);
         if elapsed > 0.0 && distance <= front {

@@ -6,6 +6,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
+use crate::irradiance::kept_bind_group::write_changed;
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -33,8 +34,6 @@ pub(super) struct GpuPool {
     pub columns: u32,
     pub rows: u32,
     cell_size: f32,
-    image_count: u32,
-    time: f32,
     wave_number: f32,
     angular_frequency: f32,
     time_damping: f32,
@@ -54,16 +53,14 @@ pub(super) struct GpuPool {
 }
 
 impl GpuPool {
-    /// The pool's texels and its water's waves at `time` (§4.3), the rest zero: what
-    /// `ripple_heights` reads.
-    pub(super) fn waves(surface: &PoolSurface, image_count: u32, time: f32) -> Self {
+    /// The pool's texels and its water's wave settings (§4.3), the rest zero: what
+    /// `ripple_heights` reads beside the [`GpuWaves`].
+    pub(super) fn waves(surface: &PoolSurface) -> Self {
         let (pool, waves) = (surface.settings(), surface.ripples().settings());
         Self {
             columns: pool.columns,
             rows: pool.rows,
             cell_size: pool.cell_size,
-            image_count,
-            time,
             wave_number: waves.wave_number,
             angular_frequency: waves.angular_frequency,
             time_damping: waves.time_damping,
@@ -73,10 +70,30 @@ impl GpuPool {
     }
 }
 
-/// Every live impulse's nine wall images as `ripple_heights` reads them: x, z,
-/// strength, drop time; one of zero strength for still water (a binding may not be
-/// empty), which `GpuPool::image_count` leaves out.
-pub(super) fn ripple_images(surface: &PoolSurface) -> (Vec<Vec4>, u32) {
+/// The water's waves at a time, as `ripple_heights` reads them (`Waves` in
+/// `types.wgsl`): the one buffer of a pool written every frame its water moves, the
+/// [`GpuPool`] only when the pool changes.
+#[derive(ShaderType, Clone, Default, PartialEq)]
+pub(super) struct GpuWaves {
+    /// The pool's clock (s); zero for still water, whose heights do not depend on it.
+    time: f32,
+    /// Live impulses × 9 wall images.
+    image_count: u32,
+    /// Every live impulse's nine wall images: x, z, strength, drop time; then zeros to
+    /// a power of two (one at least, as a binding may not be empty).
+    #[shader(size(runtime))]
+    images: Vec<Vec4>,
+}
+
+impl GpuWaves {
+    /// Whether no impulse is live.
+    pub(super) fn still(&self) -> bool {
+        self.image_count == 0
+    }
+}
+
+/// `surface`'s waves at `time` (s).
+pub(super) fn ripple_waves(surface: &PoolSurface, time: f32) -> GpuWaves {
     let ripples = surface.ripples();
     let mut images: Vec<Vec4> = ripples
         .impulses()
@@ -88,15 +105,13 @@ pub(super) fn ripple_images(surface: &PoolSurface) -> (Vec<Vec4>, u32) {
     // so that a pool's buffer grows a few times as the live impulses add up, not at
     // every new one.
     images.resize(images.len().max(1).next_power_of_two(), Vec4::ZERO);
-    (images, count)
+    GpuWaves { time: if count == 0 { 0.0 } else { time }, image_count: count, images }
 }
 
 /// Render world: one pool to draw this frame.
 struct ExtractedPool {
     uniform: GpuPool,
-    /// Every impulse's nine wall images: x, z, strength, drop time (one of zero
-    /// strength for a still pool: a binding may not be empty).
-    images: Vec<Vec4>,
+    waves: GpuWaves,
     taps: Arc<Vec<Vec4>>,
 }
 
@@ -108,7 +123,7 @@ struct ExtractedPools(HashMap<MainEntity, ExtractedPool>);
 struct PoolBuffers {
     texels: u32,
     uniform: UniformBuffer<GpuPool>,
-    images: StorageBuffer<Vec<Vec4>>,
+    waves: StorageBuffer<GpuWaves>,
     taps: StorageBuffer<Vec<Vec4>>,
     /// The kernels `taps` holds, so that unchanged ones are not written again.
     taps_written: Option<Arc<Vec<Vec4>>>,
@@ -128,7 +143,7 @@ impl PoolBuffers {
         Self {
             texels,
             uniform: UniformBuffer::default(),
-            images: StorageBuffer::default(),
+            waves: StorageBuffer::default(),
             taps: StorageBuffer::default(),
             taps_written: None,
             heights: texel_buffer(device, "caustic_pool_heights", texels, 1),
@@ -284,7 +299,6 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
         if surface.kernels().aimed != (ior, direction) {
             continue;
         }
-        let (images, count) = ripple_images(surface);
         let kernels = surface.kernels();
         let color = sun.color.to_linear();
         let uniform = GpuPool {
@@ -299,27 +313,26 @@ fn extract_pools(mut extracted: ResMut<ExtractedPools>, pools: Extract<Convoluti
             floor_tolerance: 0.05 * pool.depth,
             pool_from_world,
             color: Vec4::new(color.red, color.green, color.blue, 1.0),
-            ..GpuPool::waves(surface, count, time.elapsed_secs())
+            ..GpuPool::waves(surface)
         };
-        extracted.0.insert(MainEntity::from(entity), ExtractedPool { uniform, images, taps: kernels.taps.clone() });
+        let waves = ripple_waves(surface, time.elapsed_secs());
+        extracted.0.insert(MainEntity::from(entity), ExtractedPool { uniform, waves, taps: kernels.taps.clone() });
     }
 }
 
-/// Writes a pool's uniform and its impulses' images ([`ripple_images`]) to the GPU.
+/// Writes a pool's uniform and its waves ([`ripple_waves`]) to the GPU where they
+/// changed: a write costs a staging buffer, tens of µs of CPU.
 pub(super) fn write_waves(
-    uniform: &mut UniformBuffer<GpuPool>,
-    images: &mut StorageBuffer<Vec<Vec4>>,
-    (pool, list): (GpuPool, Vec<Vec4>),
+    (uniform, waves): (&mut UniformBuffer<GpuPool>, &mut StorageBuffer<GpuWaves>),
+    (pool, now): (GpuPool, GpuWaves),
     (device, queue): (&RenderDevice, &RenderQueue),
 ) {
-    uniform.set(pool);
     uniform.set_label(Some("caustic_pool_settings"));
-    uniform.write_buffer(device, queue);
-    // The images change only when an impulse comes or goes.
-    if images.buffer().is_none() || *images.get() != list {
-        images.set(list);
-        images.set_label(Some("caustic_pool_images"));
-        images.write_buffer(device, queue);
+    write_changed(uniform, pool, device, queue);
+    if waves.buffer().is_none() || *waves.get() != now {
+        waves.set(now);
+        waves.set_label(Some("caustic_pool_waves"));
+        waves.write_buffer(device, queue);
     }
 }
 
@@ -350,11 +363,11 @@ fn prepare_buffers(
             *buffers = PoolBuffers::new(&device, texels);
         }
         // Still water under the same light and kernels: the floor already computed.
-        let still = (pool.uniform.image_count == 0).then_some(GpuPool { time: 0.0, ..pool.uniform });
+        let still = pool.waves.still().then_some(pool.uniform);
         let same_taps = buffers.taps_written.as_ref().is_some_and(|written| Arc::ptr_eq(written, &pool.taps));
         buffers.computes = still.is_none() || buffers.still != still || !same_taps;
         buffers.still = None;
-        write_waves(&mut buffers.uniform, &mut buffers.images, (pool.uniform, std::mem::take(&mut pool.images)), (&device, &queue));
+        write_waves((&mut buffers.uniform, &mut buffers.waves), (pool.uniform, std::mem::take(&mut pool.waves)), (&device, &queue));
         if !same_taps {
             buffers.taps.set(pool.taps.as_ref().clone());
             buffers.taps.set_label(Some("caustic_pool_kernel_taps"));
@@ -362,7 +375,7 @@ fn prepare_buffers(
             buffers.taps_written = Some(pool.taps.clone());
         }
         let (Some(uniform), Some(images), Some(taps)) =
-            (buffers.uniform.binding(), buffers.images.binding(), buffers.taps.binding())
+            (buffers.uniform.binding(), buffers.waves.binding(), buffers.taps.binding())
         else {
             continue;
         };
@@ -397,7 +410,7 @@ fn init_pipelines(
             ShaderStages::COMPUTE,
             (
                 uniform_buffer::<GpuPool>(false),
-                storage_buffer_read_only::<Vec4>(false),
+                storage_buffer_read_only::<GpuWaves>(false),
                 storage_buffer_read_only::<Vec4>(false),
                 storage_buffer::<f32>(false),
                 storage_buffer::<Vec4>(false),

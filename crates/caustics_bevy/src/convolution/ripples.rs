@@ -261,8 +261,31 @@ pub(super) struct WaterOnGpu;
 type Pools<'w, 's> = Query<
     'w,
     's,
-    (Entity, &'static mut PoolSurface, Option<&'static Mesh3d>, Option<&'static CausticTechniqueChoice>, Has<CausticGenerator>, Has<MovesOnGpu>),
+    (
+        Entity,
+        &'static mut PoolSurface,
+        Option<&'static Mesh3d>,
+        Option<&'static CausticTechniqueChoice>,
+        Has<CausticGenerator>,
+        Has<MovesOnGpu>,
+        Option<&'static Aabb>,
+    ),
 >;
+
+/// The half-height of the box given to water moved on the GPU whose waves reach
+/// `bound` (m), if its box of half-height `current` no longer fits them: the box grows
+/// to [`BOX_ROOM`] times the waves and shrinks once they fill less than a quarter of
+/// it, so that the box (and what reads it: culling, the plans' change detection)
+/// changes a few times in a shower, not every frame.
+fn water_box(bound: f32, current: Option<f32>) -> Option<f32> {
+    match current {
+        Some(half) if bound <= half && bound * 4.0 * BOX_ROOM >= half => None,
+        _ => Some(bound * BOX_ROOM),
+    }
+}
+
+/// How much higher than its waves the box of water moved on the GPU is made.
+const BOX_ROOM: f32 = 1.5;
 
 /// Whether a pool's water can move on the GPU: a render app, and no technique that
 /// reads the pool's triangles on the CPU (the caustic maps; a generator whose technique
@@ -278,7 +301,7 @@ fn moves_on_gpu(gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: b
 /// written once, so that Bevy uploads the still surface over the last waves.
 fn animate_pools(mut commands: Commands, time: Res<Time>, gpu: Option<Res<WaterOnGpu>>, mut pools: Pools, mut meshes: ResMut<Assets<Mesh>>) {
     let now = time.elapsed_secs();
-    for (entity, mut surface, mesh3d, choice, generator, was_on_gpu) in &mut pools {
+    for (entity, mut surface, mesh3d, choice, generator, was_on_gpu, aabb) in &mut pools {
         let surface = &mut *surface;
         surface.ripples.remove_expired(now);
         let moving = !surface.ripples.impulses().is_empty();
@@ -290,8 +313,14 @@ fn animate_pools(mut commands: Commands, time: Res<Time>, gpu: Option<Res<WaterO
             let ripples = &surface.ripples;
             let bound = ripples.impulses().iter().map(|i| ripples.impulse_bound(i, now)).sum::<f64>().min(f32::MAX as f64) as f32;
             let half = 0.5 * surface.settings.size();
-            let aabb = Aabb::from_min_max(Vec3::new(-half.x, -bound, -half.y), Vec3::new(half.x, bound, half.y));
-            commands.entity(entity).insert((MovesOnGpu, NoAutoAabb, aabb));
+            let current = aabb.filter(|_| was_on_gpu).map(|b| b.half_extents.y);
+            let mut water = commands.entity(entity);
+            if let Some(height) = water_box(bound, current) {
+                water.insert(Aabb::from_min_max(Vec3::new(-half.x, -height, -half.y), Vec3::new(half.x, height, half.y)));
+            }
+            if !was_on_gpu {
+                water.insert((MovesOnGpu, NoAutoAabb));
+            }
             continue;
         }
         if was_on_gpu {
@@ -374,4 +403,22 @@ fn new_grid_mesh(heightfield: &Heightfield) -> Mesh {
     let uv = |i: usize, n: usize| (i as f32 + 0.5) / n as f32;
     let uvs = texels(heightfield).map(|(c, r)| [uv(c, columns), uv(r, rows)]).collect();
     grid_mesh(positions(heightfield).collect(), normals(heightfield).collect(), uvs, grid_indices(heightfield))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_water_box_changes_only_when_outgrown_or_far_too_large() {
+        assert_eq!(water_box(0.1, None), Some(0.1 * BOX_ROOM));
+        let half = 0.1 * BOX_ROOM;
+        // Waves rising and falling inside the box leave it.
+        for bound in [0.1, 0.12, 0.149, 0.05, 0.04] {
+            assert_eq!(water_box(bound, Some(half)), None, "{bound}");
+        }
+        // Outgrown: grows with room; far too large: shrinks.
+        assert_eq!(water_box(0.2, Some(half)), Some(0.2 * BOX_ROOM));
+        assert_eq!(water_box(0.01, Some(half)), Some(0.01 * BOX_ROOM));
+    }
 }

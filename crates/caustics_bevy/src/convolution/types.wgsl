@@ -6,8 +6,6 @@ struct Pool {
     columns: u32,
     rows: u32,
     cell_size: f32,
-    image_count: u32,       // impulses × 9 wall images
-    time: f32,
     wave_number: f32,       // K
     angular_frequency: f32, // ω
     time_damping: f32,      // α
@@ -27,4 +25,11 @@ struct Pool {
     // `write_vertices`: the water mesh's layout in its vertex buffer, in words (first
     // vertex, stride, position, normal; `MeshVertices`).
     vertex: vec4<u32>,
+}
+
+// The water's waves at the frame's time (`GpuWaves` in `render.rs`).
+struct Waves {
+    time: f32,
+    image_count: u32,               // impulses × 9 wall images
+    images: array<vec4<f32>>,       // x, z, strength, drop time
 }

@@ -3,11 +3,11 @@
 //! `ripple_heights` evaluates the live impulses' wall images at the texel centres
 //! (§4.3, as for the convolution) and `write_vertices` writes the surface and its
 //! normals over the water mesh in Bevy's vertex buffer, before anything reads or draws
-//! it (the caustic volumes' build included). The CPU uploads the images and one
-//! uniform a frame; it evaluates no height and uploads no mesh.
+//! it (the caustic volumes' build included). The CPU uploads the waves (clock and
+//! images) once a frame; it evaluates no height and uploads no mesh.
 
 use super::PoolSurface;
-use super::render::{GpuPool, ripple_images, write_waves};
+use super::render::{GpuPool, GpuWaves, ripple_waves, write_waves};
 use crate::cpu_time::timed;
 use crate::irradiance::kept_bind_group::KeptBindGroup;
 use crate::mesh_vertices::{MeshVertices, MovesOnGpu, WriteMeshVertices};
@@ -31,7 +31,7 @@ struct ExtractedWater {
     entity: Entity,
     mesh: AssetId<Mesh>,
     uniform: GpuPool,
-    images: Vec<Vec4>,
+    waves: GpuWaves,
 }
 
 #[derive(Resource, Default)]
@@ -41,7 +41,7 @@ struct ExtractedWaters(Vec<ExtractedWater>);
 struct WaterBuffers {
     texels: u32,
     uniform: UniformBuffer<GpuPool>,
-    images: StorageBuffer<Vec<Vec4>>,
+    waves: StorageBuffer<GpuWaves>,
     heights: Buffer,
     bind_group: KeptBindGroup,
 }
@@ -82,7 +82,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
             ShaderStages::COMPUTE,
             (
                 (0, uniform_buffer::<GpuPool>(false)),
-                (1, storage_buffer_read_only::<Vec4>(false)),
+                (1, storage_buffer_read_only::<GpuWaves>(false)),
                 (3, storage_buffer::<f32>(false)),
                 (6, storage_buffer_sized(false, None)),
             ),
@@ -99,9 +99,8 @@ type MovingPools<'w, 's> = Query<'w, 's, (Entity, &'static PoolSurface, &'static
 fn extract_waters(mut extracted: ResMut<ExtractedWaters>, pools: Extract<MovingPools>, time: Extract<Res<Time>>) {
     extracted.0.clear();
     for (entity, surface, mesh, _) in pools.iter().filter(|(.., visible)| visible.get()) {
-        let (images, count) = ripple_images(surface);
-        let uniform = GpuPool::waves(surface, count, time.elapsed_secs());
-        extracted.0.push(ExtractedWater { entity, mesh: mesh.id(), uniform, images });
+        let (uniform, waves) = (GpuPool::waves(surface), ripple_waves(surface, time.elapsed_secs()));
+        extracted.0.push(ExtractedWater { entity, mesh: mesh.id(), uniform, waves });
     }
 }
 
@@ -128,7 +127,7 @@ fn prepare_waters(
         let new = || WaterBuffers {
             texels,
             uniform: UniformBuffer::default(),
-            images: StorageBuffer::default(),
+            waves: StorageBuffer::default(),
             heights: super::render::texel_buffer(&device, "caustic_pool_water_heights", texels, 1),
             bind_group: KeptBindGroup::default(),
         };
@@ -137,18 +136,18 @@ fn prepare_waters(
             *buffers = new();
         }
         water.uniform.vertex = vertices.layout;
-        write_waves(&mut buffers.uniform, &mut buffers.images, (water.uniform, std::mem::take(&mut water.images)), (&device, &queue));
-        let (Some(uniform), Some(images)) = (buffers.uniform.buffer(), buffers.images.buffer()) else {
+        write_waves((&mut buffers.uniform, &mut buffers.waves), (water.uniform, std::mem::take(&mut water.waves)), (&device, &queue));
+        let (Some(uniform), Some(waves)) = (buffers.uniform.buffer(), buffers.waves.buffer()) else {
             continue;
         };
-        let bound = [(&layout).into(), uniform.into(), images.into(), (&buffers.heights).into(), vertices.bound()];
+        let bound = [(&layout).into(), uniform.into(), waves.into(), (&buffers.heights).into(), vertices.bound()];
         let bind_group = buffers.bind_group.get(&bound, || {
             device.create_bind_group(
                 "pool_water_bind_group",
                 &layout,
                 &BindGroupEntries::with_indices((
                     (0, uniform.as_entire_binding()),
-                    (1, images.as_entire_binding()),
+                    (1, waves.as_entire_binding()),
                     (3, buffers.heights.as_entire_binding()),
                     (6, BindingResource::Buffer(vertices.binding())),
                 )),

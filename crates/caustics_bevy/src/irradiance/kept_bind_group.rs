@@ -65,9 +65,12 @@ impl KeptBindGroup {
 }
 
 /// Sets `buffer` to `value` and uploads it, unless the buffer already holds it.
-pub fn write_changed<T: ShaderType + WriteInto + PartialEq>(buffer: &mut UniformBuffer<T>, value: T, device: &RenderDevice, queue: &RenderQueue) {
-    if buffer.buffer().is_none() || *buffer.get() != value {
+/// Whether it uploaded.
+pub fn write_changed<T: ShaderType + WriteInto + PartialEq>(buffer: &mut UniformBuffer<T>, value: T, device: &RenderDevice, queue: &RenderQueue) -> bool {
+    let changed = buffer.buffer().is_none() || *buffer.get() != value;
+    if changed {
         buffer.set(value);
         buffer.write_buffer(device, queue);
     }
+    changed
 }
