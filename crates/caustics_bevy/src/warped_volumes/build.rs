@@ -27,7 +27,8 @@ use std::sync::{Arc, Mutex};
 
 /// What the last GPU build of the caustic volumes kept and dropped (unlit, shadowed,
 /// TIR, grazing, degenerate) and the flux on each side, read back from the GPU a frame
-/// or two later. A new `generation` means a newer build. `gathered` counts the times
+/// or two later: at once for new sources, every eighth frame while they only move on
+/// the GPU (an ocean, a rippling pool). A new `generation` means a newer build. `gathered` counts the times
 /// the main world gathered the builds' sources, reading generator meshes on the CPU
 /// (when a generator, light, receiver or mesh asset changed): an ocean animated on the
 /// GPU adds none while its waves move.
@@ -43,8 +44,8 @@ pub struct CausticVolumes {
     pub surface: SurfaceWork,
 }
 
-/// How the surface pass lit a view's receivers, counted on the GPU a frame or two
-/// ago for the view drawn last: the volumes whose bounding shape covers a few pixels
+/// How the surface pass lit a view's receivers, counted on the GPU every eighth frame
+/// for one view and read back a frame or two later: the volumes whose bounding shape covers a few pixels
 /// are lit by a compute pass, pixel by pixel (`splatted`, shading `splatted_pixels`
 /// pixels in all), the others rasterised (`rasterised`, shading the pass's fragments).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

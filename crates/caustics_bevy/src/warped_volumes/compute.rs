@@ -125,7 +125,8 @@ pub(super) struct ExtractedSources {
     generation: u64,
     sources: VolumeSources,
     vertices: Vec<VertexSource>,
-    new: bool,
+    /// The sources changed at this frame's extraction.
+    pub(super) new: bool,
 }
 
 /// Where the build reads the vertices of a generator's mesh: Bevy's vertex buffer when
@@ -459,8 +460,9 @@ pub(super) fn prepare_build(
     }
 }
 
-/// Once per change of the sources: the counters started again, every job's three
-/// dispatches, then a copy of the counters for the main world when none is on its way.
+/// Once per change of the sources (every frame while they move on the GPU): the
+/// counters started again, every job's three dispatches, then a copy of the counters
+/// for the main world, at once for new sources.
 pub(super) fn build_volumes(
     mut ctx: RenderContext,
     mut build: ResMut<VolumeBuild>,
@@ -504,7 +506,8 @@ pub(super) fn build_volumes(
     build.dispatches.clear();
     recorder.record("volume build");
     let device = ctx.render_device().clone();
-    if build.readback.copy(&device, ctx.command_encoder(), (counters, COUNTER_WORDS as u64), "caustic_volume_counters_readback") {
+    // New sources are counted at once: an empty build draws nothing from then on.
+    if build.readback.copy(&device, ctx.command_encoder(), (counters, COUNTER_WORDS as u64), "caustic_volume_counters_readback", extracted.new) {
         build.copied_generation = extracted.generation;
     }
 }

@@ -1,7 +1,6 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
-use super::beam_grid::{BeamGridBuffers, BeamGridPipelines};
-use super::render::{ShaftPipeline, SurfacePipelines, SurfaceWorkReadback, VolumeBuffers, VolumesPipeline, ViewSeesMedium, ViewShafts, ViewSurfaceTargets, ViewVolumePipelines};
+use super::render::{ShaftPipeline, SurfacePipelines, SurfaceWorkReadback, VolumeBuffers, ViewSeesMedium, ViewShaftBindGroup, ViewShafts, ViewSurfaceTargets, ViewVolumePipelines};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -11,19 +10,15 @@ use bevy::render::{
     diagnostic::RecordDiagnostics,
     render_resource::*,
     renderer::{RenderContext, ViewQuery},
-    view::{ViewTarget, ViewUniformOffset, ViewUniforms},
+    view::{ViewTarget, ViewUniformOffset},
 };
 
 /// What both passes draw with.
 #[derive(SystemParam)]
 pub(super) struct VolumeDraw<'w> {
     buffers: Res<'w, VolumeBuffers>,
-    layouts: Res<'w, VolumesPipeline>,
     cache: Res<'w, PipelineCache>,
-    view_uniforms: Res<'w, ViewUniforms>,
     recorder: Res<'w, PassRecorder>,
-    grids: Res<'w, BeamGridBuffers>,
-    march: Res<'w, BeamGridPipelines>,
 }
 
 /// Where a pass draws: the target (the view's target size over `scale`, within the
@@ -33,71 +28,38 @@ type PassTarget<'a> = (&'a TextureView, Option<&'a TextureView>, u32, bool);
 
 impl VolumeDraw<'_> {
     /// Draws the volumes' bounding prisms, 36 vertices an instance, into `target` with
-    /// the view's pipeline `pipeline_id` ([`Self::additive_pass`]): for the surface
-    /// pass those `splat` left in `surface`'s list, else every volume the build kept.
-    /// Whether it drew.
+    /// the view's pipeline `pipeline_id` and `bind_group` ([`Self::additive_pass`]), as
+    /// many as `indirect` says: for the surface pass those `splat` left in its list,
+    /// else every volume the build kept. Whether it drew.
     fn draw(
         &self,
         ctx: &mut RenderContext,
         pass: &'static str,
         target: PassTarget,
-        (pipeline_id, surface): (CachedRenderPipelineId, Option<&ViewSurfaceTargets>),
+        (pipeline_id, bind_group, indirect): (CachedRenderPipelineId, &BindGroup, &Buffer),
         view: VolumeView,
     ) -> bool {
-        let (_, _, pipelines, prepass, _) = view;
-        let (false, Some(pipeline), Some(depth), Some(normal), Some(view_binding), Some(volumes), Some(counters), Some(settings)) = (
-            self.buffers.empty,
-            self.cache.get_render_pipeline(pipeline_id),
-            prepass.depth_view(),
-            prepass.normal_view(),
-            self.view_uniforms.uniforms.binding(),
-            self.buffers.volumes.as_ref(),
-            self.buffers.counters.as_ref(),
-            self.buffers.settings.binding(),
-        ) else {
+        let (false, Some(pipeline)) = (self.buffers.empty, self.cache.get_render_pipeline(pipeline_id)) else {
             return false;
         };
-        let entries = (view_binding, volumes.as_entire_binding(), settings, depth, normal);
-        let layout = self.cache.get_bind_group_layout(self.layouts.layout(surface.is_none(), pipelines.multisampled));
-        let (bind_group, indirect) = match surface {
-            Some(surface) => {
-                let (a, b, c, _, e) = entries;
-                let entries = BindGroupEntries::sequential((a, b, c, &surface.centre.default_view, e, surface.large.as_entire_binding()));
-                (ctx.render_device().create_bind_group("caustic_volumes_surface_bind_group", &layout, &entries), &surface.large)
-            }
-            None => (ctx.render_device().create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries)), counters),
-        };
-        self.additive_pass(ctx, pass, target, (pipeline, &bind_group), view, |render_pass| render_pass.draw_indirect(indirect, 0));
+        self.additive_pass(ctx, pass, target, (pipeline, bind_group), view, |render_pass| render_pass.draw_indirect(indirect, 0));
         true
     }
 
-    /// The volumetric pass into `target`: the eye rays marched through the beam grid
-    /// (a fullscreen triangle) where the view has that pipeline, else every volume
-    /// drawn ([`Self::draw`]). Whether it drew.
-    fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), view: VolumeView) -> bool {
-        let march = match view.2.shafts {
-            ShaftPipeline::Exact(exact) => return self.draw(ctx, "volumetric", (target, None, scale, clear), (exact, None), view),
-            ShaftPipeline::March(march) => march,
+    /// The volumetric pass into `target` with the view's `bind_group`: the eye rays
+    /// marched through the beam grid (a fullscreen triangle) where the view has that
+    /// pipeline, else every volume drawn ([`Self::draw`]). Whether it drew.
+    fn integrate(&self, ctx: &mut RenderContext, (target, scale, clear): (&TextureView, u32, bool), bind_group: &BindGroup, view: VolumeView) -> bool {
+        let target = (target, None, scale, clear);
+        let march = match (view.2.shafts, self.buffers.counters.as_ref()) {
+            (ShaftPipeline::Exact(exact), Some(counters)) => return self.draw(ctx, "volumetric", target, (exact, bind_group, counters), view),
+            (ShaftPipeline::Exact(_), None) => return false,
+            (ShaftPipeline::March(march), _) => march,
         };
-        let (_, _, pipelines, prepass, _) = view;
-        let (false, Some(pipeline), Some(depth), Some(view_binding), Some(settings), Some(grids), Some(cells)) = (
-            self.buffers.empty,
-            self.cache.get_render_pipeline(march),
-            prepass.depth_view(),
-            self.view_uniforms.uniforms.binding(),
-            self.buffers.settings.binding(),
-            self.grids.grids.binding(),
-            self.grids.cells.as_ref(),
-        ) else {
+        let (false, Some(pipeline)) = (self.buffers.empty, self.cache.get_render_pipeline(march)) else {
             return false;
         };
-        let bind_group = ctx.render_device().create_bind_group(
-            "caustic_shaft_march_bind_group",
-            &self.cache.get_bind_group_layout(&self.march.march_layouts[pipelines.multisampled as usize]),
-            &BindGroupEntries::sequential((view_binding, settings, grids, cells.as_entire_binding(), depth)),
-        );
-        let target = (target, None, scale, clear);
-        self.additive_pass(ctx, "volumetric", target, (pipeline, &bind_group), view, |render_pass| render_pass.draw(0..3, 0..1));
+        self.additive_pass(ctx, "volumetric", target, (pipeline, bind_group), view, |render_pass| render_pass.draw(0..3, 0..1));
         true
     }
 
@@ -204,7 +166,7 @@ pub(super) fn surface_pass(
     drop(pass);
     let device = ctx.render_device().clone();
     let encoder = ctx.command_encoder();
-    readback.copy(&device, encoder, (&targets.large, super::render::FIRST_LARGE), "caustic_surface_work_readback");
+    readback.copy(&device, encoder, (&targets.large, super::render::FIRST_LARGE), "caustic_surface_work_readback", false);
     // Only where the view sees a surface (reversed z: the fullscreen triangle lies at 0).
     let mut render_pass = encoder.begin_render_pass(&RenderPassDescriptor {
         label: Some("caustic_volumes_resolve"),
@@ -225,7 +187,8 @@ pub(super) fn surface_pass(
     span.end(&mut render_pass);
     drop(render_pass);
     let target = &view.0.texture.default_view;
-    draw.draw(&mut ctx, "volumes", (target, Some(&targets.depth.default_view), 1, false), (view.2.surface, Some(targets)), view);
+    let bound = (view.2.surface, &targets.draw_bind_group, &targets.large);
+    draw.draw(&mut ctx, "volumes", (target, Some(&targets.depth.default_view), 1, false), bound, view);
 }
 
 /// Caustics views that see a medium.
@@ -235,17 +198,17 @@ type MediumViews = (With<ViewSeesMedium>, With<ViewCausticWork>);
 /// straight, or integrated into the view's smaller shaft texture and spread over the
 /// image by a fullscreen pass.
 pub(super) fn volumetric_pass(
-    view: ViewQuery<(&ViewTarget, Option<&ViewShafts>, VolumeView<'static>), MediumViews>,
+    view: ViewQuery<(&ViewTarget, Option<&ViewShafts>, &ViewShaftBindGroup, VolumeView<'static>), MediumViews>,
     draw: VolumeDraw,
     mut ctx: RenderContext,
 ) {
-    let (target, shafts, view) = view.into_inner();
+    let (target, shafts, bound, view) = view.into_inner();
     let (Some(shafts), Some(upsample)) = (shafts, view.2.upsample) else {
-        draw.integrate(&mut ctx, (target.main_texture_view(), 1, false), view);
+        draw.integrate(&mut ctx, (target.main_texture_view(), 1, false), &bound.bind_group, view);
         return;
     };
     let Some(pipeline) = draw.cache.get_render_pipeline(upsample) else { return };
-    if !draw.integrate(&mut ctx, (&shafts.texture.default_view, shafts.scale, true), view) {
+    if !draw.integrate(&mut ctx, (&shafts.texture.default_view, shafts.scale, true), &bound.bind_group, view) {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();

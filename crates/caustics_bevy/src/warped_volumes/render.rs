@@ -100,7 +100,9 @@ impl VolumeBuffers {
 }
 
 /// A few words of a GPU buffer copied after a frame's commands and read back
-/// asynchronously, one copy at a time: the build's counters, the surface pass's counts.
+/// asynchronously, one copy at a time and, unless asked for at once, one every
+/// [`COPY_EVERY`] frames: the build's counters, the surface pass's counts. A mapping
+/// costs tens of µs of CPU, and these counts are for reports, not for drawing.
 #[derive(Default)]
 pub(super) struct WordsReadback {
     staging: Option<Buffer>,
@@ -108,16 +110,25 @@ pub(super) struct WordsReadback {
     copied: bool,
     /// Frames since the last copy with none being read.
     idle: u8,
+    /// Copies to let pass before the next one that is not asked for at once.
+    wait: u8,
 }
 
+/// One copy in this many, of a source copied every frame, is read back.
+const COPY_EVERY: u8 = 8;
+
 /// Frames without a copy after which the staging buffer goes: a source copied every
-/// other frame (while the last copy is read) keeps it.
-const IDLE_FRAMES: u8 = 4;
+/// [`COPY_EVERY`] frames keeps it.
+const IDLE_FRAMES: u8 = 2 * COPY_EVERY;
 
 impl WordsReadback {
-    /// Copies the first `words` of `source` for reading after this frame, unless a copy
-    /// is under way. Whether it copied.
-    pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, (source, words): (&Buffer, u64), label: &'static str) -> bool {
+    /// Copies the first `words` of `source` for reading after this frame, when `now`
+    /// or when its turn came, unless a copy is under way. Whether it copied.
+    pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, (source, words): (&Buffer, u64), label: &'static str, now: bool) -> bool {
+        if !now && self.wait > 0 {
+            self.wait -= 1;
+            return false;
+        }
         if self.reading.swap(true, Ordering::AcqRel) {
             return false;
         }
@@ -126,8 +137,13 @@ impl WordsReadback {
             device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false })
         });
         encoder.copy_buffer_to_buffer(source, 0, staging, 0, size);
-        (self.copied, self.idle) = (true, 0);
+        (self.copied, self.idle, self.wait) = (true, 0, COPY_EVERY - 1);
         true
+    }
+
+    /// Makes the next [`Self::copy`] copy, its turn come or not.
+    pub fn copy_next(&mut self) {
+        self.wait = 0;
     }
 
     /// After this frame's commands went in: hands the words copied this frame to `read`
@@ -218,8 +234,19 @@ pub(super) struct ViewSurfaceTargets {
     /// `splat`'s: the view, the volumes and settings, `centre`, the normal prepass,
     /// the counters, `splatted` and `large`.
     pub splat_bind_group: BindGroup,
-    /// The three bind groups above, kept while they bind the same.
-    kept: [KeptBindGroup; 3],
+    /// The rasterised volumes': the view, the volumes and settings, `centre`, the
+    /// normal prepass and `large`.
+    pub draw_bind_group: BindGroup,
+    /// The four bind groups above, kept while they bind the same.
+    kept: [KeptBindGroup; 4],
+}
+
+/// Render world: the bind group a view's volumetric pass draws with (the march's, or
+/// the exact integral's), kept while it binds the same.
+#[derive(Component)]
+pub(super) struct ViewShaftBindGroup {
+    pub bind_group: BindGroup,
+    kept: KeptBindGroup,
 }
 
 /// Fixed-point units of `splat`'s light per unit of exposed irradiance: a pixel holds
@@ -303,6 +330,7 @@ pub(super) fn build(app: &mut App) {
                 timed(&cpu, read_back_surface_work).in_set(RenderSystems::Cleanup),
                 timed(&cpu, prepare_shaft_textures).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, prepare_surface_targets).in_set(RenderSystems::PrepareBindGroups),
+                timed(&cpu, prepare_shaft_bind_groups).in_set(RenderSystems::PrepareBindGroups),
                 timed(&cpu, prepare_pipelines).in_set(RenderSystems::Prepare),
             ),
         )
@@ -348,9 +376,10 @@ fn mark_views_seeing_media(
 }
 
 fn prepare_buffers(
-    extracted: Res<ExtractedVolumeSettings>,
+    (extracted, sources): (Res<ExtractedVolumeSettings>, Res<compute::ExtractedSources>),
     media: Res<ExtractedMedia>,
     mut buffers: ResMut<VolumeBuffers>,
+    mut surface_work: ResMut<SurfaceWorkReadback>,
     device: Res<RenderDevice>,
     queue: Res<RenderQueue>,
 ) {
@@ -368,7 +397,10 @@ fn prepare_buffers(
         media,
     };
     buffers.settings.set_label(Some("caustic_volume_settings"));
-    write_changed(&mut buffers.settings, value, &device, &queue);
+    // New settings or sources share the volumes out anew: counted at once.
+    if write_changed(&mut buffers.settings, value, &device, &queue) || sources.new {
+        surface_work.copy_next();
+    }
 }
 
 /// The bind group layouts of the rasterised passes, surface and volumetric (each for a
@@ -719,7 +751,7 @@ fn prepare_surface_targets(
     mut commands: Commands,
     views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa, Option<&ViewSurfaceTargets>)>,
     others: Query<Entity, (With<ViewSurfaceTargets>, Without<ViewCausticIrradiance>)>,
-    pipelines: Res<SurfacePipelines>,
+    (pipelines, volume_layouts): (Res<SurfacePipelines>, Res<VolumesPipeline>),
     buffers: Res<VolumeBuffers>,
     view_uniforms: Res<ViewUniforms>,
     mut texture_cache: ResMut<TextureCache>,
@@ -750,7 +782,7 @@ fn prepare_surface_targets(
         let texture = target("caustic_receiver_depth", RECEIVER_DEPTH_FORMAT, TextureUsages::RENDER_ATTACHMENT);
         let centre = target("caustic_receiver_centre", RECEIVER_CENTRE_FORMAT, TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING);
         let multisampled = (msaa.samples() > 1) as usize;
-        let [mut kept_depth, mut kept_resolve, mut kept_splat] = targets.map(|t| t.kept.clone()).unwrap_or_default();
+        let [mut kept_depth, mut kept_resolve, mut kept_splat, mut kept_draw] = targets.map(|t| t.kept.clone()).unwrap_or_default();
         let layout = cache.get_bind_group_layout(&pipelines.depth_layouts[multisampled]);
         let depth_bind_group = kept_depth.get(&[(&layout).into(), view_buffer.into(), depth.into(), normal.into()], || {
             device.create_bind_group("caustic_receiver_depth_bind_group", &layout, &BindGroupEntries::sequential((view_binding.clone(), depth, normal)))
@@ -799,8 +831,63 @@ fn prepare_surface_targets(
                 )),
             )
         });
-        let kept = [kept_depth, kept_resolve, kept_splat];
-        commands.entity(entity).insert(ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, kept });
+        let layout = cache.get_bind_group_layout(volume_layouts.layout(false, multisampled == 1));
+        let bound = [(&layout).into(), view_buffer.into(), volumes.into(), settings.into(), (&centre.default_view).into(), normal.into(), (&large).into()];
+        let draw_bind_group = kept_draw.get(&bound, || {
+            let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
+            device.create_bind_group("caustic_volumes_surface_bind_group", &layout, &BindGroupEntries::sequential(entries))
+        });
+        let kept = [kept_depth, kept_resolve, kept_splat, kept_draw];
+        let targets = ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, draw_bind_group, kept };
+        commands.entity(entity).insert(targets);
+    }
+}
+
+/// Gives every view that sees a medium the [`ViewShaftBindGroup`] of its volumetric
+/// pipeline, and takes it from the others.
+#[expect(clippy::too_many_arguments)]
+fn prepare_shaft_bind_groups(
+    mut commands: Commands,
+    views: Query<(Entity, &ViewVolumePipelines, &ViewPrepassTextures, Option<&ViewShaftBindGroup>), With<ViewSeesMedium>>,
+    others: Query<Entity, (With<ViewShaftBindGroup>, Without<ViewSeesMedium>)>,
+    (layouts, march): (Res<VolumesPipeline>, Res<BeamGridPipelines>),
+    (buffers, grids): (Res<VolumeBuffers>, Res<beam_grid::BeamGridBuffers>),
+    view_uniforms: Res<ViewUniforms>,
+    device: Res<RenderDevice>,
+    cache: Res<PipelineCache>,
+) {
+    for entity in &others {
+        commands.entity(entity).remove::<ViewShaftBindGroup>();
+    }
+    for (entity, pipelines, prepass, kept) in &views {
+        let (Some(depth), Some(view_buffer), Some(view_binding), Some(settings)) =
+            (prepass.depth_view(), view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), buffers.settings.buffer())
+        else {
+            commands.entity(entity).remove::<ViewShaftBindGroup>();
+            continue;
+        };
+        let mut kept = kept.map(|k| k.kept.clone()).unwrap_or_default();
+        let bind_group = match pipelines.shafts {
+            ShaftPipeline::Exact(_) => {
+                let (Some(normal), Some(volumes)) = (prepass.normal_view(), buffers.volumes.as_ref()) else { continue };
+                let layout = cache.get_bind_group_layout(layouts.layout(true, pipelines.multisampled));
+                let bound = [(&layout).into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
+                kept.get(&bound, || {
+                    let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), depth, normal);
+                    device.create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries))
+                })
+            }
+            ShaftPipeline::March(_) => {
+                let (Some(grid), Some(cells)) = (grids.grids.buffer(), grids.cells.as_ref()) else { continue };
+                let layout = cache.get_bind_group_layout(&march.march_layouts[pipelines.multisampled as usize]);
+                let bound = [(&layout).into(), view_buffer.into(), settings.into(), grid.into(), cells.into(), depth.into()];
+                kept.get(&bound, || {
+                    let entries = (view_binding.clone(), settings.as_entire_binding(), grid.as_entire_binding(), cells.as_entire_binding(), depth);
+                    device.create_bind_group("caustic_shaft_march_bind_group", &layout, &BindGroupEntries::sequential(entries))
+                })
+            }
+        };
+        commands.entity(entity).insert(ViewShaftBindGroup { bind_group, kept });
     }
 }
 
