@@ -867,9 +867,8 @@ fn prepare_shaft_bind_groups(
             continue;
         };
         let mut kept = kept.map(|k| k.kept.clone()).unwrap_or_default();
-        let bind_group = match pipelines.shafts {
-            ShaftPipeline::Exact(_) => {
-                let (Some(normal), Some(volumes)) = (prepass.normal_view(), buffers.volumes.as_ref()) else { continue };
+        let bind_group = match (pipelines.shafts, prepass.normal_view(), buffers.volumes.as_ref(), grids.grids.buffer(), grids.cells.as_ref()) {
+            (ShaftPipeline::Exact(_), Some(normal), Some(volumes), ..) => {
                 let layout = cache.get_bind_group_layout(layouts.layout(true, pipelines.multisampled));
                 let bound = [(&layout).into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
                 kept.get(&bound, || {
@@ -877,14 +876,17 @@ fn prepare_shaft_bind_groups(
                     device.create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries))
                 })
             }
-            ShaftPipeline::March(_) => {
-                let (Some(grid), Some(cells)) = (grids.grids.buffer(), grids.cells.as_ref()) else { continue };
+            (ShaftPipeline::March(_), .., Some(grid), Some(cells)) => {
                 let layout = cache.get_bind_group_layout(&march.march_layouts[pipelines.multisampled as usize]);
                 let bound = [(&layout).into(), view_buffer.into(), settings.into(), grid.into(), cells.into(), depth.into()];
                 kept.get(&bound, || {
                     let entries = (view_binding.clone(), settings.as_entire_binding(), grid.as_entire_binding(), cells.as_entire_binding(), depth);
                     device.create_bind_group("caustic_shaft_march_bind_group", &layout, &BindGroupEntries::sequential(entries))
                 })
+            }
+            _ => {
+                commands.entity(entity).remove::<ViewShaftBindGroup>();
+                continue;
             }
         };
         commands.entity(entity).insert(ViewShaftBindGroup { bind_group, kept });
