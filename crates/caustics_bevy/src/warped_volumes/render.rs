@@ -108,7 +108,9 @@ pub(super) struct WordsReadback {
     staging: Option<Buffer>,
     reading: Arc<AtomicBool>,
     copied: bool,
-    /// Frames since the last copy with none being read.
+    /// A copy was asked for this frame, made or not.
+    asked: bool,
+    /// Frames since the last one a copy was asked for, with none being read.
     idle: u8,
     /// Copies to let pass before the next one that is not asked for at once.
     wait: u8,
@@ -117,14 +119,15 @@ pub(super) struct WordsReadback {
 /// One copy in this many, of a source copied every frame, is read back.
 const COPY_EVERY: u8 = 8;
 
-/// Frames without a copy after which the staging buffer goes: a source copied every
-/// [`COPY_EVERY`] frames keeps it.
-const IDLE_FRAMES: u8 = 2 * COPY_EVERY;
+/// Frames with no copy asked for (the build or the pass stopped) after which the
+/// staging buffer goes.
+const IDLE_FRAMES: u8 = 4;
 
 impl WordsReadback {
     /// Copies the first `words` of `source` for reading after this frame, when `now`
     /// or when its turn came, unless a copy is under way. Whether it copied.
     pub fn copy(&mut self, device: &RenderDevice, encoder: &mut CommandEncoder, (source, words): (&Buffer, u64), label: &'static str, now: bool) -> bool {
+        self.asked = true;
         if !now && self.wait > 0 {
             self.wait -= 1;
             return false;
@@ -147,11 +150,14 @@ impl WordsReadback {
     }
 
     /// After this frame's commands went in: hands the words copied this frame to `read`
-    /// once mapped. After [`IDLE_FRAMES`] frames with none copied and none being read,
-    /// the staging buffer goes.
+    /// once mapped. After [`IDLE_FRAMES`] frames with no copy asked for and none being
+    /// read, the staging buffer goes.
     pub fn read_back(&mut self, read: impl FnOnce(&[u32]) + Send + 'static) {
+        let asked = std::mem::take(&mut self.asked);
         let (true, Some(staging)) = (std::mem::take(&mut self.copied), self.staging.clone()) else {
-            if !self.reading.load(Ordering::Acquire) {
+            if asked {
+                self.idle = 0;
+            } else if !self.reading.load(Ordering::Acquire) {
                 self.idle = self.idle.saturating_add(1);
                 if self.idle >= IDLE_FRAMES {
                     self.staging = None;
