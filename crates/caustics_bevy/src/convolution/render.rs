@@ -197,20 +197,32 @@ pub(super) fn build(app: &mut App) {
         .add_systems(
             Render,
             (
-                timed(&cpu.render, prepare_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu.render, prepare_buffers)
+                    .run_if(|extracted: Res<ExtractedPools>, gpu: Res<PoolGpu>| !extracted.0.is_empty() || !gpu.0.is_empty())
+                    .in_set(RenderSystems::PrepareResources),
                 timed(&cpu.render, crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>)
-                    .run_if(|gpu: Res<PoolGpu>| !gpu.0.is_empty())
+                    .run_if(pools_on_gpu)
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, timed(&cpu.render, compute_floor_irradiance).in_set(RenderGraphSystems::Render).before(camera_driver))
+        .add_systems(
+            RenderGraph,
+            timed(&cpu.render, compute_floor_irradiance).run_if(pools_on_gpu).in_set(RenderGraphSystems::Render).before(camera_driver),
+        )
         .add_systems(
             Core3d,
             timed(&cpu.render, project_floor_irradiance)
+                .run_if(pools_on_gpu)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),
         );
+}
+
+/// Whether any pool's floor is drawn on the GPU: else the convolution's passes are
+/// left out of the frame.
+fn pools_on_gpu(gpu: Res<PoolGpu>) -> bool {
+    !gpu.0.is_empty()
 }
 
 /// A pool's generator and the technique it got.

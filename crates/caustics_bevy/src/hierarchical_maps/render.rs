@@ -506,20 +506,31 @@ pub(super) fn build(app: &mut App) {
         .add_systems(
             Render,
             (
-                timed(&cpu, prepare_maps).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, prepare_maps)
+                    .run_if(|extracted: Res<ExtractedPlan>, gpu: Res<CausticMapsGpu>| !extracted.0.views.is_empty() || gpu.generation.is_some())
+                    .in_set(RenderSystems::PrepareResources),
                 timed(&cpu, crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>)
-                    .run_if(|gpu: Res<CausticMapsGpu>| !gpu.views.is_empty())
+                    .run_if(maps_in_view)
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, timed(&cpu, super::pass::make_caustic_maps).in_set(RenderGraphSystems::Render).before(camera_driver))
+        .add_systems(
+            RenderGraph,
+            timed(&cpu, super::pass::make_caustic_maps).run_if(maps_in_view).in_set(RenderGraphSystems::Render).before(camera_driver),
+        )
         .add_systems(
             Core3d,
             timed(&cpu, super::pass::project_caustic_maps)
+                .run_if(maps_in_view)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),
         );
+}
+
+/// Whether any view shows caustic maps: else their passes are left out of the frame.
+fn maps_in_view(gpu: Res<CausticMapsGpu>) -> bool {
+    !gpu.views.is_empty()
 }
 
 fn extract_plan(mut extracted: ResMut<ExtractedPlan>, plan: Extract<Res<CausticMapPlan>>) {

@@ -194,18 +194,28 @@ pub(super) fn build(app: &mut App) {
             (
                 timed(&cpu, prepare_frames).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>)
-                    .run_if(|gpu: Res<IlluminationTexturesGpu>| !gpu.frames.is_empty())
+                    .run_if(textures_in_view)
                     .in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(RenderGraph, timed(&cpu, pass::draw_illumination_textures).in_set(RenderGraphSystems::Render).before(camera_driver))
+        .add_systems(
+            RenderGraph,
+            timed(&cpu, pass::draw_illumination_textures).run_if(textures_in_view).in_set(RenderGraphSystems::Render).before(camera_driver),
+        )
         .add_systems(
             Core3d,
             timed(&cpu, pass::project_illumination_textures)
+                .run_if(textures_in_view)
                 .after(crate::irradiance::inject_irradiance)
                 .after(Core3dSystems::Prepass)
                 .before(Core3dSystems::MainPass),
         );
+}
+
+/// Whether any frame of illumination planes is on the GPU: else the textures' passes
+/// are left out of the frame.
+fn textures_in_view(gpu: Res<IlluminationTexturesGpu>) -> bool {
+    !gpu.frames.is_empty()
 }
 
 fn extract_frames(mut extracted: ResMut<ExtractedFrames>, frames: Extract<Res<IlluminationFrames>>, settings: Extract<Res<IlluminationTexturesSettings>>) {

@@ -96,8 +96,16 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<GpuOceans>()
         .add_systems(RenderStartup, init_pipelines)
         .add_systems(ExtractSchedule, timed(&cpu, extract_oceans))
-        .add_systems(Render, timed(&cpu, prepare_oceans).in_set(RenderSystems::PrepareResources))
-        .add_systems(bevy::render::renderer::RenderGraph, timed(&cpu, animate_waves).in_set(crate::mesh_vertices::WriteMeshVertices));
+        .add_systems(
+            Render,
+            timed(&cpu, prepare_oceans)
+                .run_if(|extracted: Res<ExtractedOceans>, oceans: Res<GpuOceans>| !extracted.0.is_empty() || !oceans.buffers.is_empty() || !oceans.dispatches.is_empty())
+                .in_set(RenderSystems::PrepareResources),
+        )
+        .add_systems(
+            bevy::render::renderer::RenderGraph,
+            timed(&cpu, animate_waves).run_if(|oceans: Res<GpuOceans>| !oceans.dispatches.is_empty()).in_set(crate::mesh_vertices::WriteMeshVertices),
+        );
 }
 
 fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache: Res<PipelineCache>) {
