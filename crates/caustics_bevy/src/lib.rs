@@ -104,7 +104,9 @@ impl Plugin for CausticsPlugin {
                     .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
                     .after(bevy::camera::visibility::VisibilitySystems::VisibilityPropagate)
                     .after(components::validate_caustic_params),
-            );
+            )
+            .init_resource::<read_scene::ChangedParts>()
+            .add_systems(PostUpdate, timed(&cpu, read_scene::read_scene_changes).in_set(CausticSystems::ReadScene));
         technique::build(app);
         report::build(app);
         irradiance::build(app);

@@ -88,7 +88,8 @@ type GeneratorChanged = Or<(
 /// What changed in the scene the techniques read since the system holding this last
 /// ran, from Bevy's change detection and removals: generators, meshes that receive or
 /// block caustic light, lights. A technique gathers its inputs again only when one did,
-/// instead of walking every caster each frame to compare.
+/// instead of walking every caster each frame to compare. [`read_scene_changes`] reads
+/// it once a frame into the [`ChangedParts`] every technique reads.
 #[derive(SystemParam)]
 pub struct SceneChanges<'w, 's> {
     generators: Query<'w, 's, (), (With<CausticGenerator>, GeneratorChanged)>,
@@ -100,8 +101,9 @@ pub struct SceneChanges<'w, 's> {
     removed_lights: (RemovedComponents<'w, 's, DirectionalLight>, RemovedComponents<'w, 's, PointLight>, RemovedComponents<'w, 's, SpotLight>),
 }
 
-/// Which parts of the scene [`SceneChanges::read`] found changed.
-#[derive(Clone, Copy, Debug, Default)]
+/// Which parts of the scene [`SceneChanges::read`] found changed: as a resource, this
+/// frame's, for the systems in [`crate::CausticSystems::ReadScene`].
+#[derive(Resource, Clone, Copy, Debug, Default)]
 pub struct ChangedParts {
     /// A generator moved, changed, was added or went away (or its choice or validity).
     pub generators: bool,
@@ -138,6 +140,11 @@ impl SceneChanges<'_, '_> {
             lights: removed_lights || !self.lights.is_empty(),
         }
     }
+}
+
+/// Reads this frame's [`ChangedParts`], once for every technique that reads the scene.
+pub fn read_scene_changes(mut changes: SceneChanges, mut changed: ResMut<ChangedParts>) {
+    *changed = changes.read();
 }
 
 /// The direction an entity faces (its −Z) under `transform`, zero when the transform

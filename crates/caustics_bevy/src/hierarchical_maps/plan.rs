@@ -7,7 +7,8 @@ use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::read_scene::{
-    AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_light, core_mesh, to_core, world_aabb,
+    AnyLight, ChangedParts, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, read_scene_changes, to_core,
+    world_aabb,
 };
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
@@ -83,7 +84,7 @@ pub struct CausticMapPlan {
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<CausticMapPlan>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).in_set(crate::CausticSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene));
 }
 
 /// The occluders' BVH, by `occluders` of [`CausticMapPlan`], for the shadow test.
@@ -130,7 +131,7 @@ fn plan_caustic_maps(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     lights: Query<LightComponents, AnyLight>,
-    mut changes: SceneChanges,
+    changed: Res<ChangedParts>,
     settings: Res<HierarchicalMapsSettings>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
@@ -163,7 +164,7 @@ fn plan_caustic_maps(
         }
         _ => false,
     });
-    if !(changes.read().any() || mesh_changed || settings.is_changed()) && *shadows_tested {
+    if !(changed.any() || mesh_changed || settings.is_changed()) && *shadows_tested {
         active.set_if_neq(ActiveCausticTechniques { hierarchical_maps: !plan.views.is_empty(), ..*active });
         return;
     }

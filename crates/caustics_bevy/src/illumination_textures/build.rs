@@ -7,7 +7,7 @@ use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use crate::read_scene::{AnyLight, LightComponents, MeshComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, core_mesh};
+use crate::read_scene::{AnyLight, ChangedParts, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_lights, core_mesh, read_scene_changes};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -81,7 +81,7 @@ pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<LightTransportTables>()
         .init_resource::<IlluminationFrames>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).in_set(crate::CausticSystems::ReadScene));
+        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene));
 }
 
 /// One generator as the build reads it.
@@ -138,7 +138,7 @@ fn set_up_planes(
     generators: Query<(Entity, &CausticGenerator, &CausticTechniqueChoice, MeshComponents), Without<InvalidCausticParams>>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     lights: Query<LightComponents, AnyLight>,
-    mut changes: SceneChanges,
+    changed: Res<ChangedParts>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<IlluminationTexturesSettings>,
@@ -170,7 +170,7 @@ fn set_up_planes(
         }
     }
     // The inputs are read again only when change detection says some may differ.
-    let changed = changes.read();
+    let changed = *changed;
     if changed.generators || changed.occluders || changed.lights || settings.is_changed() || mesh_changed {
         let next = inputs(&generators, &occluders, &lights, core_settings.map(|_| settings.clone()));
         if mesh_changed || next != state.last {

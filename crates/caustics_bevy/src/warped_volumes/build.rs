@@ -9,7 +9,7 @@ use super::WarpedVolumesSettings;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::read_scene::{AnyLight, LightComponents, OccluderComponents, SceneChanges, blocks_caustic_light, core_lights, to_core, world_aabb};
+use crate::read_scene::{AnyLight, ChangedParts, LightComponents, OccluderComponents, blocks_caustic_light, core_lights, read_scene_changes, to_core, world_aabb};
 use crate::technique::CausticTechniqueChoice;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
@@ -116,7 +116,7 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<BuildStatsChannel>()
         .add_systems(
             PostUpdate,
-            (crate::cpu_time::timed(&cpu, gather_sources), crate::cpu_time::timed(&cpu, receive_stats))
+            (crate::cpu_time::timed(&cpu, gather_sources).after(read_scene_changes), crate::cpu_time::timed(&cpu, receive_stats))
                 .in_set(crate::CausticSystems::ReadScene),
         );
 }
@@ -231,7 +231,7 @@ fn gather_sources(
     lights: Query<LightComponents, AnyLight>,
     occluders: Query<OccluderComponents, Without<CausticGenerator>>,
     deformed: Query<(&Mesh3d, &Aabb), With<MovesOnGpu>>,
-    mut changes: SceneChanges,
+    changed: Res<ChangedParts>,
     mut mesh_events: MessageReader<AssetEvent<Mesh>>,
     meshes: Res<Assets<Mesh>>,
     settings: Res<WarpedVolumesSettings>,
@@ -250,7 +250,7 @@ fn gather_sources(
         }
     }
     let several_generators = generators.iter().filter(|(.., visible, _)| visible.get()).count() > 1;
-    let changed = changes.read();
+    let changed = *changed;
     let generators_changed = generator_mesh_changed
         || changed.generators
         // A mesh that had not loaded at the last gathering.
