@@ -33,6 +33,7 @@ pub fn largest_binding(device: &RenderDevice) -> u64 {
 }
 
 /// `bytes` in MiB, for warnings.
+#[cfg(any(feature = "warped-volumes", feature = "convolution", feature = "illumination-textures", feature = "hierarchical-maps"))]
 pub(crate) fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / (1u64 << 20) as f64)
 }

@@ -82,6 +82,7 @@ impl MeshVertices {
     }
 
     /// What the binding binds, for a kept bind group.
+    #[cfg(any(feature = "warped-volumes", feature = "convolution"))]
     pub fn bound(&self) -> crate::irradiance::kept_bind_group::Bound {
         crate::irradiance::kept_bind_group::Bound::Slice(self.buffer.id(), self.offset, self.size.get())
     }

@@ -39,6 +39,7 @@ impl CausticQuality {
     }
 
     /// The value for this preset among `[low, medium, high]`.
+    #[cfg(any(feature = "warped-volumes", feature = "illumination-textures", feature = "hierarchical-maps"))]
     pub(crate) fn pick<T>(self, [low, medium, high]: [T; 3]) -> T {
         match self {
             Self::Low => low,
@@ -61,10 +62,12 @@ pub trait QualityPreset: Resource<Mutability = Mutable> + Sized {
 }
 
 /// Applies [`CausticQuality`] to the settings `S` before the frame's systems read them.
+#[cfg(any(feature = "warped-volumes", feature = "illumination-textures", feature = "hierarchical-maps"))]
 pub(crate) fn build<S: QualityPreset>(app: &mut App) {
     app.add_systems(PreUpdate, apply::<S>.run_if(resource_exists_and_changed::<CausticQuality>));
 }
 
+#[cfg(any(feature = "warped-volumes", feature = "illumination-textures", feature = "hierarchical-maps"))]
 fn apply<S: QualityPreset>(quality: Res<CausticQuality>, mut settings: ResMut<S>) {
     settings.set_quality(*quality);
 }

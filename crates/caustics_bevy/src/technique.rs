@@ -35,6 +35,7 @@ impl CausticTechniqueChoice {
     }
 
     /// What the choice read of the generator: its shape, sides, medium.
+    #[cfg(any(feature = "warped-volumes", feature = "hierarchical-maps"))]
     pub(crate) fn facts(&self) -> &GeneratorFacts {
         &self.0.facts
     }
