@@ -6,7 +6,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
-use crate::irradiance::kept_bind_group::write_changed;
+use crate::irradiance::kept_bind_group::{KeptLayout, write_changed};
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -171,10 +171,10 @@ impl PoolGpu {
 /// The compute pipelines and the projection's layouts and shader.
 #[derive(Resource)]
 pub(super) struct ConvolutionPipelines {
-    compute_layout: BindGroupLayoutDescriptor,
+    compute_layout: KeptLayout,
     /// `[heights, terms, convolve]`.
     compute: [CachedComputePipelineId; 5],
-    project_layouts: [BindGroupLayoutDescriptor; 2],
+    project_layouts: [KeptLayout; 2],
     project_shader: Handle<Shader>,
     fullscreen: FullscreenShader,
 }
@@ -393,7 +393,7 @@ fn prepare_buffers(
         };
         buffers.compute = Some(device.create_bind_group(
             "pool_convolution_bind_group",
-            &cache.get_bind_group_layout(&pipelines.compute_layout),
+            pipelines.compute_layout.get(&cache),
             &BindGroupEntries::sequential((
                 uniform,
                 images,
@@ -448,9 +448,9 @@ fn init_pipelines(
         )
     };
     commands.insert_resource(ConvolutionPipelines {
-        compute_layout,
+        compute_layout: KeptLayout::new(compute_layout),
         compute,
-        project_layouts: [project_layout(false), project_layout(true)],
+        project_layouts: [project_layout(false), project_layout(true)].map(KeptLayout::new),
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
         fullscreen: fullscreen.clone(),
     });
@@ -461,7 +461,7 @@ impl SpecializedRenderPipeline for ConvolutionPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("pool_project_pipeline", &self.project_layouts, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline("pool_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
     }
 }
 
@@ -518,7 +518,7 @@ fn project_floor_irradiance(
             let uniform = buffers.uniform.binding()?;
             Some(ctx.render_device().create_bind_group(
                 "pool_project_bind_group",
-                &inputs.layout,
+                inputs.layout,
                 &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, uniform, buffers.irradiance.as_entire_binding())),
             ))
         })

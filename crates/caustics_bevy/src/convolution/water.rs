@@ -9,7 +9,7 @@
 use super::PoolSurface;
 use super::render::{GpuPool, GpuWaves, ripple_waves, write_waves};
 use crate::cpu_time::timed;
-use crate::irradiance::kept_bind_group::KeptBindGroup;
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::{MeshVertices, MovesOnGpu, WriteMeshVertices};
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -55,7 +55,7 @@ struct GpuWaters {
 
 #[derive(Resource)]
 struct WaterPipelines {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     /// `ripple_heights`, `write_vertices`.
     pipelines: [CachedComputePipelineId; 2],
 }
@@ -90,7 +90,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
     let pipelines = crate::irradiance::compute_pipelines(&cache, "pool_water", &layout, &shader, ["ripple_heights", "write_vertices"]);
-    commands.insert_resource(WaterPipelines { layout, pipelines });
+    commands.insert_resource(WaterPipelines { layout: KeptLayout::new(layout), pipelines });
 }
 
 /// The visible pools whose water moves on the GPU.
@@ -118,7 +118,7 @@ fn prepare_waters(
     let waters = &mut *waters;
     waters.buffers.retain(|entity, _| extracted.0.iter().any(|w| w.entity == *entity));
     waters.dispatches.clear();
-    let layout = cache.get_bind_group_layout(&pipelines.layout);
+    let layout = pipelines.layout.get(&cache);
     for water in &mut extracted.0 {
         let texels = water.uniform.columns * water.uniform.rows;
         let Some(vertices) = MeshVertices::of(water.mesh, &meshes, &allocator, &device).filter(|v| v.count == texels) else {
@@ -140,11 +140,11 @@ fn prepare_waters(
         let (Some(uniform), Some(waves)) = (buffers.uniform.buffer(), buffers.waves.buffer()) else {
             continue;
         };
-        let bound = [(&layout).into(), uniform.into(), waves.into(), (&buffers.heights).into(), vertices.bound()];
+        let bound = [layout.into(), uniform.into(), waves.into(), (&buffers.heights).into(), vertices.bound()];
         let bind_group = buffers.bind_group.get(&bound, || {
             device.create_bind_group(
                 "pool_water_bind_group",
-                &layout,
+                layout,
                 &BindGroupEntries::with_indices((
                     (0, uniform.as_entire_binding()),
                     (1, waves.as_entire_binding()),

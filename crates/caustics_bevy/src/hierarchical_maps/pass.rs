@@ -153,7 +153,7 @@ pub(super) fn project_caustic_maps(
         .filter_map(|v| {
             Some(ctx.render_device().create_bind_group(
                 "caustic_map_project_bind_group",
-                &inputs.layout,
+                inputs.layout,
                 &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
             ))
         })

@@ -4,6 +4,7 @@
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
+use crate::irradiance::kept_bind_group::KeptLayout;
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
@@ -219,7 +220,7 @@ pub(super) enum LightMapPass {
 /// The light maps' mesh pipeline: Bevy's own meshes, positions (and normals) only.
 #[derive(Resource)]
 pub(super) struct LightMapPipeline {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     shader: Handle<Shader>,
 }
 
@@ -250,7 +251,7 @@ impl SpecializedMeshPipeline for LightMapPipeline {
         };
         Ok(RenderPipelineDescriptor {
             label: Some(format!("caustic_light_map_{pass:?}").into()),
-            layout: vec![self.layout.clone()],
+            layout: vec![self.layout.descriptor.clone()],
             vertex: VertexState { shader: self.shader.clone(), entry_point: Some(vertex.into()), buffers: vec![buffer], ..default() },
             fragment: Some(FragmentState {
                 shader: self.shader.clone(),
@@ -274,11 +275,11 @@ impl SpecializedMeshPipeline for LightMapPipeline {
 /// The compute pipelines, in `caustic_map.wgsl`'s order, and the projection's.
 #[derive(Resource)]
 pub(super) struct CausticMapPipelines {
-    pub(super) compute_layout: BindGroupLayoutDescriptor,
+    compute_layout: KeptLayout,
     /// The indirect arguments, bound for `write_args` alone.
-    pub(super) args_layout: BindGroupLayoutDescriptor,
+    args_layout: KeptLayout,
     pub(super) compute: [CachedComputePipelineId; 6],
-    pub(super) project_layouts: [BindGroupLayoutDescriptor; 2],
+    pub(super) project_layouts: [KeptLayout; 2],
     pub(super) project_shader: Handle<Shader>,
     pub(super) fullscreen: FullscreenShader,
 }
@@ -548,7 +549,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
         ),
     );
     commands.insert_resource(LightMapPipeline {
-        layout: map_layout,
+        layout: KeptLayout::new(map_layout),
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "maps.wgsl"),
     });
     let float = TextureSampleType::Float { filterable: false };
@@ -610,10 +611,10 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
         )
     };
     commands.insert_resource(CausticMapPipelines {
-        compute_layout,
-        args_layout,
+        compute_layout: KeptLayout::new(compute_layout),
+        args_layout: KeptLayout::new(args_layout),
         compute,
-        project_layouts: [project_layout(false), project_layout(true)],
+        project_layouts: [project_layout(false), project_layout(true)].map(KeptLayout::new),
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
         fullscreen: fullscreen.clone(),
     });
@@ -624,7 +625,7 @@ impl SpecializedRenderPipeline for CausticMapPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("caustic_map_project_pipeline", &self.project_layouts, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline("caustic_map_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
     }
 }
 
@@ -836,7 +837,7 @@ fn prepare_maps(
         let mut scratch = scratch;
         scratch.args_bind_group = Some(device.create_bind_group(
             "caustic_map_args_bind_group",
-            &cache.get_bind_group_layout(&pipelines.args_layout),
+            pipelines.args_layout.get(&cache),
             &BindGroupEntries::single(scratch.args.as_entire_binding()),
         ));
         gpu.scratch = Some(scratch);
@@ -846,8 +847,8 @@ fn prepare_maps(
         return;
     };
     let Some(scratch) = gpu.scratch.as_ref() else { return };
-    let map_layout = cache.get_bind_group_layout(&map_pipeline.layout);
-    let compute_layout = cache.get_bind_group_layout(&pipelines.compute_layout);
+    let map_layout = map_pipeline.layout.get(&cache);
+    let compute_layout = pipelines.compute_layout.get(&cache);
     let m = settings.map_resolution;
     let mut views = std::mem::take(&mut gpu.views);
     views.truncate(plan.views.len());
@@ -869,11 +870,11 @@ fn prepare_maps(
         uniform.write_buffer(&device, &queue);
         let Some(view_binding) = uniform.binding() else { continue };
         let map_group = |instances: BindingResource| {
-            device.create_bind_group("caustic_light_map_bind_group", &map_layout, &BindGroupEntries::sequential((view_binding.clone(), instances)))
+            device.create_bind_group("caustic_light_map_bind_group", map_layout, &BindGroupEntries::sequential((view_binding.clone(), instances)))
         };
         let compute_bind_group = device.create_bind_group(
             "caustic_map_compute_bind_group",
-            &compute_layout,
+            compute_layout,
             &BindGroupEntries::sequential((
                 view_binding.clone(),
                 steps.clone(),

@@ -89,7 +89,7 @@ pub(super) fn project_illumination_textures(
         .filter_map(|f| {
             Some(ctx.render_device().create_bind_group(
                 "illumination_project_bind_group",
-                &inputs.layout,
+                inputs.layout,
                 &BindGroupEntries::sequential((
                     inputs.view.clone(),
                     inputs.depth,

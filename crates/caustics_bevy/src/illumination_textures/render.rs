@@ -18,6 +18,7 @@ use bevy::render::{
     renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
+use crate::irradiance::kept_bind_group::KeptLayout;
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::illumination_textures::{Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS};
 use caustics_core::triangle_bvh::InstancedBvh;
@@ -168,12 +169,12 @@ impl IlluminationTexturesGpu {
 /// shader.
 #[derive(Resource)]
 pub(super) struct IlluminationPipelines {
-    see_layout: BindGroupLayoutDescriptor,
+    see_layout: KeptLayout,
     pub(super) see: CachedComputePipelineId,
-    pub(super) draw_layout: BindGroupLayoutDescriptor,
+    draw_layout: KeptLayout,
     pub(super) draw: CachedRenderPipelineId,
     format: TextureFormat,
-    pub(super) project_layouts: [BindGroupLayoutDescriptor; 2],
+    pub(super) project_layouts: [KeptLayout; 2],
     project_shader: Handle<Shader>,
     fullscreen: FullscreenShader,
 }
@@ -298,12 +299,12 @@ fn init_pipelines(
         )
     };
     commands.insert_resource(IlluminationPipelines {
-        see_layout,
+        see_layout: KeptLayout::new(see_layout),
         see,
-        draw_layout,
+        draw_layout: KeptLayout::new(draw_layout),
         draw,
         format,
-        project_layouts: [project_layout(false), project_layout(true)],
+        project_layouts: [project_layout(false), project_layout(true)].map(KeptLayout::new),
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
         fullscreen: fullscreen.clone(),
     });
@@ -314,7 +315,7 @@ impl SpecializedRenderPipeline for IlluminationPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("illumination_project_pipeline", &self.project_layouts, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline("illumination_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
     }
 }
 
@@ -341,8 +342,7 @@ fn prepare_frames(
         return;
     }
     let receivers = gpu.receivers.write(&extracted.receivers, "caustic_illumination_receivers", &device, &queue);
-    let draw_layout = cache.get_bind_group_layout(&pipelines.draw_layout);
-    let see_layout = cache.get_bind_group_layout(&pipelines.see_layout);
+    let (draw_layout, see_layout) = (pipelines.draw_layout.get(&cache), pipelines.see_layout.get(&cache));
     let old = std::mem::take(&mut gpu.frames);
     for (k, t) in extracted.frames.iter().enumerate() {
         let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine, &extracted.receivers));
@@ -385,7 +385,7 @@ fn prepare_frames(
         };
         let see_bind_group = device.create_bind_group(
             "illumination_see_bind_group",
-            &see_layout,
+            see_layout,
             &BindGroupEntries::with_indices((
                 (0, frame_binding.clone()),
                 (1, surface.as_entire_binding()),
@@ -395,7 +395,7 @@ fn prepare_frames(
         );
         let draw_bind_group = device.create_bind_group(
             "illumination_draw_bind_group",
-            &draw_layout,
+            draw_layout,
             &BindGroupEntries::sequential((frame_binding, volume_binding, surface.as_entire_binding(), seen.as_entire_binding())),
         );
         gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group });

@@ -5,7 +5,7 @@
 //! built on the mesh asset; its top level holds the instance by the entity's `Aabb`,
 //! which bounds every shape the surface takes. Nothing goes through the CPU.
 
-use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup};
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::MeshVertices;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -31,7 +31,7 @@ struct GpuRefitJob {
 
 /// The refit's kernels (triangles, nodes) and their layout.
 pub(crate) struct BvhRefitPipelines {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     pipelines: [CachedComputePipelineId; 2],
 }
 
@@ -43,7 +43,7 @@ impl BvhRefitPipelines {
             &BindGroupLayoutEntries::sequential(ShaderStages::COMPUTE, (uniform_buffer::<GpuRefitJob>(true), read(), read(), read(), storage_buffer_sized(false, None))),
         );
         let shader = bevy::asset::load_embedded_asset!(asset_server, "bvh_refit.wgsl");
-        Self { pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes"]), layout }
+        Self { pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes"]), layout: KeptLayout::new(layout) }
     }
 }
 
@@ -113,7 +113,7 @@ impl BvhRefit {
         self.meshes.retain(|id, kept| moving.iter().any(|(m, b)| m == id && Arc::ptr_eq(b, &kept.bvh)));
         self.dispatches.clear();
         let starts = bvh.gpu_mesh_starts();
-        let layout = cache.get_bind_group_layout(&pipelines.layout);
+        let layout = pipelines.layout.get(cache);
         let mut jobs = Vec::new();
         let mut planned = Vec::new();
         for (id, mesh_bvh) in moving {
@@ -144,12 +144,12 @@ impl BvhRefit {
         let (Some(binding), Some(jobs_buffer)) = (self.jobs.binding(), self.jobs.buffer()) else { return };
         for (id, first, vertices) in planned {
             let Some(mesh) = self.meshes.get_mut(&id) else { continue };
-            let bound: [Bound; 6] = [(&layout).into(), jobs_buffer.into(), vertices.bound(), (&mesh.corners).into(), (&mesh.levels).into(), buffer.into()];
+            let bound: [Bound; 6] = [layout.into(), jobs_buffer.into(), vertices.bound(), (&mesh.corners).into(), (&mesh.levels).into(), buffer.into()];
             let (corners, levels) = (&mesh.corners, &mesh.levels);
             let bind_group = mesh.bind_group.get(&bound, || {
                 device.create_bind_group(
                     "caustic_bvh_refit_bind_group",
-                    &layout,
+                    layout,
                     &BindGroupEntries::sequential((binding.clone(), BindingResource::Buffer(vertices.binding()), corners.as_entire_binding(), levels.as_entire_binding(), buffer.as_entire_binding())),
                 )
             });

@@ -8,7 +8,7 @@
 use super::{ExtractedReceivers, GpuViewCaustics, ViewCausticIrradiance, ViewCausticWork};
 use crate::components::CausticReceiver;
 use crate::report::PassRecorder;
-use super::kept_bind_group::write_changed;
+use super::kept_bind_group::{KeptLayout, write_changed};
 use bevy::camera::{MainPassResolutionOverride, Viewport};
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
@@ -122,8 +122,8 @@ impl CachedRenderPipelinePhaseItem for CausticComposite3d {
 pub struct CausticCompositePipeline {
     mesh_pipeline: MeshPipeline,
     /// Group 1: the view's caustic buffer and settings.
-    pub view_layout: BindGroupLayoutDescriptor,
-    material_layout: BindGroupLayoutDescriptor,
+    pub view_layout: KeptLayout,
+    material_layout: KeptLayout,
     shader: Handle<Shader>,
 }
 
@@ -224,8 +224,8 @@ pub(super) fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipel
     );
     commands.insert_resource(CausticCompositePipeline {
         mesh_pipeline: mesh_pipeline.clone(),
-        view_layout,
-        material_layout,
+        view_layout: KeptLayout::new(view_layout),
+        material_layout: KeptLayout::new(material_layout),
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "composite.wgsl"),
     });
 }
@@ -255,9 +255,9 @@ impl SpecializedMeshPipeline for CausticCompositePipeline {
             label: Some("caustic_composite_pipeline".into()),
             layout: vec![
                 view_layout.main_layout,
-                self.view_layout.clone(),
+                self.view_layout.descriptor.clone(),
                 self.mesh_pipeline.mesh_layouts.model_only.clone(),
-                self.material_layout.clone(),
+                self.material_layout.descriptor.clone(),
             ],
             vertex: VertexState {
                 shader: self.shader.clone(),
@@ -338,7 +338,7 @@ pub(super) fn prepare_receiver_bind_groups(
         return;
     }
     bind_groups.0.retain(|entity, _| receivers.0.contains_key(entity));
-    let layout = pipeline_cache.get_bind_group_layout(&pipeline.material_layout);
+    let layout = pipeline.material_layout.get(&pipeline_cache);
     for (entity, albedo) in &receivers.0 {
         let image = match albedo.texture {
             Some(id) => match images.get(id) {
@@ -369,7 +369,7 @@ pub(super) fn prepare_receiver_bind_groups(
         let Some(binding) = uniform.binding() else { continue };
         let bind_group = device.create_bind_group(
             "caustic_receiver_bind_group",
-            &layout,
+            layout,
             &BindGroupEntries::sequential((binding, &image.texture_view, &image.sampler)),
         );
         bind_groups.0.insert(*entity, ReceiverBinding { uniform, texture, bind_group });

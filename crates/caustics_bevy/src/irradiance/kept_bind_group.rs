@@ -2,13 +2,17 @@
 //! views frame after frame (their contents rewritten in place) makes its bind group
 //! once, and again only when one of them is replaced: creating a bind group is a driver
 //! call and validation on the render thread, every frame, for every pass. A uniform is
-//! uploaded only when its value changed: each upload is a staging buffer and a copy.
+//! uploaded only when its value changed: each upload is a staging buffer and a copy. A
+//! bind group layout is fetched from the pipeline cache once: each fetch clones, hashes
+//! and looks up its descriptor under a lock.
 
 use bevy::render::render_resource::encase::internal::WriteInto;
 use bevy::render::render_resource::{
-    BindGroup, BindGroupLayout, BindGroupLayoutId, Buffer, BufferId, ShaderType, TextureView, TextureViewId, UniformBuffer,
+    BindGroup, BindGroupLayout, BindGroupLayoutDescriptor, BindGroupLayoutId, Buffer, BufferId, PipelineCache, ShaderType, TextureView,
+    TextureViewId, UniformBuffer,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
+use std::sync::OnceLock;
 
 /// What a bind group binds, by identity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,4 +77,24 @@ pub fn write_changed<T: ShaderType + WriteInto + PartialEq>(buffer: &mut Uniform
         buffer.write_buffer(device, queue);
     }
     changed
+}
+
+/// A bind group layout's descriptor, which pipelines name it by, and the layout itself,
+/// fetched from the pipeline cache on first use and kept (the cache never drops one).
+pub struct KeptLayout {
+    /// What pipeline descriptors list.
+    pub descriptor: BindGroupLayoutDescriptor,
+    layout: OnceLock<BindGroupLayout>,
+}
+
+impl KeptLayout {
+    /// The layout of `descriptor`, not fetched yet.
+    pub fn new(descriptor: BindGroupLayoutDescriptor) -> Self {
+        Self { descriptor, layout: OnceLock::new() }
+    }
+
+    /// The layout, from `cache` the first time.
+    pub fn get(&self, cache: &PipelineCache) -> &BindGroupLayout {
+        self.layout.get_or_init(|| cache.get_bind_group_layout(&self.descriptor))
+    }
 }

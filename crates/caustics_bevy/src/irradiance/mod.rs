@@ -26,6 +26,7 @@ pub mod mesh_bvhs;
 pub mod reference_view;
 
 use crate::cpu_time::timed;
+use kept_bind_group::KeptLayout;
 use crate::components::{CausticReceiver, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
@@ -214,12 +215,12 @@ pub fn compute_pipelines<const N: usize>(
 }
 
 /// A technique's fullscreen pass that adds the irradiance it computes at each pixel's
-/// receiver point to the view's buffer: `layouts[multisampled]` for the view's
-/// prepass, the fragment entry point `project` of `shader` (with `MULTISAMPLED`
-/// defined for a multisampled prepass), additive blending.
+/// receiver point to the view's buffer: `layout`, the fragment entry point `project`
+/// of `shader` (with `MULTISAMPLED` defined for a multisampled prepass), additive
+/// blending.
 pub fn projection_pipeline(
     label: &'static str,
-    layouts: &[BindGroupLayoutDescriptor; 2],
+    layout: &BindGroupLayoutDescriptor,
     shader: &Handle<Shader>,
     fullscreen: &FullscreenShader,
     multisampled: bool,
@@ -228,7 +229,7 @@ pub fn projection_pipeline(
     let additive = BlendComponent { src_factor: BlendFactor::One, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
     RenderPipelineDescriptor {
         label: Some(label.into()),
-        layout: vec![layouts[multisampled as usize].clone()],
+        layout: vec![layout.clone()],
         vertex: fullscreen.to_vertex_state(),
         fragment: Some(FragmentState {
             shader: shader.clone(),
@@ -268,7 +269,7 @@ pub struct ProjectionInputs<'a> {
     /// The view uniform.
     pub view: BindingResource<'a>,
     /// The layout that fits the prepass's sampling.
-    pub layout: BindGroupLayout,
+    pub layout: &'a BindGroupLayout,
 }
 
 impl<P: 'static> ViewProjectionPipeline<P> {
@@ -279,14 +280,14 @@ impl<P: 'static> ViewProjectionPipeline<P> {
         cache: &'a PipelineCache,
         prepass: &'a ViewPrepassTextures,
         view_uniforms: &'a ViewUniforms,
-        layouts: &[BindGroupLayoutDescriptor; 2],
+        layouts: &'a [KeptLayout; 2],
     ) -> Option<ProjectionInputs<'a>> {
         Some(ProjectionInputs {
             pipeline: cache.get_render_pipeline(self.pipeline)?,
             depth: prepass.depth_view()?,
             normal: prepass.normal_view(),
             view: view_uniforms.uniforms.binding()?,
-            layout: cache.get_bind_group_layout(&layouts[self.multisampled as usize]),
+            layout: layouts[self.multisampled as usize].get(cache),
         })
     }
 }
@@ -606,7 +607,7 @@ fn prepare_irradiance_buffers(
         let Some(binding) = settings.binding() else { continue };
         let bind_group = device.create_bind_group(
             "caustic_irradiance_bind_group",
-            &pipeline_cache.get_bind_group_layout(&pipeline.view_layout),
+            pipeline.view_layout.get(&pipeline_cache),
             &BindGroupEntries::sequential((&texture.default_view, binding)),
         );
         commands.entity(entity).insert(ViewCausticIrradiance { texture, bind_group, viewport, settings });
@@ -616,7 +617,7 @@ fn prepare_irradiance_buffers(
 /// The pipeline that starts a view's buffer from [`InjectedIrradiance`].
 #[derive(Resource)]
 pub(crate) struct InjectPipeline {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     pipeline: CachedRenderPipelineId,
 }
 
@@ -648,7 +649,7 @@ fn init_inject_pipeline(
         }),
         ..default()
     });
-    commands.insert_resource(InjectPipeline { layout, pipeline });
+    commands.insert_resource(InjectPipeline { layout: KeptLayout::new(layout), pipeline });
 }
 
 impl InjectPipeline {
@@ -668,7 +669,7 @@ impl InjectPipeline {
         };
         let bind_group = device.create_bind_group(
             "caustic_inject_bind_group",
-            &cache.get_bind_group_layout(&self.layout),
+            self.layout.get(cache),
             &BindGroupEntries::sequential((&image.texture_view, view_binding)),
         );
         pass.set_pipeline(pipeline);

@@ -8,6 +8,7 @@
 use super::{OceanModes, OceanWaves};
 use crate::mesh_vertices::MovesOnGpu;
 use crate::cpu_time::timed;
+use crate::irradiance::kept_bind_group::KeptLayout;
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -80,7 +81,7 @@ struct GpuOceans {
 
 #[derive(Resource)]
 struct OceanPipelines {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     /// Spectrum, FFT stage, vertices.
     pipelines: [CachedComputePipelineId; 3],
 }
@@ -125,7 +126,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "waves.wgsl");
     let pipelines = crate::irradiance::compute_pipelines(&cache, "ocean_waves", &layout, &shader, ["spectrum", "fft_stage", "write_vertices"]);
-    commands.insert_resource(OceanPipelines { layout, pipelines });
+    commands.insert_resource(OceanPipelines { layout: KeptLayout::new(layout), pipelines });
 }
 
 /// The oceans whose waves move on the GPU.
@@ -189,7 +190,7 @@ fn prepare_oceans(
     oceans.buffers.retain(|entity, _| extracted.0.iter().any(|o| o.entity == *entity));
     oceans.steps.clear();
     oceans.dispatches.clear();
-    let layout = cache.get_bind_group_layout(&pipelines.layout);
+    let layout = pipelines.layout.get(&cache);
     let mut planned = Vec::new();
     for ocean in &extracted.0 {
         let n = ocean.resolution;
@@ -225,7 +226,7 @@ fn prepare_oceans(
         let bind_group = |from: usize, to: usize| {
             device.create_bind_group(
                 "ocean_waves_bind_group",
-                &layout,
+                layout,
                 &BindGroupEntries::sequential((
                     steps.clone(),
                     b.amplitudes.as_entire_binding(),

@@ -11,7 +11,7 @@ use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
 use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
-use crate::irradiance::kept_bind_group::{KeptBindGroup, write_changed};
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
 use bevy::prelude::*;
@@ -72,11 +72,11 @@ pub(super) struct BeamGridBuffers {
 /// The deposit's and the resolve's compute pipelines and the march's render pipelines.
 #[derive(Resource)]
 pub(super) struct BeamGridPipelines {
-    deposit_layout: BindGroupLayoutDescriptor,
+    deposit_layout: KeptLayout,
     deposit: CachedComputePipelineId,
-    resolve_layout: BindGroupLayoutDescriptor,
+    resolve_layout: KeptLayout,
     resolve: CachedComputePipelineId,
-    pub march_layouts: [BindGroupLayoutDescriptor; 2],
+    pub march_layouts: [KeptLayout; 2],
     shader: Handle<Shader>,
     fullscreen: FullscreenShader,
 }
@@ -136,11 +136,11 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         )
     });
     commands.insert_resource(BeamGridPipelines {
-        deposit_layout,
+        deposit_layout: KeptLayout::new(deposit_layout),
         deposit,
-        resolve_layout,
+        resolve_layout: KeptLayout::new(resolve_layout),
         resolve,
-        march_layouts,
+        march_layouts: march_layouts.map(KeptLayout::new),
         shader,
         fullscreen: fullscreen.clone(),
     });
@@ -170,7 +170,7 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
         let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some("caustic_shaft_march_pipeline".into()),
-            layout: vec![self.march_layouts[key.multisampled as usize].clone()],
+            layout: vec![self.march_layouts[key.multisampled as usize].descriptor.clone()],
             vertex: self.fullscreen.to_vertex_state(),
             fragment: Some(FragmentState {
                 shader: self.shader.clone(),
@@ -290,12 +290,12 @@ pub(super) fn deposit_beams(
         return;
     };
     let device = ctx.render_device();
-    let layout = cache.get_bind_group_layout(&pipelines.deposit_layout);
-    let bound = [(&layout).into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into()];
+    let layout = pipelines.deposit_layout.get(&cache);
+    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into()];
     let deposit_group = grids.kept[0].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_deposit_bind_group",
-            &layout,
+            layout,
             &BindGroupEntries::sequential((
                 buffer.as_entire_binding(),
                 counters.as_entire_binding(),
@@ -305,12 +305,12 @@ pub(super) fn deposit_beams(
             )),
         )
     });
-    let layout = cache.get_bind_group_layout(&pipelines.resolve_layout);
-    let bound = [(&layout).into(), counters.into(), uniform.into(), fixed.into(), cells.into()];
+    let layout = pipelines.resolve_layout.get(&cache);
+    let bound = [layout.into(), counters.into(), uniform.into(), fixed.into(), cells.into()];
     let resolve_group = grids.kept[1].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_resolve_bind_group",
-            &layout,
+            layout,
             &BindGroupEntries::sequential((counters.as_entire_binding(), uniform.as_entire_binding(), fixed.as_entire_binding(), cells.as_entire_binding())),
         )
     });

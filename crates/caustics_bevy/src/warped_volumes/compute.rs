@@ -27,7 +27,7 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue},
 };
 use caustics_core::glam;
-use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup};
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
@@ -228,7 +228,7 @@ impl VolumeBuild {
 /// the occluders' refit.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     pipelines: [CachedComputePipelineId; 3],
     refit: BvhRefitPipelines,
 }
@@ -255,7 +255,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
     let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "triangle_volumes"]);
-    commands.insert_resource(VolumeBuildPipelines { layout, pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
+    commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
 fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
@@ -430,18 +430,18 @@ pub(super) fn prepare_build(
     let (Some(jobs), Some(volumes)) = (build.jobs.binding(), buffers.volumes.as_ref()) else {
         return;
     };
-    let layout = cache.get_bind_group_layout(&pipelines.layout);
+    let layout = pipelines.layout.get(&cache);
     let Some(jobs_buffer) = build.jobs.buffer().cloned() else { return };
     for (entity, job, counts) in planned {
         let offset = build.written_jobs.1[job];
         let (Some(g), Some(vertices)) = (build.generators.get_mut(&entity), vertex_bindings.get(&entity)) else { continue };
         let [a, b, c, d] = g.indices.each_ref().map(Bound::from);
-        let bound = [(&layout).into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
+        let bound = [layout.into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
         let (indices, rays) = (&g.indices, &g.rays);
         let bind_group = g.bind_group.get(&bound, || {
             device.create_bind_group(
                 "caustic_volume_build_bind_group",
-                &layout,
+                layout,
                 &BindGroupEntries::with_indices((
                     (0, jobs.clone()),
                     (1, BindingResource::Buffer(vertices.binding())),

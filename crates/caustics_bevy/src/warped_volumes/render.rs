@@ -8,7 +8,7 @@ use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::Caustics;
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
-use crate::irradiance::kept_bind_group::{KeptBindGroup, write_changed};
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
 use bevy::prelude::*;
@@ -288,11 +288,11 @@ const RECEIVER_CENTRE_FORMAT: TextureFormat = TextureFormat::R32Float;
 /// pass that adds what it splatted to the irradiance buffer.
 #[derive(Resource)]
 pub(super) struct SurfacePipelines {
-    depth_layouts: [BindGroupLayoutDescriptor; 2],
+    depth_layouts: [KeptLayout; 2],
     pub depth_copy: [CachedRenderPipelineId; 2],
-    pub splat_layouts: [BindGroupLayoutDescriptor; 2],
+    splat_layouts: [KeptLayout; 2],
     pub splat: [CachedComputePipelineId; 2],
-    resolve_layout: BindGroupLayoutDescriptor,
+    resolve_layout: KeptLayout,
     pub resolve: CachedRenderPipelineId,
 }
 
@@ -413,14 +413,14 @@ fn prepare_buffers(
 /// single-sampled and a multisampled prepass), and the shader.
 #[derive(Resource)]
 pub(super) struct VolumesPipeline {
-    pub surface_layouts: [BindGroupLayoutDescriptor; 2],
-    pub volumetric_layouts: [BindGroupLayoutDescriptor; 2],
+    surface_layouts: [KeptLayout; 2],
+    volumetric_layouts: [KeptLayout; 2],
     shader: Handle<Shader>,
 }
 
 impl VolumesPipeline {
     /// The layout a pass draws with.
-    pub fn layout(&self, volumetric: bool, multisampled: bool) -> &BindGroupLayoutDescriptor {
+    pub fn layout(&self, volumetric: bool, multisampled: bool) -> &KeptLayout {
         let layouts = if volumetric { &self.volumetric_layouts } else { &self.surface_layouts };
         &layouts[multisampled as usize]
     }
@@ -504,6 +504,7 @@ fn init_pipeline(
             ..default()
         })
     });
+    let (surface_layouts, volumetric_layouts) = (surface_layouts.map(KeptLayout::new), volumetric_layouts.map(KeptLayout::new));
     commands.insert_resource(VolumesPipeline { surface_layouts, volumetric_layouts, shader });
     let layout = BindGroupLayoutDescriptor::new(
         "caustic_shafts_layout",
@@ -519,7 +520,7 @@ fn init_pipeline(
         ..default()
     });
     commands.insert_resource(ShaftUpsamplePipeline {
-        layout,
+        layout: KeptLayout::new(layout),
         sampler,
         shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "upsample.wgsl"),
         fullscreen: fullscreen.clone(),
@@ -570,8 +571,7 @@ fn init_pipeline(
     // A projection into the irradiance buffer, drawn only where the view sees a
     // surface (its depth test against the receiver depth).
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "splat_resolve.wgsl");
-    let layouts = [resolve_layout.clone(), resolve_layout.clone()];
-    let mut descriptor = crate::irradiance::projection_pipeline("caustic_volumes_resolve_pipeline", &layouts, &shader, &fullscreen, false);
+    let mut descriptor = crate::irradiance::projection_pipeline("caustic_volumes_resolve_pipeline", &resolve_layout, &shader, &fullscreen, false);
     if let Some(fragment) = descriptor.fragment.as_mut() {
         fragment.shader_defs = splat_defs().to_vec();
     }
@@ -583,6 +583,8 @@ fn init_pipeline(
         bias: default(),
     });
     let resolve = cache.queue_render_pipeline(descriptor);
+    let (depth_layouts, splat_layouts) = (depth_layouts.map(KeptLayout::new), splat_layouts.map(KeptLayout::new));
+    let resolve_layout = KeptLayout::new(resolve_layout);
     commands.insert_resource(SurfacePipelines { depth_layouts, depth_copy, splat_layouts, splat, resolve_layout, resolve });
 }
 
@@ -612,7 +614,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         let additive = BlendComponent { src_factor, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some(label.into()),
-            layout: vec![self.layout(key.volumetric, key.multisampled).clone()],
+            layout: vec![self.layout(key.volumetric, key.multisampled).descriptor.clone()],
             vertex: VertexState {
                 shader: self.shader.clone(),
                 shader_defs: shader_defs.clone(),
@@ -740,7 +742,7 @@ fn prepare_shaft_textures(
             Some(shafts) => shafts.bind_group.clone(),
             None => device.create_bind_group(
                 "caustic_shafts_bind_group",
-                &cache.get_bind_group_layout(&upsample.layout),
+                upsample.layout.get(&cache),
                 &BindGroupEntries::sequential((&texture.default_view, &upsample.sampler)),
             ),
         };
@@ -755,7 +757,7 @@ fn prepare_shaft_textures(
 #[expect(clippy::too_many_arguments)]
 fn prepare_surface_targets(
     mut commands: Commands,
-    views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa, Option<&ViewSurfaceTargets>)>,
+    mut views: Query<(Entity, &ViewCausticIrradiance, &ViewPrepassTextures, &Msaa, Option<&mut ViewSurfaceTargets>)>,
     others: Query<Entity, (With<ViewSurfaceTargets>, Without<ViewCausticIrradiance>)>,
     (pipelines, volume_layouts): (Res<SurfacePipelines>, Res<VolumesPipeline>),
     buffers: Res<VolumeBuffers>,
@@ -767,7 +769,7 @@ fn prepare_surface_targets(
     for entity in &others {
         commands.entity(entity).remove::<ViewSurfaceTargets>();
     }
-    for (entity, irradiance, prepass, msaa, targets) in &views {
+    for (entity, irradiance, prepass, msaa, mut kept_targets) in &mut views {
         let (Some(depth), Some(normal), Some(volumes), Some(counters), Some(settings), Some(view_buffer), Some(view_binding)) = (
             prepass.depth_view(),
             prepass.normal_view(),
@@ -788,10 +790,11 @@ fn prepare_surface_targets(
         let texture = target("caustic_receiver_depth", RECEIVER_DEPTH_FORMAT, TextureUsages::RENDER_ATTACHMENT);
         let centre = target("caustic_receiver_centre", RECEIVER_CENTRE_FORMAT, TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING);
         let multisampled = (msaa.samples() > 1) as usize;
-        let [mut kept_depth, mut kept_resolve, mut kept_splat, mut kept_draw] = targets.map(|t| t.kept.clone()).unwrap_or_default();
-        let layout = cache.get_bind_group_layout(&pipelines.depth_layouts[multisampled]);
-        let depth_bind_group = kept_depth.get(&[(&layout).into(), view_buffer.into(), depth.into(), normal.into()], || {
-            device.create_bind_group("caustic_receiver_depth_bind_group", &layout, &BindGroupEntries::sequential((view_binding.clone(), depth, normal)))
+        let [mut kept_depth, mut kept_resolve, mut kept_splat, mut kept_draw] = kept_targets.as_mut().map(|t| std::mem::take(&mut t.kept)).unwrap_or_default();
+        let targets = kept_targets.as_deref();
+        let layout = pipelines.depth_layouts[multisampled].get(&cache);
+        let depth_bind_group = kept_depth.get(&[layout.into(), view_buffer.into(), depth.into(), normal.into()], || {
+            device.create_bind_group("caustic_receiver_depth_bind_group", layout, &BindGroupEntries::sequential((view_binding.clone(), depth, normal)))
         });
         let pixels = u64::from(irradiance.region().1.element_product());
         let splatted_size = 3 * 4 * pixels.max(1);
@@ -805,13 +808,13 @@ fn prepare_surface_targets(
             Some(t) => t.large.clone(),
             None => buffer("caustic_volumes_large", large_size, BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC),
         };
-        let layout = cache.get_bind_group_layout(&pipelines.resolve_layout);
-        let resolve_bind_group = kept_resolve.get(&[(&layout).into(), view_buffer.into(), (&splatted).into()], || {
-            device.create_bind_group("caustic_volumes_resolve_bind_group", &layout, &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())))
+        let layout = pipelines.resolve_layout.get(&cache);
+        let resolve_bind_group = kept_resolve.get(&[layout.into(), view_buffer.into(), (&splatted).into()], || {
+            device.create_bind_group("caustic_volumes_resolve_bind_group", layout, &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())))
         });
-        let layout = cache.get_bind_group_layout(&pipelines.splat_layouts[multisampled]);
+        let layout = pipelines.splat_layouts[multisampled].get(&cache);
         let bound = [
-            (&layout).into(),
+            layout.into(),
             view_buffer.into(),
             volumes.into(),
             settings.into(),
@@ -824,7 +827,7 @@ fn prepare_surface_targets(
         let splat_bind_group = kept_splat.get(&bound, || {
             device.create_bind_group(
                 "caustic_volumes_splat_bind_group",
-                &layout,
+                layout,
                 &BindGroupEntries::sequential((
                     view_binding.clone(),
                     volumes.as_entire_binding(),
@@ -837,15 +840,21 @@ fn prepare_surface_targets(
                 )),
             )
         });
-        let layout = cache.get_bind_group_layout(volume_layouts.layout(false, multisampled == 1));
-        let bound = [(&layout).into(), view_buffer.into(), volumes.into(), settings.into(), (&centre.default_view).into(), normal.into(), (&large).into()];
+        let layout = volume_layouts.layout(false, multisampled == 1).get(&cache);
+        let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), (&centre.default_view).into(), normal.into(), (&large).into()];
         let draw_bind_group = kept_draw.get(&bound, || {
             let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
-            device.create_bind_group("caustic_volumes_surface_bind_group", &layout, &BindGroupEntries::sequential(entries))
+            device.create_bind_group("caustic_volumes_surface_bind_group", layout, &BindGroupEntries::sequential(entries))
         });
         let kept = [kept_depth, kept_resolve, kept_splat, kept_draw];
         let targets = ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, draw_bind_group, kept };
-        commands.entity(entity).insert(targets);
+        // Replaced in place: no command a frame for a view that keeps its targets.
+        match kept_targets {
+            Some(mut kept) => *kept = targets,
+            None => {
+                commands.entity(entity).insert(targets);
+            }
+        }
     }
 }
 
@@ -854,7 +863,7 @@ fn prepare_surface_targets(
 #[expect(clippy::too_many_arguments)]
 fn prepare_shaft_bind_groups(
     mut commands: Commands,
-    views: Query<(Entity, &ViewVolumePipelines, &ViewPrepassTextures, Option<&ViewShaftBindGroup>), With<ViewSeesMedium>>,
+    mut views: Query<(Entity, &ViewVolumePipelines, &ViewPrepassTextures, Option<&mut ViewShaftBindGroup>), With<ViewSeesMedium>>,
     others: Query<Entity, (With<ViewShaftBindGroup>, Without<ViewSeesMedium>)>,
     (layouts, march): (Res<VolumesPipeline>, Res<BeamGridPipelines>),
     (buffers, grids): (Res<VolumeBuffers>, Res<beam_grid::BeamGridBuffers>),
@@ -865,29 +874,29 @@ fn prepare_shaft_bind_groups(
     for entity in &others {
         commands.entity(entity).remove::<ViewShaftBindGroup>();
     }
-    for (entity, pipelines, prepass, kept) in &views {
+    for (entity, pipelines, prepass, mut shafts) in &mut views {
         let (Some(depth), Some(view_buffer), Some(view_binding), Some(settings)) =
             (prepass.depth_view(), view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), buffers.settings.buffer())
         else {
             commands.entity(entity).remove::<ViewShaftBindGroup>();
             continue;
         };
-        let mut kept = kept.map(|k| k.kept.clone()).unwrap_or_default();
+        let mut kept = shafts.as_mut().map(|s| std::mem::take(&mut s.kept)).unwrap_or_default();
         let bind_group = match (pipelines.shafts, prepass.normal_view(), buffers.volumes.as_ref(), grids.grids.buffer(), grids.cells.as_ref()) {
             (ShaftPipeline::Exact(_), Some(normal), Some(volumes), ..) => {
-                let layout = cache.get_bind_group_layout(layouts.layout(true, pipelines.multisampled));
-                let bound = [(&layout).into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
+                let layout = layouts.layout(true, pipelines.multisampled).get(&cache);
+                let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
                 kept.get(&bound, || {
                     let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), depth, normal);
-                    device.create_bind_group("caustic_volumes_bind_group", &layout, &BindGroupEntries::sequential(entries))
+                    device.create_bind_group("caustic_volumes_bind_group", layout, &BindGroupEntries::sequential(entries))
                 })
             }
             (ShaftPipeline::March(_), .., Some(grid), Some(cells)) => {
-                let layout = cache.get_bind_group_layout(&march.march_layouts[pipelines.multisampled as usize]);
-                let bound = [(&layout).into(), view_buffer.into(), settings.into(), grid.into(), cells.into(), depth.into()];
+                let layout = march.march_layouts[pipelines.multisampled as usize].get(&cache);
+                let bound = [layout.into(), view_buffer.into(), settings.into(), grid.into(), cells.into(), depth.into()];
                 kept.get(&bound, || {
                     let entries = (view_binding.clone(), settings.as_entire_binding(), grid.as_entire_binding(), cells.as_entire_binding(), depth);
-                    device.create_bind_group("caustic_shaft_march_bind_group", &layout, &BindGroupEntries::sequential(entries))
+                    device.create_bind_group("caustic_shaft_march_bind_group", layout, &BindGroupEntries::sequential(entries))
                 })
             }
             _ => {
@@ -895,14 +904,19 @@ fn prepare_shaft_bind_groups(
                 continue;
             }
         };
-        commands.entity(entity).insert(ViewShaftBindGroup { bind_group, kept });
+        match shafts {
+            Some(mut shafts) => *shafts = ViewShaftBindGroup { bind_group, kept },
+            None => {
+                commands.entity(entity).insert(ViewShaftBindGroup { bind_group, kept });
+            }
+        }
     }
 }
 
 /// The fullscreen pass that spreads a view's shaft texture over its image.
 #[derive(Resource)]
 pub(super) struct ShaftUpsamplePipeline {
-    layout: BindGroupLayoutDescriptor,
+    layout: KeptLayout,
     sampler: Sampler,
     shader: Handle<Shader>,
     fullscreen: FullscreenShader,
@@ -922,7 +936,7 @@ impl SpecializedRenderPipeline for ShaftUpsamplePipeline {
         let additive = BlendComponent { src_factor: BlendFactor::Constant, dst_factor: BlendFactor::One, operation: BlendOperation::Add };
         RenderPipelineDescriptor {
             label: Some("caustic_shaft_upsample_pipeline".into()),
-            layout: vec![self.layout.clone()],
+            layout: vec![self.layout.descriptor.clone()],
             vertex: self.fullscreen.to_vertex_state(),
             fragment: Some(FragmentState {
                 shader: self.shader.clone(),
