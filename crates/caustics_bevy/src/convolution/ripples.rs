@@ -133,7 +133,14 @@ pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
     app.add_systems(
         Update,
-        (timed(&cpu, configure_pools), timed(&cpu, replay_impulses), timed(&cpu, drop_pebbles), timed(&cpu, animate_pools)).chain(),
+        (
+            // Only in frames where a pool's settings change or go.
+            timed(&cpu, configure_pools).run_if(any_match_filter::<Changed<PoolRipples>>.or_else(any_component_removed::<PoolRipples>)),
+            timed(&cpu, replay_impulses),
+            timed(&cpu, drop_pebbles),
+            timed(&cpu, animate_pools),
+        )
+            .chain(),
     );
 }
 

@@ -84,7 +84,16 @@ pub struct CausticMapPlan {
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<CausticMapPlan>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, plan_caustic_maps).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene));
+        .add_systems(
+            PostUpdate,
+            crate::cpu_time::timed(&cpu, plan_caustic_maps).run_if(maps_wanted).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
+        );
+}
+
+/// Whether the maps have a plan to make or to clear: a generator drawn by them, or a
+/// plan that still holds one. A scene without them spends nothing on their plan.
+fn maps_wanted(choices: Query<&CausticTechniqueChoice>, plan: Res<CausticMapPlan>) -> bool {
+    !plan.generators.is_empty() || !plan.views.is_empty() || choices.iter().any(|c| c.technique() == CausticTechnique::HierarchicalMaps)
 }
 
 /// The occluders' BVH, by `occluders` of [`CausticMapPlan`], for the shadow test.

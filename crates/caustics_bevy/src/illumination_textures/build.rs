@@ -81,7 +81,21 @@ pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
     app.init_resource::<LightTransportTables>()
         .init_resource::<IlluminationFrames>()
-        .add_systems(PostUpdate, crate::cpu_time::timed(&cpu, set_up_planes).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene));
+        .init_resource::<BuildState>()
+        .add_systems(
+            PostUpdate,
+            crate::cpu_time::timed(&cpu, set_up_planes).run_if(planes_wanted).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
+        );
+}
+
+/// Whether the planes have work or something to clear: a generator drawn by them, a
+/// build under way or asked for, or frames that still hold one. A scene without them
+/// spends nothing on their set-up.
+fn planes_wanted(choices: Query<&CausticTechniqueChoice>, frames: Res<IlluminationFrames>, state: Res<BuildState>) -> bool {
+    state.pending
+        || state.running.is_some()
+        || !frames.frames.is_empty()
+        || choices.iter().any(|c| c.technique() == CausticTechnique::IlluminationTextures)
 }
 
 /// One generator as the build reads it.
@@ -116,7 +130,8 @@ struct Inputs {
     settings: Option<IlluminationTexturesSettings>,
 }
 
-#[derive(Default)]
+/// The set-up's state between frames.
+#[derive(Resource, Default)]
 struct BuildState {
     last: Inputs,
     /// Something changed since the running build started.
@@ -145,7 +160,7 @@ fn set_up_planes(
     mut tables: ResMut<LightTransportTables>,
     mut frames: ResMut<IlluminationFrames>,
     mut active: ResMut<ActiveCausticTechniques>,
-    mut state: Local<BuildState>,
+    mut state: ResMut<BuildState>,
     (cpu, device, budget, mut bvhs): (Res<crate::CausticCpuTime>, Option<Res<RenderDevice>>, Res<CausticGpuBudget>, ResMut<MeshBvhs>),
 ) {
     let core_settings = match settings.core() {
