@@ -164,6 +164,17 @@ pub struct InvalidCausticParams(pub ParamError);
 /// Entities whose generator or medium was added or changed since the last check.
 type ParamsChanged = Or<(Changed<CausticGenerator>, Changed<ParticipatingMedium>)>;
 
+/// Whether [`validate_caustic_params`] has anything to check this frame: a generator
+/// or medium added, changed or removed.
+pub(crate) fn params_may_change(
+    changed: Query<(), ParamsChanged>,
+    mut removed_generators: RemovedComponents<CausticGenerator>,
+    mut removed_media: RemovedComponents<ParticipatingMedium>,
+) -> bool {
+    let removed = removed_generators.read().count() + removed_media.read().count() > 0;
+    removed || !changed.is_empty()
+}
+
 /// Checks generators and media when they are added, changed or removed, per entity (a
 /// water body may be both): an invalid one gets [`InvalidCausticParams`] and one
 /// warning; a fixed one, or one that no longer has either component, loses the marker.

@@ -96,7 +96,13 @@ impl Plugin for CausticsPlugin {
             .init_resource::<CausticGpuBudget>()
             .add_plugins(bevy::render::extract_resource::ExtractResourcePlugin::<CausticGpuBudget>::default())
             .add_systems(Update, timed(&cpu, gltf_tagging::tag_from_materials))
-            .add_systems(PostUpdate, (timed(&cpu, components::validate_caustic_params), timed(&cpu, lights::warn_unsupported_lights)))
+            .add_systems(
+                PostUpdate,
+                (
+                    timed(&cpu, components::validate_caustic_params).run_if(timed(&cpu, components::params_may_change)),
+                    timed(&cpu, lights::warn_unsupported_lights),
+                ),
+            )
             .configure_sets(
                 PostUpdate,
                 CausticSystems::ReadScene

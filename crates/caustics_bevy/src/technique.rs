@@ -110,6 +110,7 @@ pub(crate) fn build(app: &mut App) {
     app.init_resource::<AvailableCausticTechniques>().add_systems(
         PostUpdate,
         crate::cpu_time::timed(&cpu, choose_techniques)
+            .run_if(crate::cpu_time::timed(&cpu, choices_may_change))
             .after(crate::components::validate_caustic_params)
             .after(bevy::transform::TransformSystems::Propagate)
             .after(bevy::camera::visibility::VisibilitySystems::CalculateBounds)
@@ -148,6 +149,50 @@ type OceanMarker = NeverPresent;
 #[cfg(any(not(feature = "convolution"), not(feature = "ocean")))]
 #[derive(Component)]
 pub struct NeverPresent;
+
+/// Generators whose choice may differ from last frame's: added, changed, moved, given
+/// a new mesh or bounds, found valid or invalid, made a pool or an ocean.
+type ChangedGenerators = (
+    With<CausticGenerator>,
+    Or<(
+        Changed<CausticGenerator>,
+        Changed<Mesh3d>,
+        Changed<GlobalTransform>,
+        Changed<Aabb>,
+        Changed<InvalidCausticParams>,
+        Changed<PoolMarker>,
+        Changed<OceanMarker>,
+    )>,
+);
+
+/// Media that may have moved a generator in or out of one.
+type ChangedMedia = (With<ParticipatingMedium>, Or<(Changed<ParticipatingMedium>, Changed<GlobalTransform>, Changed<InheritedVisibility>)>);
+
+/// What was taken from an entity since the last frame that a choice reads.
+type Removals<'w, 's> = (
+    RemovedComponents<'w, 's, CausticGenerator>,
+    RemovedComponents<'w, 's, CausticTechniqueChoice>,
+    RemovedComponents<'w, 's, InvalidCausticParams>,
+    RemovedComponents<'w, 's, ParticipatingMedium>,
+    RemovedComponents<'w, 's, PoolMarker>,
+    RemovedComponents<'w, 's, OceanMarker>,
+);
+
+/// Whether [`choose_techniques`] may choose differently this frame: anything it reads
+/// changed, went, or is a mesh event (a mesh loaded, modified or removed). A scene
+/// that holds still spends nothing on the choice.
+fn choices_may_change(
+    generators: Query<(), ChangedGenerators>,
+    media: Query<(), ChangedMedia>,
+    mut removed: Removals,
+    mut mesh_events: MessageReader<AssetEvent<Mesh>>,
+    available: Res<AvailableCausticTechniques>,
+) -> bool {
+    let (a, b, c, d, e, f) = &mut removed;
+    let removed = a.read().count() + b.read().count() + c.read().count() + d.read().count() + e.read().count() + f.read().count() > 0;
+    let meshes = mesh_events.read().count() > 0;
+    removed || meshes || available.is_changed() || !generators.is_empty() || !media.is_empty()
+}
 
 /// The valid participating media, for whether a generator lies in one.
 type Media<'w, 's> =

@@ -135,7 +135,7 @@ pub(super) fn build(app: &mut App) {
         Update,
         (
             // Only in frames where a pool's settings change or go.
-            timed(&cpu, configure_pools).run_if(any_match_filter::<Changed<PoolRipples>>.or_else(any_component_removed::<PoolRipples>)),
+            timed(&cpu, configure_pools).run_if(timed(&cpu, any_match_filter::<Changed<PoolRipples>>.or_else(any_component_removed::<PoolRipples>))),
             timed(&cpu, replay_impulses),
             timed(&cpu, drop_pebbles),
             timed(&cpu, animate_pools),

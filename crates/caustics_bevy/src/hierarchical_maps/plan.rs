@@ -86,7 +86,7 @@ pub(super) fn build(app: &mut App) {
     app.init_resource::<CausticMapPlan>()
         .add_systems(
             PostUpdate,
-            crate::cpu_time::timed(&cpu, plan_caustic_maps).run_if(maps_wanted).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
+            crate::cpu_time::timed(&cpu, plan_caustic_maps).run_if(crate::cpu_time::timed(&cpu, maps_wanted)).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
         );
 }
 

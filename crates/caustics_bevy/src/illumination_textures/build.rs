@@ -84,7 +84,7 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<BuildState>()
         .add_systems(
             PostUpdate,
-            crate::cpu_time::timed(&cpu, set_up_planes).run_if(planes_wanted).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
+            crate::cpu_time::timed(&cpu, set_up_planes).run_if(crate::cpu_time::timed(&cpu, planes_wanted)).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
         );
 }
 
