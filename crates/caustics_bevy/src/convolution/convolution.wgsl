@@ -39,22 +39,31 @@ fn height(c: i32, r: i32) -> f32 {
     return heights[texel_index(u32(fold(c, pool.columns).x), u32(fold(r, pool.rows).x))];
 }
 
-// `RippleSettings::impulse_height` summed over the impulses' images (`PoolRipples::height_at`).
+// `RippleSettings::impulse_height` summed over the impulses and their nine wall images
+// (`mirror_images`, §4.3), in `PoolRipples::height_at`'s order.
 @compute @workgroup_size(8, 8, 1)
 fn ripple_heights(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= pool.columns || id.y >= pool.rows {
         return;
     }
     let point = (vec2<f32>(id.xy) + 0.5) * pool.cell_size;
+    let size = vec2(f32(pool.columns), f32(pool.rows)) * pool.cell_size;
     var h = 0.0;
-    for (var i = 0u; i < waves.image_count; i++) {
-        let image = waves.images[i];
-        let elapsed = waves.time - image.w;
+    for (var i = 0u; i < waves.impulse_count; i++) {
+        let impulse = waves.impulses[i];
+        let elapsed = waves.time - impulse.w;
+        if elapsed <= 0.0 {
+            continue;
+        }
         let front = pool.angular_frequency * elapsed / pool.wave_number;
-        let distance = length(point - image.xy);
-        if elapsed > 0.0 && distance <= front {
-            let envelope = -pool.front_damping * (front - distance) - pool.time_damping * elapsed;
-            h += image.z * exp(envelope) * sin(pool.wave_number * distance - pool.angular_frequency * elapsed);
+        let xs = vec3(impulse.x, -impulse.x, 2.0 * size.x - impulse.x);
+        let zs = vec3(impulse.y, -impulse.y, 2.0 * size.y - impulse.y);
+        for (var k = 0u; k < 9u; k++) {
+            let distance = length(point - vec2(xs[k % 3u], zs[k / 3u]));
+            if distance <= front {
+                let envelope = -pool.front_damping * (front - distance) - pool.time_damping * elapsed;
+                h += impulse.z * exp(envelope) * sin(pool.wave_number * distance - pool.angular_frequency * elapsed);
+            }
         }
     }
     heights[texel_index(id.x, id.y)] = h;

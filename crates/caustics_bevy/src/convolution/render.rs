@@ -25,7 +25,6 @@ use bevy::render::{
     sync_world::MainEntity,
     view::{ViewUniform, ViewUniformOffset, ViewUniforms},
 };
-use caustics_core::convolution::ripples::mirror_images;
 use std::sync::Arc;
 
 /// `Pool` in `types.wgsl`.
@@ -77,35 +76,34 @@ impl GpuPool {
 pub(super) struct GpuWaves {
     /// The pool's clock (s); zero for still water, whose heights do not depend on it.
     time: f32,
-    /// Live impulses × 9 wall images.
-    image_count: u32,
-    /// Every live impulse's nine wall images: x, z, strength, drop time; then zeros to
-    /// a power of two (one at least, as a binding may not be empty).
+    /// Live impulses.
+    impulse_count: u32,
+    /// Every live impulse: x, z, strength, drop time; then zeros to a power of two (one
+    /// at least, as a binding may not be empty). The shader adds each one's nine wall
+    /// images (§4.3).
     #[shader(size(runtime))]
-    images: Vec<Vec4>,
+    impulses: Vec<Vec4>,
 }
 
 impl GpuWaves {
     /// Whether no impulse is live.
     pub(super) fn still(&self) -> bool {
-        self.image_count == 0
+        self.impulse_count == 0
     }
 }
 
 /// `surface`'s waves at `time` (s).
 pub(super) fn ripple_waves(surface: &PoolSurface, time: f32) -> GpuWaves {
-    let ripples = surface.ripples();
-    let mut images: Vec<Vec4> = ripples
-        .impulses()
-        .iter()
-        .flat_map(|i| mirror_images(i.position, ripples.size()).map(|p| Vec4::new(p.x as f32, p.y as f32, i.strength, i.time)))
-        .collect();
-    let count = images.len() as u32;
-    // Room to the next power of two (one image at least, as a binding may not be empty),
-    // so that a pool's buffer grows a few times as the live impulses add up, not at
-    // every new one.
-    images.resize(images.len().max(1).next_power_of_two(), Vec4::ZERO);
-    GpuWaves { time: if count == 0 { 0.0 } else { time }, image_count: count, images }
+    let live = surface.ripples().impulses();
+    // Room to the next power of two (one impulse at least, as a binding may not be
+    // empty), so that a pool's buffer grows a few times as the live impulses add up,
+    // not at every new one.
+    let room = live.len().max(1).next_power_of_two();
+    let mut impulses = Vec::with_capacity(room);
+    impulses.extend(live.iter().map(|i| Vec4::new(i.position.x, i.position.y, i.strength, i.time)));
+    let count = impulses.len() as u32;
+    impulses.resize(room, Vec4::ZERO);
+    GpuWaves { time: if count == 0 { 0.0 } else { time }, impulse_count: count, impulses }
 }
 
 /// Render world: one pool to draw this frame.

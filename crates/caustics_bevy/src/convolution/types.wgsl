@@ -30,6 +30,6 @@ struct Pool {
 // The water's waves at the frame's time (`GpuWaves` in `render.rs`).
 struct Waves {
     time: f32,
-    image_count: u32,               // impulses × 9 wall images
-    images: array<vec4<f32>>,       // x, z, strength, drop time
+    impulse_count: u32,
+    impulses: array<vec4<f32>>,     // x, z, strength, drop time
 }

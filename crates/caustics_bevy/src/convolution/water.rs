@@ -4,7 +4,7 @@
 //! (§4.3, as for the convolution) and `write_vertices` writes the surface and its
 //! normals over the water mesh in Bevy's vertex buffer, before anything reads or draws
 //! it (the caustic volumes' build included). The CPU uploads the waves (clock and
-//! images) once a frame; it evaluates no height and uploads no mesh.
+//! impulses) once a frame; it evaluates no height and uploads no mesh.
 
 use super::PoolSurface;
 use super::render::{GpuPool, GpuWaves, ripple_waves, write_waves};
@@ -26,7 +26,7 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue},
 };
 
-/// One pool to move this frame: its water mesh, texels and waves, and the images.
+/// One pool to move this frame: its water mesh, texels and waves, and its impulses.
 struct ExtractedWater {
     entity: Entity,
     mesh: AssetId<Mesh>,
