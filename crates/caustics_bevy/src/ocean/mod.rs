@@ -132,7 +132,7 @@ impl Plugin for OceanPlugin {
         let cpu = crate::CausticCpuTime::of(app).main;
         // Left out of the frame while no entity has an ocean or the waves of one.
         let seas = any_with_component::<Ocean>.or_else(any_with_component::<OceanWaves>);
-        app.register_type::<Ocean>().add_systems(Update, (timed(&cpu, draw_waves), timed(&cpu, animate_oceans)).chain().run_if(seas));
+        app.register_type::<Ocean>().add_systems(Update, (timed(&cpu, draw_waves), timed(&cpu, animate_oceans)).chain().run_if(timed(&cpu, seas)));
         if app.get_sub_app(bevy::render::RenderApp).is_some() {
             app.insert_resource(GpuWaves);
             crate::mesh_vertices::build(app);
