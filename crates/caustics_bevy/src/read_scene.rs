@@ -76,7 +76,9 @@ type OccluderChanged = Or<(
     Added<CausticReceiver>,
     Added<bevy::light::NotShadowCaster>,
 )>;
-type GeneratorChanged = Or<(
+/// A generator moved, changed, got a new mesh, choice or visibility, or began to move
+/// on the GPU.
+pub(crate) type GeneratorChanged = Or<(
     Changed<GlobalTransform>,
     Changed<Mesh3d>,
     Changed<CausticGenerator>,

@@ -7,7 +7,7 @@
 //! without a warning.
 
 use crate::components::{CausticGenerator, CausticTechnique, InvalidCausticParams, ParticipatingMedium};
-use crate::read_scene::{core_mesh, world_aabb};
+use crate::read_scene::{GeneratorChanged, core_mesh, world_aabb};
 use bevy::camera::primitives::Aabb;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -150,19 +150,12 @@ type OceanMarker = NeverPresent;
 #[derive(Component)]
 pub struct NeverPresent;
 
-/// Generators whose choice may differ from last frame's: added, changed, moved, given
-/// a new mesh or bounds, found valid or invalid, made a pool or an ocean.
+/// Generators whose choice may differ from last frame's: changed as the techniques
+/// read them ([`GeneratorChanged`]), given new bounds, found invalid, made a pool or an
+/// ocean.
 type ChangedGenerators = (
     With<CausticGenerator>,
-    Or<(
-        Changed<CausticGenerator>,
-        Changed<Mesh3d>,
-        Changed<GlobalTransform>,
-        Changed<Aabb>,
-        Changed<InvalidCausticParams>,
-        Changed<PoolMarker>,
-        Changed<OceanMarker>,
-    )>,
+    Or<(GeneratorChanged, Changed<Aabb>, Changed<InvalidCausticParams>, Changed<PoolMarker>, Changed<OceanMarker>)>,
 );
 
 /// Media that may have moved a generator in or out of one.
