@@ -6,7 +6,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
-use crate::irradiance::kept_bind_group::{KeptLayout, write_changed};
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -128,7 +128,8 @@ struct PoolBuffers {
     heights: Buffer,
     terms: Buffer,
     irradiance: Buffer,
-    compute: Option<BindGroup>,
+    /// The compute passes' bind group, kept while it binds the same buffers.
+    compute: KeptBindGroup,
     /// Whether the compute passes run this frame: not while the water stays still and
     /// `still` already holds its floor.
     computes: bool,
@@ -147,7 +148,7 @@ impl PoolBuffers {
             heights: texel_buffer(device, "caustic_pool_heights", texels, 1),
             terms: texel_buffer(device, "caustic_pool_terms", texels, 4),
             irradiance: texel_buffer(device, "caustic_pool_floor_irradiance", texels, 1),
-            compute: None,
+            compute: KeptBindGroup::default(),
             computes: true,
             still: None,
         }
@@ -384,23 +385,25 @@ fn prepare_buffers(
             buffers.taps.write_buffer(&device, &queue);
             buffers.taps_written = Some(pool.taps.clone());
         }
-        let (Some(uniform), Some(images), Some(taps)) =
-            (buffers.uniform.binding(), buffers.waves.binding(), buffers.taps.binding())
-        else {
+        let (Some(uniform), Some(images), Some(taps)) = (buffers.uniform.buffer(), buffers.waves.buffer(), buffers.taps.buffer()) else {
             continue;
         };
-        buffers.compute = Some(device.create_bind_group(
-            "pool_convolution_bind_group",
-            pipelines.compute_layout.get(&cache),
-            &BindGroupEntries::sequential((
-                uniform,
-                images,
-                taps,
-                buffers.heights.as_entire_binding(),
-                buffers.terms.as_entire_binding(),
-                buffers.irradiance.as_entire_binding(),
-            )),
-        ));
+        let layout = pipelines.compute_layout.get(&cache);
+        let (heights, terms, irradiance) = (&buffers.heights, &buffers.terms, &buffers.irradiance);
+        buffers.compute.get(&[layout.into(), uniform.into(), images.into(), taps.into()], || {
+            device.create_bind_group(
+                "pool_convolution_bind_group",
+                layout,
+                &BindGroupEntries::sequential((
+                    uniform.as_entire_binding(),
+                    images.as_entire_binding(),
+                    taps.as_entire_binding(),
+                    heights.as_entire_binding(),
+                    terms.as_entire_binding(),
+                    irradiance.as_entire_binding(),
+                )),
+            )
+        });
         // The compute node runs this frame's passes once every kernel is ready.
         if pipelines.compute.iter().all(|&id| cache.get_compute_pipeline(id).is_some()) {
             buffers.still = still;
@@ -477,7 +480,7 @@ fn compute_floor_irradiance(
         return;
     };
     // No pools: no pass (and no span in the GPU timings).
-    if gpu.0.values().all(|buffers| buffers.compute.is_none() || !buffers.computes) {
+    if gpu.0.values().all(|buffers| buffers.compute.current().is_none() || !buffers.computes) {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();
@@ -485,7 +488,7 @@ fn compute_floor_irradiance(
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/convolution");
     for buffers in gpu.0.values().filter(|buffers| buffers.computes) {
-        let Some(bind_group) = &buffers.compute else { continue };
+        let Some(bind_group) = buffers.compute.current() else { continue };
         let uniform = buffers.uniform.get();
         pass.set_bind_group(0, bind_group, &[]);
         for pipeline in &kernels {
@@ -499,7 +502,7 @@ fn compute_floor_irradiance(
 
 /// Adds each pool's floor irradiance where the view sees its floor.
 fn project_floor_irradiance(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<ConvolutionPipelines>)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<ConvolutionPipelines>)>,
     gpu: Res<PoolGpu>,
     pipelines: Res<ConvolutionPipelines>,
     cache: Res<PipelineCache>,
@@ -507,20 +510,23 @@ fn project_floor_irradiance(
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
-    let bind_groups: Vec<BindGroup> = gpu
-        .0
-        .values()
-        .filter_map(|buffers| {
-            let uniform = buffers.uniform.binding()?;
-            Some(ctx.render_device().create_bind_group(
-                "pool_project_bind_group",
-                inputs.layout,
-                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, uniform, buffers.irradiance.as_entire_binding())),
-            ))
-        })
-        .collect();
+    let device = ctx.render_device().clone();
+    let bind_groups = pipeline.bind_groups(
+        &inputs,
+        gpu.0.values().filter_map(|buffers| {
+            let (uniform, binding) = (buffers.uniform.buffer()?, buffers.uniform.binding()?);
+            let make = || {
+                device.create_bind_group(
+                    "pool_project_bind_group",
+                    inputs.layout,
+                    &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, binding, buffers.irradiance.as_entire_binding())),
+                )
+            };
+            Some((vec![uniform.into(), (&buffers.irradiance).into()], make))
+        }),
+    );
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, ("pool_floor", "caustics/pool_floor", "pool floor"), &recorder);
 }
 

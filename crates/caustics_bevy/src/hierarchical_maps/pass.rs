@@ -133,7 +133,7 @@ pub(super) fn make_caustic_maps(
 
 /// Adds every light view's caustic irradiance where the view sees its receivers.
 pub(super) fn project_caustic_maps(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<CausticMapPipelines>)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<CausticMapPipelines>)>,
     gpu: Res<CausticMapsGpu>,
     pipelines: Res<CausticMapPipelines>,
     cache: Res<PipelineCache>,
@@ -141,23 +141,25 @@ pub(super) fn project_caustic_maps(
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, pipeline) = view.into_inner();
-    if gpu.generation.is_none() || gpu.views.is_empty() {
-        return;
-    }
+    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
-    let bind_groups: Vec<BindGroup> = gpu
-        .views
-        .iter()
-        .filter_map(|v| {
-            Some(ctx.render_device().create_bind_group(
-                "caustic_map_project_bind_group",
-                inputs.layout,
-                &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, v.uniform.binding()?, &v.receivers.1, v.resolved.as_entire_binding())),
-            ))
-        })
-        .collect();
+    let device = ctx.render_device().clone();
+    let views = gpu.views.iter().filter(|_| gpu.generation.is_some());
+    let bind_groups = pipeline.bind_groups(
+        &inputs,
+        views.filter_map(|v| {
+            let (uniform, binding) = (v.uniform.buffer()?, v.uniform.binding()?);
+            let make = || {
+                device.create_bind_group(
+                    "caustic_map_project_bind_group",
+                    inputs.layout,
+                    &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, binding, &v.receivers.1, v.resolved.as_entire_binding())),
+                )
+            };
+            Some((vec![uniform.into(), (&v.receivers.1).into(), (&v.resolved).into()], make))
+        }),
+    );
     let names = ("caustic_map_projection", "caustic_maps/projection", "caustic map projection");
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

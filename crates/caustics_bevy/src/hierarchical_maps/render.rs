@@ -4,7 +4,7 @@
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
-use crate::irradiance::kept_bind_group::KeptLayout;
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
@@ -416,6 +416,8 @@ pub(super) struct ViewMaps {
     pub(super) compute_bind_group: BindGroup,
     pub(super) dispatches: Vec<Dispatch>,
     pub(super) step_offsets: Vec<u32>,
+    /// The three bind groups, kept while they bind the same buffers and views.
+    kept: [KeptBindGroup; 3],
 }
 
 /// A mesh instance to draw into the light maps, with its pipelines.
@@ -846,6 +848,9 @@ fn prepare_maps(
     let (Some(generators), Some(occluders), Some(steps)) = (gpu.generators.binding(), gpu.occluders.binding(), gpu.steps.binding()) else {
         return;
     };
+    let (Some(generator_buffer), Some(occluder_buffer), Some(steps_buffer)) = (gpu.generators.buffer(), gpu.occluders.buffer(), gpu.steps.buffer()) else {
+        return;
+    };
     let Some(scratch) = gpu.scratch.as_ref() else { return };
     let map_layout = map_pipeline.layout.get(&cache);
     let compute_layout = pipelines.compute_layout.get(&cache);
@@ -853,55 +858,71 @@ fn prepare_maps(
     let mut views = std::mem::take(&mut gpu.views);
     views.truncate(plan.views.len());
     for (k, (uniform_value, (dispatches, step_offsets))) in uniforms.into_iter().zip(plans).enumerate() {
-        let (mut uniform, receivers, resolved) = match views.get_mut(k) {
+        let (mut uniform, receivers, resolved, mut kept) = match views.get_mut(k) {
             Some(existing) => (
                 std::mem::take(&mut existing.uniform),
                 (existing.receivers.0.clone(), existing.receivers.1.clone()),
                 existing.resolved.clone(),
+                std::mem::take(&mut existing.kept),
             ),
             None => (
                 UniformBuffer::default(),
                 target_texture(&device, "caustic_receiver_map", m, TextureFormat::R32Float),
                 storage(&device, "caustic_map_resolved", m as u64 * m as u64 * 4, BufferUsages::empty()),
+                default(),
             ),
         };
         uniform.set(uniform_value);
         uniform.set_label(Some("caustic_map_light_view"));
         uniform.write_buffer(&device, &queue);
-        let Some(view_binding) = uniform.binding() else { continue };
-        let map_group = |instances: BindingResource| {
-            device.create_bind_group("caustic_light_map_bind_group", map_layout, &BindGroupEntries::sequential((view_binding.clone(), instances)))
+        let (Some(view_binding), Some(view_buffer)) = (uniform.binding(), uniform.buffer()) else { continue };
+        let [kept_generators, kept_occluders, kept_compute] = &mut kept;
+        let map_group = |kept: &mut KeptBindGroup, instances: &Buffer, binding: &BindingResource| {
+            kept.get(&[map_layout.into(), view_buffer.into(), instances.into()], || {
+                device.create_bind_group("caustic_light_map_bind_group", map_layout, &BindGroupEntries::sequential((view_binding.clone(), binding.clone())))
+            })
         };
-        let compute_bind_group = device.create_bind_group(
-            "caustic_map_compute_bind_group",
-            compute_layout,
-            &BindGroupEntries::sequential((
-                view_binding.clone(),
-                steps.clone(),
-                &scratch.front.1,
-                &scratch.back.1,
-                &receivers.1,
-                scratch.photon_uv.as_entire_binding(),
-                scratch.photon_flux.as_entire_binding(),
-                scratch.pyramid.as_entire_binding(),
-                scratch.lists[0].as_entire_binding(),
-                scratch.lists[1].as_entire_binding(),
-                scratch.lists[2].as_entire_binding(),
-                scratch.counters.as_entire_binding(),
-                scratch.levels.as_entire_binding(),
-                resolved.as_entire_binding(),
-                bvh_buffer.as_entire_binding(),
-            )),
-        );
+        let generator_bind_group = map_group(kept_generators, generator_buffer, &generators);
+        let occluder_bind_group = map_group(kept_occluders, occluder_buffer, &occluders);
+        let scratch_buffers = [&scratch.photon_uv, &scratch.photon_flux, &scratch.pyramid, &scratch.lists[0], &scratch.lists[1], &scratch.lists[2], &scratch.counters, &scratch.levels];
+        let bound: Vec<Bound> = [compute_layout.into(), view_buffer.into(), steps_buffer.into(), (&scratch.front.1).into(), (&scratch.back.1).into(), (&receivers.1).into()]
+            .into_iter()
+            .chain(scratch_buffers.map(Bound::from))
+            .chain([(&resolved).into(), (&bvh_buffer).into()])
+            .collect();
+        let compute_bind_group = kept_compute.get(&bound, || {
+            device.create_bind_group(
+                "caustic_map_compute_bind_group",
+                compute_layout,
+                &BindGroupEntries::sequential((
+                    view_binding.clone(),
+                    steps.clone(),
+                    &scratch.front.1,
+                    &scratch.back.1,
+                    &receivers.1,
+                    scratch.photon_uv.as_entire_binding(),
+                    scratch.photon_flux.as_entire_binding(),
+                    scratch.pyramid.as_entire_binding(),
+                    scratch.lists[0].as_entire_binding(),
+                    scratch.lists[1].as_entire_binding(),
+                    scratch.lists[2].as_entire_binding(),
+                    scratch.counters.as_entire_binding(),
+                    scratch.levels.as_entire_binding(),
+                    resolved.as_entire_binding(),
+                    bvh_buffer.as_entire_binding(),
+                )),
+            )
+        });
         let view_maps = ViewMaps {
-            generator_bind_group: map_group(generators.clone()),
-            occluder_bind_group: map_group(occluders.clone()),
+            generator_bind_group,
+            occluder_bind_group,
             uniform,
             receivers,
             resolved,
             compute_bind_group,
             dispatches,
             step_offsets,
+            kept,
         };
         if k < views.len() {
             views[k] = view_maps;

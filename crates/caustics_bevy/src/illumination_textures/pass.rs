@@ -69,7 +69,7 @@ pub(super) fn draw_illumination_textures(
 
 /// Adds every light's illumination textures where the view sees receivers.
 pub(super) fn project_illumination_textures(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<IlluminationPipelines>)>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<IlluminationPipelines>)>,
     gpu: Res<IlluminationTexturesGpu>,
     pipelines: Res<IlluminationPipelines>,
     cache: Res<PipelineCache>,
@@ -77,31 +77,35 @@ pub(super) fn project_illumination_textures(
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, pipeline) = view.into_inner();
-    if gpu.frames.is_empty() || gpu.dirty {
+    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
+    if gpu.dirty {
         return;
     }
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
-    let bind_groups: Vec<BindGroup> = gpu
-        .frames
-        .iter()
-        .filter_map(|f| {
-            Some(ctx.render_device().create_bind_group(
-                "illumination_project_bind_group",
-                inputs.layout,
-                &BindGroupEntries::sequential((
-                    inputs.view.clone(),
-                    inputs.depth,
-                    normal,
-                    f.uniform.binding()?,
-                    &f.array,
-                    f.surface.as_entire_binding(),
-                    f.seen.as_entire_binding(),
-                )),
-            ))
-        })
-        .collect();
+    let device = ctx.render_device().clone();
+    let bind_groups = pipeline.bind_groups(
+        &inputs,
+        gpu.frames.iter().filter_map(|f| {
+            let (uniform, binding) = (f.uniform.buffer()?, f.uniform.binding()?);
+            let make = || {
+                device.create_bind_group(
+                    "illumination_project_bind_group",
+                    inputs.layout,
+                    &BindGroupEntries::sequential((
+                        inputs.view.clone(),
+                        inputs.depth,
+                        normal,
+                        binding,
+                        &f.array,
+                        f.surface.as_entire_binding(),
+                        f.seen.as_entire_binding(),
+                    )),
+                )
+            };
+            Some((vec![uniform.into(), (&f.array).into(), (&f.surface).into(), (&f.seen).into()], make))
+        }),
+    );
     let names = ("illumination_projection", "illumination_textures/projection", "illumination textures projection");
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

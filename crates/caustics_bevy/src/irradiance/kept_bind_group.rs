@@ -66,6 +66,11 @@ impl KeptBindGroup {
             }
         }
     }
+
+    /// The bind group last made or kept, if any.
+    pub fn current(&self) -> Option<&BindGroup> {
+        self.bind_group.as_ref()
+    }
 }
 
 /// Sets `buffer` to `value` and uploads it, unless the buffer already holds it.

@@ -26,7 +26,7 @@ pub mod mesh_bvhs;
 pub mod reference_view;
 
 use crate::cpu_time::timed;
-use kept_bind_group::KeptLayout;
+use kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::components::{CausticReceiver, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
@@ -246,13 +246,16 @@ pub fn projection_pipeline(
 }
 
 /// Render world: a view's pipeline for technique `P`'s fullscreen projection
-/// ([`projection_pipeline`], for a single-sampled or multisampled prepass).
+/// ([`projection_pipeline`], for a single-sampled or multisampled prepass), and the
+/// projection's bind groups, kept across frames.
 #[derive(Component)]
 pub struct ViewProjectionPipeline<P: 'static> {
     /// The pipeline, specialised for the view.
     pub pipeline: CachedRenderPipelineId,
     /// Whether the view's prepass is multisampled.
     pub multisampled: bool,
+    /// One bind group per source projected last frame, in order.
+    kept: Vec<KeptBindGroup>,
     technique: PhantomData<fn() -> P>,
 }
 
@@ -268,6 +271,8 @@ pub struct ProjectionInputs<'a> {
     pub normal: Option<&'a TextureView>,
     /// The view uniform.
     pub view: BindingResource<'a>,
+    /// The buffer the view uniform lies in.
+    pub view_buffer: &'a Buffer,
     /// The layout that fits the prepass's sampling.
     pub layout: &'a BindGroupLayout,
 }
@@ -287,8 +292,27 @@ impl<P: 'static> ViewProjectionPipeline<P> {
             depth: prepass.depth_view()?,
             normal: prepass.normal_view(),
             view: view_uniforms.uniforms.binding()?,
+            view_buffer: view_uniforms.uniforms.buffer()?,
             layout: layouts[self.multisampled as usize].get(cache),
         })
+    }
+
+    /// This frame's bind groups, one per source (a light view, a pool, a light's
+    /// planes), each from what the source binds besides `inputs` and how to make it:
+    /// the bind group kept for the source's place is used again while it binds the
+    /// same, so a projection makes none in a frame where nothing was replaced.
+    pub fn bind_groups<F: FnOnce() -> BindGroup>(&mut self, inputs: &ProjectionInputs, sources: impl IntoIterator<Item = (Vec<Bound>, F)>) -> Vec<BindGroup> {
+        let view = [inputs.layout.into(), inputs.view_buffer.into(), inputs.depth.into()].into_iter().chain(inputs.normal.map(Bound::from));
+        let mut bind_groups = Vec::new();
+        for (place, (bound, make)) in sources.into_iter().enumerate() {
+            if self.kept.len() == place {
+                self.kept.push(KeptBindGroup::default());
+            }
+            let bound: Vec<Bound> = view.clone().chain(bound).collect();
+            bind_groups.push(self.kept[place].get(&bound, make));
+        }
+        self.kept.truncate(bind_groups.len());
+        bind_groups
     }
 }
 
@@ -296,15 +320,20 @@ impl<P: 'static> ViewProjectionPipeline<P> {
 /// by each technique with a run condition for when it has something to project.
 pub fn prepare_projection_pipelines<P: SpecializedRenderPipeline<Key = bool> + Resource>(
     mut commands: Commands,
-    views: Query<(Entity, &Msaa), With<ViewCausticWork>>,
+    mut views: Query<(Entity, &Msaa, Option<&mut ViewProjectionPipeline<P>>), With<ViewCausticWork>>,
     pipelines: Res<P>,
     mut specialized: ResMut<SpecializedRenderPipelines<P>>,
     cache: Res<PipelineCache>,
 ) {
-    for (entity, msaa) in &views {
+    for (entity, msaa, kept) in &mut views {
         let multisampled = msaa.samples() > 1;
         let pipeline = specialized.specialize(&cache, &pipelines, multisampled);
-        commands.entity(entity).insert(ViewProjectionPipeline::<P> { pipeline, multisampled, technique: PhantomData });
+        match kept {
+            Some(mut kept) => (kept.pipeline, kept.multisampled) = (pipeline, multisampled),
+            None => {
+                commands.entity(entity).insert(ViewProjectionPipeline::<P> { pipeline, multisampled, kept: Vec::new(), technique: PhantomData });
+            }
+        }
     }
 }
 

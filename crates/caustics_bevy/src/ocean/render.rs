@@ -8,7 +8,7 @@
 use super::{OceanModes, OceanWaves};
 use crate::mesh_vertices::MovesOnGpu;
 use crate::cpu_time::timed;
-use crate::irradiance::kept_bind_group::KeptLayout;
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -55,12 +55,13 @@ struct ExtractedOcean {
 struct ExtractedOceans(Vec<ExtractedOcean>);
 
 /// An ocean's buffers: its spectrum's amplitudes and frequencies, and the two halves
-/// of the FFT's ping-pong.
+/// of the FFT's ping-pong; and its two bind groups, kept while they bind the same.
 struct OceanBuffers {
     modes: Arc<OceanModes>,
     amplitudes: Buffer,
     omega: Buffer,
     fields: [Buffer; 2],
+    bind_groups: [KeptBindGroup; 2],
 }
 
 /// A prepared ocean: its bind groups (fields 1 → 0 and 0 → 1), the uniform offset of
@@ -165,6 +166,7 @@ impl OceanBuffers {
             amplitudes: storage(device, "caustic_ocean_amplitudes", bytemuck::cast_slice(&modes.amplitudes)),
             omega: storage(device, "caustic_ocean_omega", bytemuck::cast_slice(&modes.omega)),
             fields: [field(), field()],
+            bind_groups: default(),
         }
     }
 }
@@ -218,26 +220,32 @@ fn prepare_oceans(
     }
     oceans.steps.set_label(Some("caustic_ocean_fft_steps"));
     oceans.steps.write_buffer(&device, &queue);
-    let Some(steps) = oceans.steps.binding() else {
+    let (Some(steps), Some(steps_buffer)) = (oceans.steps.binding(), oceans.steps.buffer()) else {
         return;
     };
     for (entity, vertices, offsets, resolution, fields) in planned {
-        let Some(b) = oceans.buffers.get(&entity) else { continue };
-        let bind_group = |from: usize, to: usize| {
-            device.create_bind_group(
-                "ocean_waves_bind_group",
-                layout,
-                &BindGroupEntries::sequential((
-                    steps.clone(),
-                    b.amplitudes.as_entire_binding(),
-                    b.omega.as_entire_binding(),
-                    b.fields[from].as_entire_binding(),
-                    b.fields[to].as_entire_binding(),
-                    BindingResource::Buffer(vertices.binding()),
-                )),
-            )
+        let Some(b) = oceans.buffers.get_mut(&entity) else { continue };
+        let (amplitudes, omega, halves) = (&b.amplitudes, &b.omega, &b.fields);
+        let bind_group = |kept: &mut KeptBindGroup, from: usize, to: usize| {
+            let bound = [layout.into(), steps_buffer.into(), vertices.bound(), (&halves[from]).into(), (&halves[to]).into()];
+            kept.get(&bound, || {
+                device.create_bind_group(
+                    "ocean_waves_bind_group",
+                    layout,
+                    &BindGroupEntries::sequential((
+                        steps.clone(),
+                        amplitudes.as_entire_binding(),
+                        omega.as_entire_binding(),
+                        halves[from].as_entire_binding(),
+                        halves[to].as_entire_binding(),
+                        BindingResource::Buffer(vertices.binding()),
+                    )),
+                )
+            })
         };
-        oceans.dispatches.push(OceanDispatches { bind_groups: [bind_group(1, 0), bind_group(0, 1)], offsets, resolution, fields });
+        let [first, second] = &mut b.bind_groups;
+        let bind_groups = [bind_group(first, 1, 0), bind_group(second, 0, 1)];
+        oceans.dispatches.push(OceanDispatches { bind_groups, offsets, resolution, fields });
     }
 }
 
