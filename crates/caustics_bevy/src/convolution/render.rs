@@ -6,7 +6,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
-use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
+use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, ViewBindGroups, write_changed};
 use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -130,6 +130,8 @@ struct PoolBuffers {
     irradiance: Buffer,
     /// The compute passes' bind group, kept while it binds the same buffers.
     compute: KeptBindGroup,
+    /// The projection's bind group for each view.
+    projections: ViewBindGroups,
     /// Whether the compute passes run this frame: not while the water stays still and
     /// `still` already holds its floor.
     computes: bool,
@@ -149,6 +151,7 @@ impl PoolBuffers {
             terms: texel_buffer(device, "caustic_pool_terms", texels, 4),
             irradiance: texel_buffer(device, "caustic_pool_floor_irradiance", texels, 1),
             compute: KeptBindGroup::default(),
+            projections: ViewBindGroups::default(),
             computes: true,
             still: None,
         }
@@ -502,31 +505,34 @@ fn compute_floor_irradiance(
 
 /// Adds each pool's floor irradiance where the view sees its floor.
 fn project_floor_irradiance(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<ConvolutionPipelines>)>,
-    gpu: Res<PoolGpu>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<ConvolutionPipelines>)>,
+    views: Query<(), With<ViewProjectionPipeline<ConvolutionPipelines>>>,
+    mut gpu: ResMut<PoolGpu>,
     pipelines: Res<ConvolutionPipelines>,
     cache: Res<PipelineCache>,
     view_uniforms: Res<ViewUniforms>,
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
+    let entity = view.entity();
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let device = ctx.render_device().clone();
-    let bind_groups = pipeline.bind_groups(
-        &inputs,
-        gpu.0.values().filter_map(|buffers| {
+    let bind_groups: Vec<BindGroup> = gpu
+        .0
+        .values_mut()
+        .filter_map(|buffers| {
             let (uniform, binding) = (buffers.uniform.buffer()?, buffers.uniform.binding()?);
-            let make = || {
+            let source = [uniform.into(), (&buffers.irradiance).into()];
+            Some(inputs.bind_group(&mut buffers.projections, (entity, |e| views.contains(e)), &source, || {
                 device.create_bind_group(
                     "pool_project_bind_group",
                     inputs.layout,
                     &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, binding, buffers.irradiance.as_entire_binding())),
                 )
-            };
-            Some((vec![uniform.into(), (&buffers.irradiance).into()], make))
-        }),
-    );
+            }))
+        })
+        .collect();
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, ("pool_floor", "caustics/pool_floor", "pool floor"), &recorder);
 }
 

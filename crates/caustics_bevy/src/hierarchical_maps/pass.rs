@@ -133,33 +133,38 @@ pub(super) fn make_caustic_maps(
 
 /// Adds every light view's caustic irradiance where the view sees its receivers.
 pub(super) fn project_caustic_maps(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<CausticMapPipelines>)>,
-    gpu: Res<CausticMapsGpu>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<CausticMapPipelines>)>,
+    views: Query<(), With<ViewProjectionPipeline<CausticMapPipelines>>>,
+    mut gpu: ResMut<CausticMapsGpu>,
     pipelines: Res<CausticMapPipelines>,
     cache: Res<PipelineCache>,
     view_uniforms: Res<ViewUniforms>,
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
+    let entity = view.entity();
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    if gpu.generation.is_none() || gpu.views.is_empty() {
+        return;
+    }
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
     let device = ctx.render_device().clone();
-    let views = gpu.views.iter().filter(|_| gpu.generation.is_some());
-    let bind_groups = pipeline.bind_groups(
-        &inputs,
-        views.filter_map(|v| {
+    let bind_groups: Vec<BindGroup> = gpu
+        .views
+        .iter_mut()
+        .filter_map(|v| {
             let (uniform, binding) = (v.uniform.buffer()?, v.uniform.binding()?);
-            let make = || {
+            let source = [uniform.into(), (&v.receivers.1).into(), (&v.resolved).into()];
+            Some(inputs.bind_group(&mut v.projections, (entity, |e| views.contains(e)), &source, || {
                 device.create_bind_group(
                     "caustic_map_project_bind_group",
                     inputs.layout,
                     &BindGroupEntries::sequential((inputs.view.clone(), inputs.depth, normal, binding, &v.receivers.1, v.resolved.as_entire_binding())),
                 )
-            };
-            Some((vec![uniform.into(), (&v.receivers.1).into(), (&v.resolved).into()], make))
-        }),
-    );
+            }))
+        })
+        .collect();
     let names = ("caustic_map_projection", "caustic_maps/projection", "caustic map projection");
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

@@ -4,7 +4,7 @@
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
 use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
-use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout, ViewBindGroups};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::triangle_bvh::InstancedBvh;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
@@ -418,6 +418,8 @@ pub(super) struct ViewMaps {
     pub(super) step_offsets: Vec<u32>,
     /// The three bind groups, kept while they bind the same buffers and views.
     kept: [KeptBindGroup; 3],
+    /// The projection's bind group for each view.
+    pub(super) projections: ViewBindGroups,
 }
 
 /// A mesh instance to draw into the light maps, with its pipelines.
@@ -858,12 +860,12 @@ fn prepare_maps(
     let mut views = std::mem::take(&mut gpu.views);
     views.truncate(plan.views.len());
     for (k, (uniform_value, (dispatches, step_offsets))) in uniforms.into_iter().zip(plans).enumerate() {
-        let (mut uniform, receivers, resolved, mut kept) = match views.get_mut(k) {
+        let (mut uniform, receivers, resolved, (mut kept, projections)) = match views.get_mut(k) {
             Some(existing) => (
                 std::mem::take(&mut existing.uniform),
                 (existing.receivers.0.clone(), existing.receivers.1.clone()),
                 existing.resolved.clone(),
-                std::mem::take(&mut existing.kept),
+                (std::mem::take(&mut existing.kept), std::mem::take(&mut existing.projections)),
             ),
             None => (
                 UniformBuffer::default(),
@@ -923,6 +925,7 @@ fn prepare_maps(
             dispatches,
             step_offsets,
             kept,
+            projections,
         };
         if k < views.len() {
             views[k] = view_maps;

@@ -69,26 +69,30 @@ pub(super) fn draw_illumination_textures(
 
 /// Adds every light's illumination textures where the view sees receivers.
 pub(super) fn project_illumination_textures(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &mut ViewProjectionPipeline<IlluminationPipelines>)>,
-    gpu: Res<IlluminationTexturesGpu>,
+    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<IlluminationPipelines>)>,
+    views: Query<(), With<ViewProjectionPipeline<IlluminationPipelines>>>,
+    mut gpu: ResMut<IlluminationTexturesGpu>,
     pipelines: Res<IlluminationPipelines>,
     cache: Res<PipelineCache>,
     view_uniforms: Res<ViewUniforms>,
     recorder: Res<PassRecorder>,
     mut ctx: RenderContext,
 ) {
-    let (buffer, prepass, offset, mut pipeline) = view.into_inner();
-    if gpu.dirty {
+    let entity = view.entity();
+    let (buffer, prepass, offset, pipeline) = view.into_inner();
+    if gpu.frames.is_empty() || gpu.dirty {
         return;
     }
     let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
     let device = ctx.render_device().clone();
-    let bind_groups = pipeline.bind_groups(
-        &inputs,
-        gpu.frames.iter().filter_map(|f| {
+    let bind_groups: Vec<BindGroup> = gpu
+        .frames
+        .iter_mut()
+        .filter_map(|f| {
             let (uniform, binding) = (f.uniform.buffer()?, f.uniform.binding()?);
-            let make = || {
+            let source = [uniform.into(), (&f.array).into(), (&f.surface).into(), (&f.seen).into()];
+            Some(inputs.bind_group(&mut f.projections, (entity, |v| views.contains(v)), &source, || {
                 device.create_bind_group(
                     "illumination_project_bind_group",
                     inputs.layout,
@@ -102,10 +106,9 @@ pub(super) fn project_illumination_textures(
                         f.seen.as_entire_binding(),
                     )),
                 )
-            };
-            Some((vec![uniform.into(), (&f.array).into(), (&f.surface).into(), (&f.seen).into()], make))
-        }),
-    );
+            }))
+        })
+        .collect();
     let names = ("illumination_projection", "illumination_textures/projection", "illumination textures projection");
     buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
 }

@@ -18,7 +18,7 @@ use bevy::render::{
     renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
-use crate::irradiance::kept_bind_group::KeptLayout;
+use crate::irradiance::kept_bind_group::{KeptLayout, ViewBindGroups};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::illumination_textures::{Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS};
 use caustics_core::triangle_bvh::InstancedBvh;
@@ -114,6 +114,8 @@ pub(super) struct FrameGpu {
     pub(super) seen: Buffer,
     pub(super) see_bind_group: BindGroup,
     pub(super) draw_bind_group: BindGroup,
+    /// The projection's bind group for each view.
+    pub(super) projections: ViewBindGroups,
 }
 
 /// Render world: the illumination textures on the GPU.
@@ -398,6 +400,7 @@ fn prepare_frames(
             draw_layout,
             &BindGroupEntries::sequential((frame_binding, volume_binding, surface.as_entire_binding(), seen.as_entire_binding())),
         );
-        gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group });
+        let projections = ViewBindGroups::default();
+        gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group, projections });
     }
 }

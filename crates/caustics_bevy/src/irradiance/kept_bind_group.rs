@@ -12,6 +12,8 @@ use bevy::render::render_resource::{
     TextureViewId, UniformBuffer,
 };
 use bevy::render::renderer::{RenderDevice, RenderQueue};
+use bevy::ecs::entity::Entity;
+use bevy::platform::collections::HashMap;
 use std::sync::OnceLock;
 
 /// What a bind group binds, by identity.
@@ -70,6 +72,21 @@ impl KeptBindGroup {
     /// The bind group last made or kept, if any.
     pub fn current(&self) -> Option<&BindGroup> {
         self.bind_group.as_ref()
+    }
+}
+
+/// One source's bind group for each view it is projected into (a light view's, a
+/// pool's, a light's planes'), kept with the source, so that it goes with the source's
+/// buffers; a view that no longer exists is forgotten.
+#[derive(Default)]
+pub struct ViewBindGroups(HashMap<Entity, KeptBindGroup>);
+
+impl ViewBindGroups {
+    /// The bind group of `bound` for `view`, as [`KeptBindGroup::get`]; first forgets
+    /// the views for which `exists` is false.
+    pub fn get(&mut self, view: Entity, exists: impl Fn(Entity) -> bool, bound: &[Bound], make: impl FnOnce() -> BindGroup) -> BindGroup {
+        self.0.retain(|&kept, _| kept == view || exists(kept));
+        self.0.entry(view).or_default().get(bound, make)
     }
 }
 

@@ -26,7 +26,7 @@ pub mod mesh_bvhs;
 pub mod reference_view;
 
 use crate::cpu_time::timed;
-use kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
+use kept_bind_group::{Bound, KeptLayout, ViewBindGroups};
 use crate::components::{CausticReceiver, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
@@ -246,16 +246,13 @@ pub fn projection_pipeline(
 }
 
 /// Render world: a view's pipeline for technique `P`'s fullscreen projection
-/// ([`projection_pipeline`], for a single-sampled or multisampled prepass), and the
-/// projection's bind groups, kept across frames.
+/// ([`projection_pipeline`], for a single-sampled or multisampled prepass).
 #[derive(Component)]
 pub struct ViewProjectionPipeline<P: 'static> {
     /// The pipeline, specialised for the view.
     pub pipeline: CachedRenderPipelineId,
     /// Whether the view's prepass is multisampled.
     pub multisampled: bool,
-    /// One bind group per source projected last frame, in order.
-    kept: Vec<KeptBindGroup>,
     technique: PhantomData<fn() -> P>,
 }
 
@@ -296,23 +293,22 @@ impl<P: 'static> ViewProjectionPipeline<P> {
             layout: layouts[self.multisampled as usize].get(cache),
         })
     }
+}
 
-    /// This frame's bind groups, one per source (a light view, a pool, a light's
-    /// planes), each from what the source binds besides `inputs` and how to make it:
-    /// the bind group kept for the source's place is used again while it binds the
-    /// same, so a projection makes none in a frame where nothing was replaced.
-    pub fn bind_groups<F: FnOnce() -> BindGroup>(&mut self, inputs: &ProjectionInputs, sources: impl IntoIterator<Item = (Vec<Bound>, F)>) -> Vec<BindGroup> {
-        let view = [inputs.layout.into(), inputs.view_buffer.into(), inputs.depth.into()].into_iter().chain(inputs.normal.map(Bound::from));
-        let mut bind_groups = Vec::new();
-        for (place, (bound, make)) in sources.into_iter().enumerate() {
-            if self.kept.len() == place {
-                self.kept.push(KeptBindGroup::default());
-            }
-            let bound: Vec<Bound> = view.clone().chain(bound).collect();
-            bind_groups.push(self.kept[place].get(&bound, make));
-        }
-        self.kept.truncate(bind_groups.len());
-        bind_groups
+impl ProjectionInputs<'_> {
+    /// A source's bind group for `view`, kept in the source's `kept` while it binds the
+    /// same: what `inputs` bind and `source` (the source's own buffers and views).
+    /// `exists` says which views still exist.
+    pub fn bind_group(
+        &self,
+        kept: &mut ViewBindGroups,
+        (view, exists): (Entity, impl Fn(Entity) -> bool),
+        source: &[Bound],
+        make: impl FnOnce() -> BindGroup,
+    ) -> BindGroup {
+        let inputs = [self.layout.into(), self.view_buffer.into(), self.depth.into()].into_iter().chain(self.normal.map(Bound::from));
+        let bound: Vec<Bound> = inputs.chain(source.iter().copied()).collect();
+        kept.get(view, exists, &bound, make)
     }
 }
 
@@ -331,7 +327,7 @@ pub fn prepare_projection_pipelines<P: SpecializedRenderPipeline<Key = bool> + R
         match kept {
             Some(mut kept) => (kept.pipeline, kept.multisampled) = (pipeline, multisampled),
             None => {
-                commands.entity(entity).insert(ViewProjectionPipeline::<P> { pipeline, multisampled, kept: Vec::new(), technique: PhantomData });
+                commands.entity(entity).insert(ViewProjectionPipeline::<P> { pipeline, multisampled, technique: PhantomData });
             }
         }
     }
