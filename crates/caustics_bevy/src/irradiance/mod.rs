@@ -296,8 +296,8 @@ impl<P: 'static> ViewProjectionPipeline<P> {
 }
 
 impl ProjectionInputs<'_> {
-    /// A source's bind group for `view`, kept in the source's `kept` while it binds the
-    /// same: what `inputs` bind and `source` (the source's own buffers and views).
+    /// A source's bind group for `view`: these inputs and `source` (the source's own
+    /// buffers and views), kept in the source's `kept` while it binds the same.
     /// `exists` says which views still exist.
     pub fn bind_group(
         &self,
