@@ -28,7 +28,7 @@ use caustics_core::metrics::relative_l2;
 use caustics_core::ocean::OceanSpectrum;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
-use caustics_core::volumes::{BuildStats, VolumeSet, build_scene_volumes};
+use caustics_core::volumes::{BuildStats, Footprint, VolumeSet, build_scene_volumes};
 use support::render;
 
 const SIZE: u32 = 96;
@@ -91,18 +91,20 @@ fn cpu_scene(renderer: &mut HeadlessRenderer, generators: &[Entity], as_assets: 
     }
 }
 
-/// The CPU build's caustic irradiance at the receiver point each pixel sees (straight
-/// down through the pixel's centre), with that surface's normal.
+/// The CPU build's caustic irradiance over each pixel's footprint on the receiver
+/// point it sees (straight down through the pixel's centre), with that surface's normal.
 fn cpu_irradiance(scene: &Scene, set: &VolumeSet) -> Vec<f32> {
     let receivers = SceneBvh::build(&Scene { receivers: scene.receivers.clone(), ..Scene::default() });
-    let (points, normals): (Vec<V>, Vec<V>) = (0..SIZE * SIZE)
+    let step = VIEW / SIZE as f32;
+    let pixels: Vec<_> = (0..SIZE * SIZE)
         .map(|i| {
             let top = to_core(support::floor_point(i % SIZE, i / SIZE, SIZE, VIEW)) + V::Y * 5.0;
             let hit = receivers.intersect(top, V::NEG_Y, 0.0, f32::INFINITY).expect("every pixel sees a receiver");
-            (top + V::NEG_Y * hit.t, hit.geometric_normal * hit.geometric_normal.y.signum())
+            let n = hit.geometric_normal * hit.geometric_normal.y.signum();
+            (top + V::NEG_Y * hit.t, n, Footprint::seen(n, V::NEG_Y, V::X * step, V::Z * step))
         })
-        .unzip();
-    set.irradiance_at(&points, &normals, &Default::default()).iter().map(|e| e.x).collect()
+        .collect();
+    set.irradiance_over_at(&pixels, &Default::default()).iter().map(|e| e.x).collect()
 }
 
 /// The irradiance the GPU's volumes left in the camera's buffer this frame.

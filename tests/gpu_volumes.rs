@@ -18,7 +18,7 @@ use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
-use caustics_core::volumes::{BeamGrid, MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
+use caustics_core::volumes::{BeamGrid, Footprint, MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
 use support::{caustic_irradiance, exposure, render, render_without_caustics};
 
 const SIZE: u32 = 96;
@@ -65,12 +65,15 @@ fn cpu_volumes(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, sett
     build_scene_volumes(&scene, &settings.core())
 }
 
-/// The CPU twin's caustic irradiance at every pixel's floor point.
+/// The CPU twin's caustic irradiance at every pixel's floor point, over the pixel's
+/// footprint or at its centre as `settings` say.
 fn cpu_twin(mesh: &TriMesh, interaction: SpecularInteraction, sun: Vec3, settings: &WarpedVolumesSettings) -> Vec<f32> {
+    use caustics_core::glam::Vec3 as V;
     let set = cpu_volumes(mesh, interaction, sun, settings);
-    let points: Vec<_> = (0..SIZE * SIZE).map(|i| to_core(world_at(i % SIZE, i / SIZE))).collect();
-    let normals = vec![caustics_core::glam::Vec3::Y; points.len()];
-    set.irradiance_at(&points, &normals, &settings.core()).iter().map(|e| e.x).collect()
+    let step = VIEW / SIZE as f32;
+    let footprint = Footprint { du: V::X * step, dv: V::Z * step };
+    let pixels: Vec<_> = (0..SIZE * SIZE).map(|i| (to_core(world_at(i % SIZE, i / SIZE)), V::Y, footprint)).collect();
+    set.irradiance_over_at(&pixels, &settings.core()).iter().map(|e| e.x).collect()
 }
 
 fn save(image: &RenderedImage, name: &str) {
@@ -115,6 +118,11 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let error = relative_l2(&gpu, &cpu);
     eprintln!("GPU vs CPU twin, pool, relative L2: {error:.2e} (mean irradiance {mean:.3} lux)");
     assert!(error < 0.01, "GPU and CPU caustic volumes differ: relative L2 {error}");
+    // Each pixel is the mean over its footprint: the twin's point samples differ.
+    let point = cpu_twin(&mesh, water.specular_interaction(), SUN, &WarpedVolumesSettings { footprint_filter: false, ..settings });
+    let against_points = relative_l2(&gpu, &point);
+    eprintln!("GPU (footprints) vs the twin's point samples: {against_points:.2e}");
+    assert!(against_points > 3.0 * error, "the pixels are not footprint means: {against_points} vs {error}");
 
     // The other intensity modes and single-sampled prepasses follow the same path, and
     // every volume rasterised lights the same pixels as the compute pass.
@@ -123,7 +131,8 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         (bevy_caustics::warped_volumes::VolumeIntensity::Interpolated, Msaa::Sample4, 1024),
         (bevy_caustics::warped_volumes::VolumeIntensity::Conserving, Msaa::Sample4, 0),
     ] {
-        let settings = WarpedVolumesSettings { intensity, splat_pixels, ..default() };
+        // The rasteriser point-samples: with every volume rasterised, so does the twin.
+        let settings = WarpedVolumesSettings { intensity, splat_pixels, footprint_filter: splat_pixels != 0, ..default() };
         renderer.world_mut().insert_resource(settings);
         let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.world_mut()).unwrap();
         renderer.world_mut().entity_mut(camera).insert(msaa);

@@ -9,7 +9,7 @@ use caustics_core::params::{MediumCoefficients, SpecularInteraction};
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
 use caustics_core::volumes::{
-    HEXAHEDRON_TRIANGLES, IntensityMode, MediumBox, VolumeSet, VolumeSettings, build_scene_volumes,
+    Footprint, HEXAHEDRON_TRIANGLES, IntensityMode, MediumBox, VolumeSet, VolumeSettings, build_scene_volumes,
     in_scattered_radiance,
 };
 use glam::{Affine3A, Vec3};
@@ -17,7 +17,7 @@ use proptest::prelude::*;
 
 /// The default cap and grazing limit (`VolumeSettings::default()`, which is not const).
 const INTERPOLATED: VolumeSettings =
-    VolumeSettings { intensity: IntensityMode::Interpolated, max_magnification: 1.0e3, min_ray_cosine: 1.0e-3 };
+    VolumeSettings { intensity: IntensityMode::Interpolated, max_magnification: 1.0e3, min_ray_cosine: 1.0e-3, footprint_filter: true };
 const CONSTANT: VolumeSettings = VolumeSettings { intensity: IntensityMode::Constant, ..INTERPOLATED };
 const CONSERVING: VolumeSettings = VolumeSettings { intensity: IntensityMode::Conserving, ..INTERPOLATED };
 const ALL_MODES: [VolumeSettings; 3] = [CONSERVING, INTERPOLATED, CONSTANT];
@@ -445,6 +445,58 @@ fn the_test_settings_are_the_defaults() {
     let d = VolumeSettings::default();
     assert_eq!((d.max_magnification, d.min_ray_cosine), (INTERPOLATED.max_magnification, INTERPOLATED.min_ray_cosine));
     assert_eq!(d.intensity, IntensityMode::Conserving);
+    assert!(d.footprint_filter);
+}
+
+/// The region's cell means from `k × k` samples a cell, each the pixel value over its
+/// footprint (a `1/k` cell), filtered or point-sampled as `settings` say.
+fn footprint_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
+    let fine = GridRegion { nu: region.nu * k, nv: region.nv * k, ..*region };
+    let footprint = Footprint { du: fine.edge_u / fine.nu as f32, dv: fine.edge_v / fine.nv as f32 };
+    let samples: Vec<_> =
+        (0..fine.nv).flat_map(|r| (0..fine.nu).map(move |c| (fine.cell_center(r, c), Vec3::Y, footprint))).collect();
+    let e = set.irradiance_over_at(&samples, settings);
+    (0..region.nv * region.nu)
+        .map(|i| {
+            let (r, c) = (i / region.nu, i % region.nu);
+            (0..k * k).map(|j| e[(r * k + j / k) * fine.nu + c * k + j % k].x).sum::<f32>() / (k * k) as f32
+        })
+        .collect()
+}
+
+#[test]
+fn footprint_means_keep_the_flux_and_need_no_supersampling() {
+    // Water rippled enough to focus at the floor: cusps far finer than the cells.
+    let l = Vec3::new(0.3, -1.0, -0.2).normalize();
+    let waves = [Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 }, Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 }];
+    let mesh = wave_heightfield(48, 2.0, 0.8, &waves);
+    let expected = emitted_times_fresnel(&mesh, l, 1.333);
+    let scene = Scene { lights: vec![sun(l)], generators: vec![water(mesh, 1.333)], receivers: vec![floor(8.0, 0.0)] };
+    let region = GridRegion::horizontal(-2.0, -2.0, 0.0, 4.0, 128);
+    let filtered = VolumeSettings::default();
+    let point = VolumeSettings { footprint_filter: false, ..filtered };
+    let set = build_scene_volumes(&scene, &filtered);
+    // The cell means that 32² point samples a cell converge to.
+    let truth = footprint_cell_means(&set, &region, 32, &point);
+    let error = |k: usize, settings: &VolumeSettings| {
+        let means = footprint_cell_means(&set, &region, k, settings);
+        assert!(means.iter().all(|e| e.is_finite() && *e >= 0.0));
+        let flux = means.iter().map(|&e| e as f64).sum::<f64>() * region.cell_area() as f64;
+        (caustics_core::metrics::relative_l2(&means, &truth), flux)
+    };
+    let [(point_1, _), (point_8, _), (filtered_1, flux_1), (filtered_8, flux_8)] =
+        [(1, &point), (8, &point), (1, &filtered), (8, &filtered)].map(|(k, s)| error(k, s));
+    eprintln!("cell means against 32² point samples a cell: point 1² {point_1:.4}, 8² {point_8:.4}; footprint 1² {filtered_1:.4}, 8² {filtered_8:.4}");
+    eprintln!("flux: footprint 1² {flux_1}, 8² {flux_8}, emitted × Fresnel {expected}");
+    // One footprint-filtered sample a cell is nearer than 8² point samples (whose own
+    // noise is most of what is left: the 32² reference is itself point-sampled)…
+    assert!(filtered_1 < 0.1 && filtered_1 < 0.5 * point_8, "{filtered_1} vs {point_8}");
+    // …where one point sample a cell is off by more than the cells' light.
+    assert!(point_1 > 10.0 * filtered_1, "{point_1} vs {filtered_1}");
+    // Flux is kept: the footprints tile the floor.
+    for flux in [flux_1, flux_8] {
+        assert!((flux - expected).abs() < 0.02 * expected, "{flux} vs {expected}");
+    }
 }
 
 /// The tracer's cell means of the floor region (`photons` from `seed`), and the cells

@@ -87,6 +87,13 @@ pub struct WarpedVolumesSettings {
     /// in whole blocks of pixels (2 × 2 on most GPUs, 4 × 4 on lavapipe), most of them
     /// outside it, and a fine generator makes many small shapes.
     pub splat_pixels: u32,
+    /// Whether each pixel shows the mean of the caustic light over its footprint on
+    /// the receiver (the default) or the point sample at its centre; see
+    /// [`VolumeSettings::footprint_filter`]. The volumes lit in the compute pass (those
+    /// within [`Self::splat_pixels`]) are filtered; the larger ones the rasteriser
+    /// draws are point-sampled, since across a caustic triangle 64 pixels wide the
+    /// centre's value is the footprint's mean but on its edges.
+    pub footprint_filter: bool,
 }
 
 /// How the volumetric pass integrates the light scattered out of the caustic beams.
@@ -115,6 +122,7 @@ impl Default for WarpedVolumesSettings {
             shaft_grid: 96,
             shaft_steps: 256,
             splat_pixels: 4096,
+            footprint_filter: core.footprint_filter,
         }
     }
 }
@@ -159,7 +167,12 @@ impl WarpedVolumesSettings {
             VolumeIntensity::Interpolated => IntensityMode::Interpolated,
             VolumeIntensity::Constant => IntensityMode::Constant,
         };
-        VolumeSettings { intensity, max_magnification: self.max_magnification, ..VolumeSettings::default() }
+        VolumeSettings {
+            intensity,
+            max_magnification: self.max_magnification,
+            footprint_filter: self.footprint_filter,
+            ..VolumeSettings::default()
+        }
     }
 }
 

@@ -72,6 +72,8 @@ pub(super) struct GpuVolumeSettings {
     medium_count: u32,
     /// [`WarpedVolumesSettings::splat_pixels`].
     splat_pixels: u32,
+    /// [`WarpedVolumesSettings::footprint_filter`]: 1 or 0.
+    footprint_filter: u32,
     media: [GpuMedium; MAX_MEDIA],
 }
 
@@ -400,6 +402,7 @@ fn prepare_buffers(
         max_magnification: settings.max_magnification,
         medium_count,
         splat_pixels: extracted.0.splat_pixels,
+        footprint_filter: settings.footprint_filter.into(),
         media,
     };
     buffers.settings.set_label(Some("caustic_volume_settings"));

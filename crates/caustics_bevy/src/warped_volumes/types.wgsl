@@ -34,6 +34,7 @@ struct VolumeSettings {
     max_magnification: f32,
     medium_count: u32,
     splat_pixels: u32,          // `splat` lights the volumes whose box holds at most this many pixels
+    footprint_filter: u32,      // 1: `splat` gives each pixel the mean over its footprint, 0: the point sample
     media: array<Medium, 4>,
 }
 
@@ -53,14 +54,18 @@ fn beta(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
     return ez.yzx * ex.zxy - ex.yzx * ez.zxy;
 }
 
+// A local point's height above the generator triangle, on the side the rays leave to.
+fn height(v: CausticVolume, p: vec3<f32>) -> f32 {
+    let n = v.surface_normal.xyz;
+    return p.x * dot(v.axis_x.xyz, n) + p.y * dot(v.axis_y.xyz, n) + p.z * dot(v.axis_z.xyz, n);
+}
+
 // Normalised barycentric coordinates in .xyz; .w = 1 inside the volume, 0 outside.
 fn barycentric(v: CausticVolume, p: vec3<f32>) -> vec4<f32> {
     if !(p.y >= 0.0 && p.y <= v.origin.w) {
         return vec4(0.0);
     }
-    let n = v.surface_normal.xyz;
-    let height = p.x * dot(v.axis_x.xyz, n) + p.y * dot(v.axis_y.xyz, n) + p.z * dot(v.axis_z.xyz, n);
-    if height < 0.0 {
+    if height(v, p) < 0.0 {
         return vec4(0.0);
     }
     let b = beta(v, p);
@@ -102,14 +107,20 @@ struct VolumeSample {
 
 // `CausticVolume::sample` (`VolumeSettings`' mode and cap): irradiance on the slicing plane and the interpolated ray.
 fn sample_volume(v: CausticVolume, world: vec3<f32>, intensity_mode: u32, max_magnification: f32) -> VolumeSample {
-    var s: VolumeSample;
-    s.inside = false;
     let p = to_local(v, world);
     let bary = barycentric(v, p);
     if bary.w == 0.0 {
-        return s;
+        var outside: VolumeSample;
+        outside.inside = false;
+        return outside;
     }
-    let lambda = bary.xyz;
+    return sample_inside(v, p, bary.xyz, intensity_mode, max_magnification);
+}
+
+// `sample_volume` at a local point `p` found inside, with barycentric coordinates `lambda`.
+fn sample_inside(v: CausticVolume, p: vec3<f32>, lambda: vec3<f32>, intensity_mode: u32, max_magnification: f32) -> VolumeSample {
+    var s: VolumeSample;
+    s.inside = false;
     if occluded(v, p, lambda) {
         return s;
     }
@@ -147,4 +158,93 @@ fn sample_volume(v: CausticVolume, world: vec3<f32>, intensity_mode: u32, max_ma
     s.plane_irradiance = e * window;
     s.depth = alpha;
     return s;
+}
+
+// Whether every component is a finite number (NaN fails every comparison).
+fn finite3(x: vec3<f32>) -> bool {
+    return all(abs(x) <= vec3(3.4e38));
+}
+
+// Normalised barycentric coordinates of a local point, inside the volume or not.
+fn lambda_at(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
+    let b = beta(v, p);
+    return b / (b.x + b.y + b.z);
+}
+
+// `caustics_core::volumes::footprint_coverage`: .x the area of the part of the unit
+// square u, v ∈ [−½, ½] where the three λᵢ + u ∂uᵢ + v ∂vᵢ are non-negative, .yz its
+// centroid (Sutherland–Hodgman: at most seven corners).
+fn footprint_coverage(lambda: vec3<f32>, du: vec3<f32>, dv: vec3<f32>) -> vec3<f32> {
+    var corners = array<vec2<f32>, 8>(vec2(-0.5, -0.5), vec2(0.5, -0.5), vec2(0.5, 0.5), vec2(-0.5, 0.5), vec2(0.0), vec2(0.0), vec2(0.0), vec2(0.0));
+    var count = 4u;
+    for (var i = 0u; i < 3u; i++) {
+        var kept: array<vec2<f32>, 8>;
+        var k = 0u;
+        for (var j = 0u; j < count; j++) {
+            let a = corners[j];
+            let b = corners[select(j + 1u, 0u, j + 1u == count)];
+            let ha = lambda[i] + a.x * du[i] + a.y * dv[i];
+            let hb = lambda[i] + b.x * du[i] + b.y * dv[i];
+            if ha >= 0.0 {
+                kept[k] = a;
+                k++;
+            }
+            if (ha >= 0.0) != (hb >= 0.0) {
+                kept[k] = a + (b - a) * (ha / (ha - hb));
+                k++;
+            }
+        }
+        corners = kept;
+        count = k;
+        if count < 3u {
+            return vec3(0.0);
+        }
+    }
+    var twice_area = 0.0;
+    var moment = vec2(0.0);
+    for (var j = 0u; j < count; j++) {
+        let a = corners[j];
+        let b = corners[select(j + 1u, 0u, j + 1u == count)];
+        let cross = a.x * b.y - a.y * b.x;
+        twice_area += cross;
+        moment += (a + b) * cross;
+    }
+    if abs(twice_area) <= 1.1920929e-7 {
+        return vec3(0.0);
+    }
+    return vec3(0.5 * abs(twice_area), moment / (3.0 * twice_area));
+}
+
+// `CausticVolume::irradiance_over` without the slab and the colour: the mean over a
+// pixel's footprint `world + u du + v dv` (u, v ∈ [−½, ½]) of the plane irradiance
+// times the cosine on `n`: the part of the footprint inside the caustic triangle times
+// the irradiance at that part's centroid.
+fn footprint_irradiance(v: CausticVolume, world: vec3<f32>, n: vec3<f32>, du_world: vec3<f32>, dv_world: vec3<f32>, intensity_mode: u32, max_magnification: f32) -> f32 {
+    let p = to_local(v, world);
+    let du = vec3(dot(du_world, v.axis_x.xyz), dot(du_world, v.axis_y.xyz), dot(du_world, v.axis_z.xyz));
+    let dv = vec3(dot(dv_world, v.axis_x.xyz), dot(dv_world, v.axis_y.xyz), dot(dv_world, v.axis_z.xyz));
+    let centre = lambda_at(v, p);
+    let along_u = lambda_at(v, p + 0.5 * du) - lambda_at(v, p - 0.5 * du);
+    let along_v = lambda_at(v, p + 0.5 * dv) - lambda_at(v, p - 0.5 * dv);
+    if !(finite3(centre) && finite3(along_u) && finite3(along_v)) {
+        return 0.0;
+    }
+    let cover = footprint_coverage(centre, along_u, along_v);
+    if cover.x <= 0.0 {
+        return 0.0;
+    }
+    let at = p + cover.y * du + cover.z * dv;
+    if !(at.y >= 0.0 && at.y <= v.origin.w) || height(v, at) < 0.0 {
+        return 0.0;
+    }
+    let clamped = max(lambda_at(v, at), vec3(0.0));
+    let inside = clamped / (clamped.x + clamped.y + clamped.z);
+    if !finite3(inside) {
+        return 0.0;
+    }
+    let s = sample_inside(v, at, inside, intensity_mode, max_magnification);
+    if !s.inside {
+        return 0.0;
+    }
+    return cover.x * s.plane_irradiance * max(0.0, -dot(s.ray, n));
 }

@@ -11,7 +11,7 @@
 
 #import bevy_render::view::View
 #import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
-#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, beta, sample_volume, to_local}
+#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, beta, footprint_irradiance, sample_volume, to_local}
 
 
 @group(0) @binding(0) var<uniform> view: View;
@@ -92,19 +92,42 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 }
 
 #ifdef RECEIVER_CENTRE
-// What volume `v` adds to the irradiance buffer at `pixel`: its light at the receiver
-// point there, exposed; zero outside it. On the ray through the pixel's centre.
-fn surface_light(v: CausticVolume, pixel: vec2<i32>) -> vec3<f32> {
+// `caustics_core::volumes::MAX_FOOTPRINT_STRETCH`.
+const MAX_FOOTPRINT_STRETCH: f32 = 8.0;
+
+// `Footprint::seen`: a step of one pixel between neighbouring eye rays at the receiver
+// point's depth, carried along the eye ray (`eye`, unit) onto the tangent plane of
+// normal `n`, at most `MAX_FOOTPRINT_STRETCH` times its length.
+fn onto_receiver(step: vec3<f32>, eye: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    let cosine = dot(eye, n);
+    let limit = MAX_FOOTPRINT_STRETCH * length(step);
+    let along = select(0.0, -dot(step, n) / cosine, cosine != 0.0);
+    return step + eye * clamp(along, -limit, limit);
+}
+
+// What volume `v` adds to the irradiance buffer at `pixel`, exposed: with `filtered`,
+// the mean of its light over the pixel's footprint on the receiver
+// (`CausticVolume::irradiance_over`), else its light at the receiver point on the ray
+// through the pixel's centre; zero where it lights nothing.
+fn surface_light(v: CausticVolume, pixel: vec2<i32>, filtered: bool) -> vec3<f32> {
     let depth = textureLoad(receiver_centre, pixel, 0).x;
     if depth <= 0.0 {
         return vec3(0.0);
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    let p = world_at(view, vec2<f32>(pixel) + 0.5, depth);
+    let centre = vec2<f32>(pixel) + 0.5;
+    let p = world_at(view, centre, depth);
     // `CausticVolume::irradiance`: surfaces in the volume's slab, where it has one.
     let d = dot(v.slab.xyz, p);
     if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
         return vec3(0.0);
+    }
+    if filtered {
+        let eye = normalize(p - world_at(view, centre, 1.0));
+        let du = onto_receiver(world_at(view, centre + vec2(1.0, 0.0), depth) - p, eye, n);
+        let dv = onto_receiver(world_at(view, centre + vec2(0.0, 1.0), depth) - p, eye, n);
+        let e = footprint_irradiance(v, p, n, du, dv, settings.intensity_mode, settings.max_magnification);
+        return exposed(v.color.rgb * e, view.exposure).rgb;
     }
     let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
     if !s.inside {
@@ -116,17 +139,45 @@ fn surface_light(v: CausticVolume, pixel: vec2<i32>) -> vec3<f32> {
 
 @fragment
 fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
-    return vec4(surface_light(volumes[in.volume], vec2<i32>(in.position.xy)), 0.0);
+    // The rasterised volumes are the large ones, point-sampled at pixel centres.
+    return vec4(surface_light(volumes[in.volume], vec2<i32>(in.position.xy), false), 0.0);
 }
 #endif
 
 #ifdef SPLAT
+// The least and greatest x of a convex shape's twelve edges (`corner`, the hexahedron's
+// corners in pixels) over the rows `y0 ≤ y ≤ y1`.
+fn row_span(corner: array<vec2<f32>, 8>, y0: f32, y1: f32) -> vec2<f32> {
+    // The hexahedron's edges: around the top, around the bottom, top to bottom.
+    var start = array(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
+    var end = array(1, 2, 3, 0, 5, 6, 7, 4, 4, 5, 6, 7);
+    var span = vec2(3.0e38, -3.0e38);
+    for (var e = 0; e < 12; e++) {
+        let a = corner[start[e]];
+        let b = corner[end[e]];
+        let low = min(a.y, b.y);
+        let high = max(a.y, b.y);
+        if low <= y1 && y0 <= high {
+            var x0 = a.x;
+            var x1 = b.x;
+            if a.y != b.y {
+                x0 = mix(a.x, b.x, clamp((clamp(y0, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
+                x1 = mix(a.x, b.x, clamp((clamp(y1, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
+            }
+            span = vec2(min(span.x, min(x0, x1)), max(span.y, max(x0, x1)));
+        }
+    }
+    return span;
+}
+
 // One volume of the surface pass: where its surface bounding shape projects within a
-// box of at most `settings.splat_pixels` pixels, the pixels whose centres the shape covers
-// (those the rasteriser would shade: the shape is convex, and a row of pixels meets it
-// between the outermost crossings of its twelve edges) get `surface_light`, added to
-// `splatted`; a larger or clipped shape goes to the rasteriser's list, and one off the
-// viewport lights nothing.
+// box of at most `settings.splat_pixels` pixels, it lights the pixels the shape may
+// light, added to `splatted`: with `settings.footprint_filter` every pixel the shape
+// touches (the shape is convex, so a row of pixels meets it between the outermost
+// points of its twelve edges over the row) with the mean over the pixel's footprint,
+// else the pixels whose centres it covers (those the rasteriser would shade) with the
+// point sample. A larger or clipped shape goes to the rasteriser's list, and one off
+// the viewport lights nothing.
 @compute @workgroup_size(64)
 fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let index = id.x + id.y * groups.x * 64u;
@@ -163,10 +214,13 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         return;
     }
     let clipped = behind > 0;
-    // The pixels whose centres lie in the shape's box, within the viewport (clamped
-    // first, so that every conversion to an integer is in range).
-    let first = max(vec2<i32>(ceil(clamp(lo, origin - 1.0, origin + size + 1.0) - 0.5)), vec2<i32>(origin));
-    let last = min(vec2<i32>(floor(clamp(hi, origin - 1.0, origin + size + 1.0) - 0.5)), vec2<i32>(origin + size) - 1);
+    // The pixels whose centres (point samples) or squares (footprints) meet the
+    // shape's box, within the viewport (clamped first, so that every conversion to an
+    // integer is in range).
+    let filtered = settings.footprint_filter != 0u;
+    let reach = select(0.0, 0.5, filtered);
+    let first = max(vec2<i32>(ceil(clamp(lo, origin - 1.0, origin + size + 1.0) - 0.5 - reach)), vec2<i32>(origin));
+    let last = min(vec2<i32>(floor(clamp(hi, origin - 1.0, origin + size + 1.0) - 0.5 + reach)), vec2<i32>(origin + size) - 1);
     if !clipped && any(last < first) {
         return;
     }
@@ -176,32 +230,18 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         atomicStore(&large[FIRST_LARGE + slot], index);
         return;
     }
-    // The hexahedron's edges: around the top, around the bottom, top to bottom.
-    var start = array(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
-    var end = array(1, 2, 3, 0, 5, 6, 7, 4, 4, 5, 6, 7);
     var shaded = 0u;
     for (var y = first.y; y <= last.y; y++) {
         let row = f32(y) + 0.5;
-        var left = 3.0e38;
-        var right = -3.0e38;
-        for (var e = 0; e < 12; e++) {
-            let a = corner[start[e]];
-            let b = corner[end[e]];
-            if min(a.y, b.y) <= row && row <= max(a.y, b.y) {
-                let t = select(clamp((row - a.y) / (b.y - a.y), 0.0, 1.0), 0.0, a.y == b.y);
-                let x = mix(a.x, b.x, t);
-                left = min(left, min(x, select(x, b.x, a.y == b.y)));
-                right = max(right, max(x, select(x, b.x, a.y == b.y)));
-            }
-        }
-        if !(left <= right) {
+        let span = row_span(corner, row - reach, row + reach);
+        if !(span.x <= span.y) {
             continue;
         }
-        let from_x = max(i32(ceil(clamp(left, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5)), first.x);
-        let to_x = min(i32(floor(clamp(right, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5)), last.x);
+        let from_x = max(i32(ceil(clamp(span.x, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5 - reach)), first.x);
+        let to_x = min(i32(floor(clamp(span.y, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5 + reach)), last.x);
         for (var x = from_x; x <= to_x; x++) {
             shaded++;
-            let light = vec3<u32>(surface_light(v, vec2(x, y)) * SPLAT_SCALE + 0.5);
+            let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
             let pixel = 3u * u32((y - i32(origin.y)) * i32(size.x) + x - i32(origin.x));
             for (var c = 0u; c < 3u; c++) {
                 if light[c] != 0u {

@@ -95,12 +95,98 @@ pub struct VolumeSettings {
     /// flatter ray (grazing light) are dropped, since their scaled rays (`r_y = 1`)
     /// would be unbounded.
     pub min_ray_cosine: f32,
+    /// Whether a pixel given its [`Footprint`] shows the mean irradiance over it
+    /// ([`CausticVolume::irradiance_over`]) rather than the point sample at its centre
+    /// (the default, `true`). Irradiance at a focal line is unbounded in ever thinner
+    /// regions (§3.4), so a point sample aliases there: one pixel catches a caustic
+    /// triangle a hundredth of its size at a hundred times the light, its neighbour
+    /// none, and the image sparkles as the generator moves. The mean over the footprint
+    /// is what the pixel can show, and keeps the flux.
+    pub footprint_filter: bool,
 }
 
 impl Default for VolumeSettings {
     fn default() -> Self {
-        Self { intensity: IntensityMode::default(), max_magnification: 1000.0, min_ray_cosine: 1.0e-3 }
+        Self { intensity: IntensityMode::default(), max_magnification: 1000.0, min_ray_cosine: 1.0e-3, footprint_filter: true }
     }
+}
+
+/// How far a pixel's footprint may stretch along a receiver seen at a slant, as a
+/// multiple of its size across the eye ray: past about 83° from the normal the
+/// footprint stops growing, so that a grazing view does not average a pixel over
+/// metres.
+pub const MAX_FOOTPRINT_STRETCH: f32 = 8.0;
+
+/// A pixel's footprint on its receiver: the parallelogram `p + u·du + v·dv`,
+/// `u, v ∈ [−½, ½]`, around the receiver point `p` seen at the pixel's centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footprint {
+    /// The step of one pixel to the right, on the receiver.
+    pub du: Vec3,
+    /// The step of one pixel down, on the receiver.
+    pub dv: Vec3,
+}
+
+impl Footprint {
+    /// The footprint on the receiver's tangent plane (unit normal `n`) of a pixel whose
+    /// eye ray runs along `eye` (unit) to `p`, from the steps `across_u` and `across_v`
+    /// of one pixel between neighbouring eye rays at `p`'s depth: each step carried
+    /// along the eye ray onto the plane, at most [`MAX_FOOTPRINT_STRETCH`] times its
+    /// length.
+    pub fn seen(n: Vec3, eye: Vec3, across_u: Vec3, across_v: Vec3) -> Self {
+        let onto_plane = |step: Vec3| {
+            let cosine = eye.dot(n);
+            let limit = MAX_FOOTPRINT_STRETCH * step.length();
+            let along = if cosine != 0.0 { -step.dot(n) / cosine } else { 0.0 };
+            step + eye * along.clamp(-limit, limit)
+        };
+        Self { du: onto_plane(across_u), dv: onto_plane(across_v) }
+    }
+}
+
+/// The part of the unit square `u, v ∈ [−½, ½]` where the three affine functions
+/// `λᵢ(u, v) = λ₀ᵢ + u·∂uᵢ + v·∂vᵢ` are all non-negative (a pixel's footprint inside a
+/// caustic triangle, in the footprint's coordinates): its area (a fraction of the
+/// square's) and its centroid. Sutherland–Hodgman: three cuts of a convex quadrilateral
+/// leave at most seven corners.
+pub fn footprint_coverage(lambda: Vec3, du: Vec3, dv: Vec3) -> (f32, glam::Vec2) {
+    use glam::Vec2;
+    let mut corners = [Vec2::ZERO; 8];
+    corners[..4].copy_from_slice(&[Vec2::new(-0.5, -0.5), Vec2::new(0.5, -0.5), Vec2::new(0.5, 0.5), Vec2::new(-0.5, 0.5)]);
+    let mut count = 4;
+    for i in 0..3 {
+        let height = |q: Vec2| lambda[i] + q.x * du[i] + q.y * dv[i];
+        let mut kept = [Vec2::ZERO; 8];
+        let mut k = 0;
+        for j in 0..count {
+            let (a, b) = (corners[j], corners[(j + 1) % count]);
+            let (ha, hb) = (height(a), height(b));
+            if ha >= 0.0 {
+                kept[k] = a;
+                k += 1;
+            }
+            if (ha >= 0.0) != (hb >= 0.0) {
+                kept[k] = a + (b - a) * (ha / (ha - hb));
+                k += 1;
+            }
+        }
+        corners = kept;
+        count = k;
+        if count < 3 {
+            return (0.0, Vec2::ZERO);
+        }
+    }
+    let (mut twice_area, mut moment) = (0.0, Vec2::ZERO);
+    for j in 0..count {
+        let (a, b) = (corners[j], corners[(j + 1) % count]);
+        let cross = a.perp_dot(b);
+        twice_area += cross;
+        moment += (a + b) * cross;
+    }
+    if twice_area.abs() <= f32::EPSILON {
+        return (0.0, Vec2::ZERO);
+    }
+    (0.5 * twice_area.abs(), moment / (3.0 * twice_area))
 }
 
 /// One caustic volume, in the layout the GPU reads (§4.1's "vertical" vectors: the
@@ -245,9 +331,7 @@ impl CausticVolume {
         if !(local.y >= 0.0 && local.y <= self.depth) {
             return None;
         }
-        let n = self.surface_normal;
-        let height = local.x * self.axes[0].dot(n) + local.y * self.axes[1].dot(n) + local.z * self.axes[2].dot(n);
-        if height < 0.0 {
+        if self.height(local) < 0.0 {
             return None;
         }
         let beta = self.beta(local);
@@ -259,6 +343,14 @@ impl CausticVolume {
         let inside =
             (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
         inside.then_some(lambda)
+    }
+
+    /// A local point's height above the generator triangle's plane, on the side the
+    /// rays leave to: the volume starts there.
+    #[inline]
+    fn height(&self, local: Vec3) -> f32 {
+        let n = self.surface_normal;
+        local.x * self.axes[0].dot(n) + local.y * self.axes[1].dot(n) + local.z * self.axes[2].dot(n)
     }
 
     /// Whether a local point inside the volume, with barycentric coordinates λ, lies
@@ -279,6 +371,12 @@ impl CausticVolume {
     pub fn sample(&self, p: Vec3, settings: &VolumeSettings) -> Option<VolumeSample> {
         let local = self.to_local(p);
         let lambda = self.barycentric(local)?;
+        self.sample_inside(local, lambda, settings)
+    }
+
+    /// [`Self::sample`] at a local point already found inside, with barycentric
+    /// coordinates λ.
+    fn sample_inside(&self, local: Vec3, lambda: Vec3, settings: &VolumeSettings) -> Option<VolumeSample> {
         if self.occluded(local, lambda) {
             return None;
         }
@@ -325,6 +423,50 @@ impl CausticVolume {
         }
         match self.sample(p, settings) {
             Some(s) => self.color * (s.plane_irradiance * (-s.ray.dot(n)).max(0.0)),
+            None => Vec3::ZERO,
+        }
+    }
+
+    /// The mean over a pixel's [`Footprint`] of what [`Self::irradiance`] gives, to
+    /// first order: the footprint's part inside the caustic triangle (the βᵢ carried to
+    /// the footprint's corners are affine across it; [`footprint_coverage`]) times the
+    /// irradiance at that part's centroid (exact for an intensity linear across it).
+    /// The slab is tested at `p`, every other test at the centroid. A footprint that
+    /// straddles two volumes' shared side splits between them by area, so no fill rule
+    /// is needed, and the light of a caustic triangle smaller than the pixel is spread
+    /// over the pixel, not caught whole or missed by its centre.
+    pub fn irradiance_over(&self, p: Vec3, n: Vec3, footprint: &Footprint, settings: &VolumeSettings) -> Vec3 {
+        if self.slab.is_some_and(|slab| !slab.contains(p)) {
+            return Vec3::ZERO;
+        }
+        let local = self.to_local(p);
+        let rotate = |d: Vec3| Vec3::new(d.dot(self.axes[0]), d.dot(self.axes[1]), d.dot(self.axes[2]));
+        let (du, dv) = (rotate(footprint.du), rotate(footprint.dv));
+        let lambda = |q: Vec3| {
+            let beta = self.beta(q);
+            beta / (beta.x + beta.y + beta.z)
+        };
+        let centre = lambda(local);
+        let along_u = lambda(local + 0.5 * du) - lambda(local - 0.5 * du);
+        let along_v = lambda(local + 0.5 * dv) - lambda(local - 0.5 * dv);
+        if !(centre.is_finite() && along_u.is_finite() && along_v.is_finite()) {
+            return Vec3::ZERO;
+        }
+        let (area, centroid) = footprint_coverage(centre, along_u, along_v);
+        if area <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let at = local + centroid.x * du + centroid.y * dv;
+        if !(at.y >= 0.0 && at.y <= self.depth) || self.height(at) < 0.0 {
+            return Vec3::ZERO;
+        }
+        let inside = lambda(at).max(Vec3::ZERO);
+        let inside = inside / (inside.x + inside.y + inside.z);
+        if !inside.is_finite() {
+            return Vec3::ZERO;
+        }
+        match self.sample_inside(at, inside, settings) {
+            Some(s) => self.color * (area * s.plane_irradiance * (-s.ray.dot(n)).max(0.0)),
             None => Vec3::ZERO,
         }
     }
@@ -438,6 +580,25 @@ impl VolumeGrid {
         let c = (z * self.dims[1] + y) * self.dims[0] + x;
         &self.items[self.start[c] as usize..self.start[c + 1] as usize]
     }
+
+    /// The volumes whose bounds may meet the box `lo..hi`, each once.
+    fn near_box(&self, lo: Vec3, hi: Vec3) -> Vec<u32> {
+        let Some((a, b)) = self.range(lo, hi).filter(|_| !self.start.is_empty()) else {
+            return Vec::new();
+        };
+        let mut found = Vec::new();
+        for z in a[2]..=b[2] {
+            for y in a[1]..=b[1] {
+                for x in a[0]..=b[0] {
+                    let c = (z * self.dims[1] + y) * self.dims[0] + x;
+                    found.extend_from_slice(&self.items[self.start[c] as usize..self.start[c + 1] as usize]);
+                }
+            }
+        }
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
 }
 
 impl VolumeSet {
@@ -468,8 +629,70 @@ impl VolumeSet {
         e
     }
 
+    /// What a pixel with this [`Footprint`] on the receiver at `p` shows: with
+    /// [`VolumeSettings::footprint_filter`], the mean caustic irradiance over the
+    /// footprint from every volume whose bounds meet it
+    /// ([`CausticVolume::irradiance_over`]); else the point sample at `p`.
+    pub fn irradiance_over(&self, p: Vec3, n: Vec3, footprint: &Footprint, settings: &VolumeSettings) -> Vec3 {
+        if !settings.footprint_filter {
+            return self.irradiance(p, n, settings);
+        }
+        let reach = 0.5 * (footprint.du.abs() + footprint.dv.abs());
+        let (lo, hi) = (p - reach, p + reach);
+        let mut e = Vec3::ZERO;
+        for i in self.grid.near_box(lo, hi) {
+            let (a, b) = self.boxes[i as usize];
+            if a.cmple(hi).all() && b.cmpge(lo).all() {
+                e += self.volumes[i as usize].irradiance_over(p, n, footprint, settings);
+            }
+        }
+        e
+    }
+
+    /// [`Self::irradiance_over`] at receiver points with their normals and footprints.
+    pub fn irradiance_over_at(&self, points: &[(Vec3, Vec3, Footprint)], settings: &VolumeSettings) -> Vec<Vec3> {
+        use rayon::prelude::*;
+        points.par_iter().map(|(p, n, footprint)| self.irradiance_over(*p, *n, footprint, settings)).collect()
+    }
+
     /// Total flux carried by all volumes.
     pub fn flux(&self) -> Vec3 {
         self.volumes.iter().map(CausticVolume::flux).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec2;
+
+    #[test]
+    fn footprint_coverage_is_the_part_of_the_square_inside() {
+        // Wholly inside: the whole square, centred.
+        let (area, centroid) = footprint_coverage(Vec3::splat(1.0 / 3.0), Vec3::ZERO, Vec3::ZERO);
+        assert!((area - 1.0).abs() < 1e-6 && centroid.length() < 1e-6);
+        // A side through the centre along v: the half u > 0, centred at u = ¼.
+        let (area, centroid) = footprint_coverage(Vec3::new(0.0, 0.5, 0.5), Vec3::new(1.0, -0.5, -0.5), Vec3::ZERO);
+        assert!((area - 0.5).abs() < 1e-6 && (centroid - Vec2::new(0.25, 0.0)).length() < 1e-6, "{area} {centroid}");
+        // A triangle of area ⅛ inside the square: λ = (½ + 2u, ½ + 2v, −2u − 2v).
+        let (area, _) = footprint_coverage(Vec3::new(0.5, 0.5, 0.0), Vec3::new(2.0, 0.0, -2.0), Vec3::new(0.0, 2.0, -2.0));
+        assert!((area - 0.125).abs() < 1e-6, "{area}");
+        // Wholly outside: nothing.
+        assert_eq!(footprint_coverage(Vec3::new(-1.0, 1.0, 1.0), Vec3::new(0.1, 0.0, -0.1), Vec3::ZERO).0, 0.0);
+    }
+
+    #[test]
+    fn a_footprint_seen_at_a_slant_stretches_along_the_receiver() {
+        let step = Vec3::X * 0.01;
+        // Straight down onto a floor: the step as it is.
+        assert_eq!(Footprint::seen(Vec3::Y, Vec3::NEG_Y, step, Vec3::Z * 0.01).du, step);
+        // At 60° from the normal, a step across the eye ray in its plane grows by 1/cos.
+        let eye = Vec3::new(60f32.to_radians().sin(), -60f32.to_radians().cos(), 0.0);
+        let across = Vec3::new(eye.y, -eye.x, 0.0) * 0.01;
+        let du = Footprint::seen(Vec3::Y, eye, across, Vec3::Z * 0.01).du;
+        assert!(du.y.abs() < 1e-7 && (du.length() - 0.02).abs() < 1e-6, "{du}");
+        // Grazing: at most `MAX_FOOTPRINT_STRETCH` times longer, and finite.
+        let grazing = Footprint::seen(Vec3::Y, Vec3::X, Vec3::Y * 0.01, Vec3::Z * 0.01).du;
+        assert!(grazing.is_finite() && grazing.length() <= 0.01 * (1.0 + MAX_FOOTPRINT_STRETCH) + 1e-6, "{grazing}");
     }
 }
