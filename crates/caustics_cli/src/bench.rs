@@ -18,7 +18,7 @@ use caustics_core::scene::{LightKind, Scene};
 use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose};
 use caustics_core::scenes::{BenchScene, wave_pool};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
-use caustics_core::volumes::{IntensityMode, VolumeSettings, build_drawn_volumes};
+use caustics_core::volumes::{Footprint, IntensityMode, VolumeSettings, build_drawn_volumes};
 use crate::render::{GpuTimes, Method};
 use caustics_bevy::CausticQuality;
 use clap::Args;
@@ -211,11 +211,12 @@ pub struct WarpedVolumes {
 }
 
 /// Points per cell side at which the methods' CPU twins are evaluated in the bench:
-/// the tracer bins flux per cell, so both estimate cell means. The volumes' point
-/// samples need this many at their focal lines (on the pool at 256² water cells their
-/// L2 against the tracer reads 0.239 from 4² samples a cell, 0.152 from 8², 0.086 from
-/// 16²; the maps' 0.211, 0.214, 0.215: their splats are already smooth); every
-/// reading is an upper bound of the method's error in the cell means.
+/// the tracer bins flux per cell, so both estimate cell means. The volumes' pixels are
+/// each the mean over their footprint (a `1/BENCH_SAMPLES` cell), so one a cell would
+/// do for them; point samples needed this many and more at their focal lines (on the
+/// pool at 256² water cells their L2 against the tracer read 0.239 from 4² samples a
+/// cell, 0.152 from 8², 0.086 from 16²; the maps' 0.211, 0.214, 0.215: their splats
+/// are already smooth).
 pub const BENCH_SAMPLES: usize = 8;
 
 /// Points per cell side of the GPU irradiance plane (pixels), of its twin and of a
@@ -262,8 +263,9 @@ fn tessellated(name: &str, scene: &BenchScene, cells: usize) -> Result<BenchScen
     }
 }
 
-/// The caustic irradiance per cell of `region` (the mean of `samples`² points) from
-/// every generator of `scene` by the volumes' CPU twin, and the number of volumes.
+/// The caustic irradiance per cell of `region` from every generator of `scene` by the
+/// volumes' CPU twin at the plugin's defaults (the mean of `samples`² pixels a cell,
+/// each the mean over its footprint), and the number of volumes.
 pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode, samples: usize) -> (Vec<f32>, u64) {
     drawn_volumes_irradiance(scene, region, intensity, samples, |_| true)
 }
@@ -278,11 +280,12 @@ fn drawn_volumes_irradiance(
 ) -> (Vec<f32>, u64) {
     let settings = VolumeSettings { intensity, ..VolumeSettings::default() };
     let set = build_drawn_volumes(scene, &settings, drawn);
-    let points = cell_sample_points(region, samples);
     // The floor faces up (the region's `edge_u × edge_v` may point either way).
     let up = if region.normal().y < 0.0 { -region.normal() } else { region.normal() };
-    let normals = vec![up; points.len()];
-    let irradiance: Vec<f32> = set.irradiance_at(&points, &normals, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
+    let per_side = samples as f32;
+    let footprint = Footprint { du: region.edge_u / (region.nu as f32 * per_side), dv: region.edge_v / (region.nv as f32 * per_side) };
+    let pixels: Vec<_> = cell_sample_points(region, samples).into_iter().map(|p| (p, up, footprint)).collect();
+    let irradiance: Vec<f32> = set.irradiance_over_at(&pixels, &settings).iter().map(|e| (e.x + e.y + e.z) / 3.0).collect();
     (cell_means(&irradiance, samples), set.volumes.len() as u64)
 }
 

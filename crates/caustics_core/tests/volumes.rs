@@ -629,3 +629,37 @@ fn light_shafts_stop_at_an_occluder() {
     let (low, high) = (integral((-0.5, -0.025), &beam), integral((-0.5, 0.075), &beam));
     assert!(across.x > low && across.x < high, "across: {} not in [{low}, {high}]", across.x);
 }
+
+#[test]
+fn footprint_means_change_with_a_moving_sea_as_the_tracer_does() {
+    use caustics_core::ocean::{OceanSettings, OceanSpectrum};
+    // A sea of 1.6 m waves over a floor 3 m down, two frames 1/60 s apart, measured
+    // one pixel a cell (the footprint is the cell).
+    let ocean = OceanSettings { resolution: 64, size: 8.0, wind_speed: 4.0, ..Default::default() };
+    let spectrum = OceanSpectrum::new(&ocean).unwrap();
+    let l = Vec3::new(0.2, -1.0, 0.1).normalize();
+    let scene_at = |t: f32| Scene {
+        lights: vec![sun(l)],
+        generators: vec![water(spectrum.evaluate(t).mesh(), 1.333)],
+        receivers: vec![floor(12.0, -3.0)],
+    };
+    let region = GridRegion::horizontal(-2.0, -2.0, -3.0, 4.0, 64);
+    let frames = [scene_at(1.0), scene_at(1.0 + 1.0 / 60.0)];
+    let filtered = VolumeSettings::default();
+    let point = VolumeSettings { footprint_filter: false, ..filtered };
+    let photons = 1 << 22;
+    let traced = |scene: &Scene, seed: u64| traced_with_dark_cells(scene, &region, photons, seed).0;
+    // ‖b − a‖ / ‖a‖ over the cells.
+    let change = |[a, b]: [Vec<f32>; 2]| caustics_core::metrics::relative_l2(&b, &a);
+    let tracer = change(frames.each_ref().map(|s| traced(s, 1)));
+    let noise = change([traced(&frames[0], 1), traced(&frames[0], 2)]);
+    let volumes = |settings: &VolumeSettings| {
+        change(frames.each_ref().map(|s| footprint_cell_means(&build_scene_volumes(s, settings), &region, 1, settings)))
+    };
+    let (footprints, points) = (volumes(&filtered), volumes(&point));
+    eprintln!("frame-to-frame change (relative L2): tracer {tracer:.4} (its own noise {noise:.4}), footprints {footprints:.4}, point samples {points:.4}");
+    assert!(noise < 0.5 * tracer, "the tracer's noise {noise} hides the change {tracer}");
+    assert!(footprints <= 1.5 * tracer, "the footprint means change by {footprints}, the tracer's light by {tracer}");
+    // Point samples sparkle: their focal lines jump from pixel to pixel.
+    assert!(points > 1.5 * tracer, "point samples change by {points}, the tracer's light by {tracer}");
+}
