@@ -73,7 +73,7 @@ pub struct BenchArgs {
     #[arg(long, default_value = "grid", value_parser = parse_shafts)]
     pub shafts: caustics_bevy::warped_volumes::ShaftIntegral,
     /// With `--frames`: the caustic volumes' `WarpedVolumesSettings::splat_pixels`, the
-    /// largest box in pixels whose volumes the surface pass lights in its compute pass
+    /// most pixels a volume's shape covers for the surface pass to light it in its compute pass
     /// (0: every volume rasterised); the plugin's default when not given.
     #[arg(long)]
     pub splat_pixels: Option<u32>,

@@ -19,8 +19,8 @@
 //!    irradiance (§3.4), times the receiver's cosine from the normal prepass, added to
 //!    the view's caustic irradiance buffer; the composite then shows it on receivers.
 //!    A compute pass (`splat` in `volumes.wgsl`), one invocation a volume, projects the
-//!    shape, skips it off the view and lights the pixels it covers itself where its
-//!    box holds at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
+//!    shape, skips it off the view and lights the pixels it covers itself where it
+//!    covers at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
 //!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
 //!    rasteriser, which draws their back faces indirectly, so that each pixel a shape
 //!    covers runs the fragment shader at most once, and only where the back face lies
@@ -80,10 +80,11 @@ pub struct WarpedVolumesSettings {
     /// [`ShaftIntegral::Grid`]'s most steps along the part of each eye ray inside a
     /// medium, which it marches one step a cell (256 by default).
     pub shaft_steps: u32,
-    /// The surface pass lights a volume whose bounding shape projects into a box of at
-    /// most this many pixels in a compute pass, one invocation a volume looping over
-    /// the pixels the shape covers, and rasterises the larger ones (4096, a 64 × 64
-    /// box, by default; 0 rasterises every volume). A rasteriser shades a small shape
+    /// The surface pass lights a volume whose bounding shape projects onto at most
+    /// this many pixels (its area, not its box: a thin sliver across the view stays)
+    /// in a compute pass, one invocation a volume looping over the pixels the shape
+    /// covers, and rasterises the larger ones (4096, a 64 × 64 square, by default; 0
+    /// rasterises every volume). A rasteriser shades a small shape
     /// in whole blocks of pixels (2 × 2 on most GPUs, 4 × 4 on lavapipe), most of them
     /// outside it, and a fine generator makes many small shapes.
     pub splat_pixels: u32,
@@ -91,7 +92,7 @@ pub struct WarpedVolumesSettings {
     /// the receiver (the default) or the point sample at its centre; see
     /// [`VolumeSettings::footprint_filter`]. The volumes lit in the compute pass (those
     /// within [`Self::splat_pixels`]) are filtered; the larger ones the rasteriser
-    /// draws are point-sampled, since across a caustic triangle 64 pixels wide the
+    /// draws are point-sampled, since across a caustic triangle of 4096 pixels the
     /// centre's value is the footprint's mean but on its edges.
     pub footprint_filter: bool,
 }

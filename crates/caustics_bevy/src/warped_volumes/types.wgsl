@@ -33,7 +33,7 @@ struct VolumeSettings {
     intensity_mode: u32,        // 0 conserving, 1 the paper's interpolation, 2 constant
     max_magnification: f32,
     medium_count: u32,
-    splat_pixels: u32,          // `splat` lights the volumes whose box holds at most this many pixels
+    splat_pixels: u32,          // `splat` lights the volumes whose shape covers at most this many pixels
     footprint_filter: u32,      // 1: `splat` gives each pixel the mean over its footprint, 0: the point sample
     media: array<Medium, 4>,
 }

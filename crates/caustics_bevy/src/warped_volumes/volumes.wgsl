@@ -170,8 +170,8 @@ fn row_span(corner: array<vec2<f32>, 8>, y0: f32, y1: f32) -> vec2<f32> {
     return span;
 }
 
-// One volume of the surface pass: where its surface bounding shape projects within a
-// box of at most `settings.splat_pixels` pixels, it lights the pixels the shape may
+// One volume of the surface pass: where its surface bounding shape projects onto at
+// most `settings.splat_pixels` pixels, it lights the pixels the shape may
 // light, added to `splatted`: with `settings.footprint_filter` every pixel the shape
 // touches (the shape is convex, so a row of pixels meets it between the outermost
 // points of its twelve edges over the row) with the mean over the pixel's footprint,
@@ -224,8 +224,21 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     if !clipped && any(last < first) {
         return;
     }
-    let extent = vec2<u32>(max(last - first + 1, vec2(0)));
-    if clipped || extent.x * extent.y > settings.splat_pixels {
+    // The shape's area in pixels: every point of a convex solid's outline is covered
+    // by the projections of exactly two of its faces. A thin sliver across the view
+    // (a cardioid's) has a large box and few pixels, and stays here.
+    var triangles = array<u32, 36>(
+        0u, 1u, 2u, 0u, 2u, 3u, 4u, 6u, 5u, 4u, 7u, 6u, 0u, 4u, 5u, 0u, 5u, 1u,
+        1u, 5u, 6u, 1u, 6u, 2u, 2u, 6u, 7u, 2u, 7u, 3u, 3u, 7u, 4u, 3u, 4u, 0u,
+    );
+    var faces = 0.0;
+    for (var t = 0; t < 36; t += 3) {
+        let a = corner[triangles[t]];
+        let ab = corner[triangles[t + 1]] - a;
+        let ac = corner[triangles[t + 2]] - a;
+        faces += abs(ab.x * ac.y - ab.y * ac.x);
+    }
+    if clipped || 0.25 * faces > f32(settings.splat_pixels) {
         let slot = atomicAdd(&large[1], 1u);
         atomicStore(&large[FIRST_LARGE + slot], index);
         return;
