@@ -175,6 +175,14 @@ fn lambda_at(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
 // square u, v ∈ [−½, ½] where the three λᵢ + u ∂uᵢ + v ∂vᵢ are non-negative, .yz its
 // centroid (Sutherland–Hodgman: at most seven corners).
 fn footprint_coverage(lambda: vec3<f32>, du: vec3<f32>, dv: vec3<f32>) -> vec3<f32> {
+    // Each λᵢ's least and greatest over the square: wholly outside, or wholly inside.
+    let reach = 0.5 * (abs(du) + abs(dv));
+    if any(lambda + reach < vec3(0.0)) {
+        return vec3(0.0);
+    }
+    if all(lambda - reach >= vec3(0.0)) {
+        return vec3(1.0, 0.0, 0.0);
+    }
     var corners = array<vec2<f32>, 8>(vec2(-0.5, -0.5), vec2(0.5, -0.5), vec2(0.5, 0.5), vec2(-0.5, 0.5), vec2(0.0), vec2(0.0), vec2(0.0), vec2(0.0));
     var count = 4u;
     for (var i = 0u; i < 3u; i++) {

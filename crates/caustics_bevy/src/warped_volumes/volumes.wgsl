@@ -115,17 +115,22 @@ fn surface_light(v: CausticVolume, pixel: vec2<i32>, filtered: bool) -> vec3<f32
         return vec3(0.0);
     }
     let n = normalize(textureLoad(normal_prepass, pixel, 0).xyz * 2.0 - 1.0);
-    let centre = vec2<f32>(pixel) + 0.5;
-    let p = world_at(view, centre, depth);
+    // `world_at`, keeping the homogeneous point for the footprint's derivatives.
+    let uv = (vec2<f32>(pixel) + 0.5 - view.viewport.xy) / view.viewport.zw;
+    let h = view.world_from_clip * vec4(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    let p = h.xyz / h.w;
     // `CausticVolume::irradiance`: surfaces in the volume's slab, where it has one.
     let d = dot(v.slab.xyz, p);
     if any(v.slab.xyz != vec3(0.0)) && !(d >= v.slab.w && d <= v.slab_far.x) {
         return vec3(0.0);
     }
     if filtered {
-        let eye = normalize(p - world_at(view, centre, 1.0));
-        let du = onto_receiver(world_at(view, centre + vec2(1.0, 0.0), depth) - p, eye, n);
-        let dv = onto_receiver(world_at(view, centre + vec2(0.0, 1.0), depth) - p, eye, n);
+        // The unprojection's derivatives at p: along the NDC depth (the eye ray), and
+        // one pixel right and down at p's depth.
+        let m = view.world_from_clip;
+        let eye = normalize(m[2].xyz - p * m[2].w);
+        let du = onto_receiver((m[0].xyz - p * m[0].w) * (2.0 / (view.viewport.z * h.w)), eye, n);
+        let dv = onto_receiver((m[1].xyz - p * m[1].w) * (-2.0 / (view.viewport.w * h.w)), eye, n);
         let e = footprint_irradiance(v, p, n, du, dv, settings.intensity_mode, settings.max_magnification);
         return exposed(v.color.rgb * e, view.exposure).rgb;
     }

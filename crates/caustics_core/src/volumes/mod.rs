@@ -151,6 +151,14 @@ impl Footprint {
 /// leave at most seven corners.
 pub fn footprint_coverage(lambda: Vec3, du: Vec3, dv: Vec3) -> (f32, glam::Vec2) {
     use glam::Vec2;
+    // Each λᵢ's least and greatest over the square: wholly outside, or wholly inside.
+    let reach = 0.5 * (du.abs() + dv.abs());
+    if (lambda + reach).cmplt(Vec3::ZERO).any() {
+        return (0.0, Vec2::ZERO);
+    }
+    if (lambda - reach).cmpge(Vec3::ZERO).all() {
+        return (1.0, Vec2::ZERO);
+    }
     let mut corners = [Vec2::ZERO; 8];
     corners[..4].copy_from_slice(&[Vec2::new(-0.5, -0.5), Vec2::new(0.5, -0.5), Vec2::new(0.5, 0.5), Vec2::new(-0.5, 0.5)]);
     let mut count = 4;
