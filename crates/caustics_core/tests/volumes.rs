@@ -116,13 +116,19 @@ fn emitted_times_fresnel(mesh: &TriMesh, l: Vec3, ior: f32) -> f64 {
         .sum()
 }
 
-#[test]
-fn energy_on_a_large_receiver_matches_emitted_times_fresnel() {
+/// Water rippled enough to focus on the floor 0.8 m below it (cusps far finer than a
+/// 4 cm cell) under a slanted sun, and the flux it transmits (emitted × Fresnel).
+fn focusing_pool() -> (Scene, f64) {
     let l = Vec3::new(0.3, -1.0, -0.2).normalize();
     let waves = [Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 }, Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 }];
     let mesh = wave_heightfield(48, 2.0, 0.8, &waves);
     let expected = emitted_times_fresnel(&mesh, l, 1.333);
-    let scene = Scene { lights: vec![sun(l)], generators: vec![water(mesh, 1.333)], receivers: vec![floor(8.0, 0.0)] };
+    (Scene { lights: vec![sun(l)], generators: vec![water(mesh, 1.333)], receivers: vec![floor(8.0, 0.0)] }, expected)
+}
+
+#[test]
+fn energy_on_a_large_receiver_matches_emitted_times_fresnel() {
+    let (scene, expected) = focusing_pool();
     let region = GridRegion::horizontal(-2.0, -2.0, 0.0, 4.0, 800);
     for settings in ALL_MODES {
         let set = build_scene_volumes(&scene, &settings);
@@ -466,12 +472,7 @@ fn footprint_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings
 
 #[test]
 fn footprint_means_keep_the_flux_and_need_no_supersampling() {
-    // Water rippled enough to focus at the floor: cusps far finer than the cells.
-    let l = Vec3::new(0.3, -1.0, -0.2).normalize();
-    let waves = [Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 }, Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 }];
-    let mesh = wave_heightfield(48, 2.0, 0.8, &waves);
-    let expected = emitted_times_fresnel(&mesh, l, 1.333);
-    let scene = Scene { lights: vec![sun(l)], generators: vec![water(mesh, 1.333)], receivers: vec![floor(8.0, 0.0)] };
+    let (scene, expected) = focusing_pool();
     let region = GridRegion::horizontal(-2.0, -2.0, 0.0, 4.0, 128);
     let filtered = VolumeSettings::default();
     let point = VolumeSettings { footprint_filter: false, ..filtered };
