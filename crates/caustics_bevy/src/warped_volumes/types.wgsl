@@ -173,7 +173,8 @@ fn lambda_at(v: CausticVolume, p: vec3<f32>) -> vec3<f32> {
 
 // `caustics_core::volumes::footprint_coverage`: .x the area of the part of the unit
 // square u, v ∈ [−½, ½] where the three λᵢ + u ∂uᵢ + v ∂vᵢ are non-negative, .yz its
-// centroid (Sutherland–Hodgman: at most seven corners).
+// centroid: each of the seven half-planes a + b·q ≥ 0 that cut it adds the stretch
+// of its line inside the other six, counter-clockwise, to the shoelace sums.
 fn footprint_coverage(lambda: vec3<f32>, du: vec3<f32>, dv: vec3<f32>) -> vec3<f32> {
     // Each λᵢ's least and greatest over the square: wholly outside, or wholly inside.
     let reach = 0.5 * (abs(du) + abs(dv));
@@ -183,44 +184,55 @@ fn footprint_coverage(lambda: vec3<f32>, du: vec3<f32>, dv: vec3<f32>) -> vec3<f
     if all(lambda - reach >= vec3(0.0)) {
         return vec3(1.0, 0.0, 0.0);
     }
-    var corners = array<vec2<f32>, 8>(vec2(-0.5, -0.5), vec2(0.5, -0.5), vec2(0.5, 0.5), vec2(-0.5, 0.5), vec2(0.0), vec2(0.0), vec2(0.0), vec2(0.0));
-    var count = 4u;
-    for (var i = 0u; i < 3u; i++) {
-        var kept: array<vec2<f32>, 8>;
-        var k = 0u;
-        for (var j = 0u; j < count; j++) {
-            let a = corners[j];
-            let b = corners[select(j + 1u, 0u, j + 1u == count)];
-            let ha = lambda[i] + a.x * du[i] + a.y * dv[i];
-            let hb = lambda[i] + b.x * du[i] + b.y * dv[i];
-            if ha >= 0.0 {
-                kept[k] = a;
-                k++;
-            }
-            if (ha >= 0.0) != (hb >= 0.0) {
-                kept[k] = a + (b - a) * (ha / (ha - hb));
-                k++;
-            }
-        }
-        corners = kept;
-        count = k;
-        if count < 3u {
-            return vec3(0.0);
-        }
-    }
+    // (a, b.x, b.y) of each half-plane: the square's sides, then λᵢ ≥ 0.
+    var planes = array<vec3<f32>, 7>(
+        vec3(0.5, 1.0, 0.0),
+        vec3(0.5, -1.0, 0.0),
+        vec3(0.5, 0.0, 1.0),
+        vec3(0.5, 0.0, -1.0),
+        vec3(lambda.x, du.x, dv.x),
+        vec3(lambda.y, du.y, dv.y),
+        vec3(lambda.z, du.z, dv.z),
+    );
     var twice_area = 0.0;
     var moment = vec2(0.0);
-    for (var j = 0u; j < count; j++) {
-        let a = corners[j];
-        let b = corners[select(j + 1u, 0u, j + 1u == count)];
-        let cross = a.x * b.y - a.y * b.x;
-        twice_area += cross;
-        moment += (a + b) * cross;
+    for (var k = 0; k < 7; k++) {
+        let b = planes[k].yz;
+        let length_squared = dot(b, b);
+        if length_squared == 0.0 {
+            continue;
+        }
+        // The line a + b·q = 0, run with the inside (b) on its left.
+        let origin = -planes[k].x * b / length_squared;
+        let along = vec2(b.y, -b.x);
+        var enter = -3.4e38;
+        var leave = 3.4e38;
+        for (var j = 0; j < 7; j++) {
+            let at = planes[j].x + dot(planes[j].yz, origin);
+            let rate = dot(planes[j].yz, along);
+            if j == k {
+                continue;
+            } else if rate > 0.0 {
+                enter = max(enter, -at / rate);
+            } else if rate < 0.0 {
+                leave = min(leave, -at / rate);
+            } else if at < 0.0 || (at == 0.0 && j < k) {
+                // Outside a parallel side, or on the same line as an earlier one.
+                leave = -3.4e38;
+            }
+        }
+        if enter < leave {
+            let p = origin + enter * along;
+            let q = origin + leave * along;
+            let cross = p.x * q.y - p.y * q.x;
+            twice_area += cross;
+            moment += (p + q) * cross;
+        }
     }
-    if abs(twice_area) <= 1.1920929e-7 {
+    if !(twice_area > 1.1920929e-7) {
         return vec3(0.0);
     }
-    return vec3(0.5 * abs(twice_area), moment / (3.0 * twice_area));
+    return vec3(0.5 * twice_area, moment / (3.0 * twice_area));
 }
 
 // `CausticVolume::irradiance_over` without the slab and the colour: the mean over a

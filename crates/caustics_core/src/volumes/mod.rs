@@ -147,8 +147,11 @@ impl Footprint {
 /// The part of the unit square `u, v ∈ [−½, ½]` where the three affine functions
 /// `λᵢ(u, v) = λ₀ᵢ + u·∂uᵢ + v·∂vᵢ` are all non-negative (a pixel's footprint inside a
 /// caustic triangle, in the footprint's coordinates): its area (a fraction of the
-/// square's) and its centroid. Sutherland–Hodgman: three cuts of a convex quadrilateral
-/// leave at most seven corners.
+/// square's) and its centroid. The part is convex, cut by seven half-planes `a + b·q ≥
+/// 0` (the square's four sides and the three λᵢ ≥ 0); each one's boundary line adds
+/// the stretch of it inside the other six, run counter-clockwise, to the area and
+/// moment sums of the shoelace formula, which need no order of the edges. A fixed
+/// amount of straight arithmetic, with no list of corners to index.
 pub fn footprint_coverage(lambda: Vec3, du: Vec3, dv: Vec3) -> (f32, glam::Vec2) {
     use glam::Vec2;
     // Each λᵢ's least and greatest over the square: wholly outside, or wholly inside.
@@ -159,42 +162,49 @@ pub fn footprint_coverage(lambda: Vec3, du: Vec3, dv: Vec3) -> (f32, glam::Vec2)
     if (lambda - reach).cmpge(Vec3::ZERO).all() {
         return (1.0, Vec2::ZERO);
     }
-    let mut corners = [Vec2::ZERO; 8];
-    corners[..4].copy_from_slice(&[Vec2::new(-0.5, -0.5), Vec2::new(0.5, -0.5), Vec2::new(0.5, 0.5), Vec2::new(-0.5, 0.5)]);
-    let mut count = 4;
-    for i in 0..3 {
-        let height = |q: Vec2| lambda[i] + q.x * du[i] + q.y * dv[i];
-        let mut kept = [Vec2::ZERO; 8];
-        let mut k = 0;
-        for j in 0..count {
-            let (a, b) = (corners[j], corners[(j + 1) % count]);
-            let (ha, hb) = (height(a), height(b));
-            if ha >= 0.0 {
-                kept[k] = a;
-                k += 1;
-            }
-            if (ha >= 0.0) != (hb >= 0.0) {
-                kept[k] = a + (b - a) * (ha / (ha - hb));
-                k += 1;
-            }
-        }
-        corners = kept;
-        count = k;
-        if count < 3 {
-            return (0.0, Vec2::ZERO);
-        }
-    }
+    let planes = [
+        (0.5, Vec2::X),
+        (0.5, Vec2::NEG_X),
+        (0.5, Vec2::Y),
+        (0.5, Vec2::NEG_Y),
+        (lambda.x, Vec2::new(du.x, dv.x)),
+        (lambda.y, Vec2::new(du.y, dv.y)),
+        (lambda.z, Vec2::new(du.z, dv.z)),
+    ];
     let (mut twice_area, mut moment) = (0.0, Vec2::ZERO);
-    for j in 0..count {
-        let (a, b) = (corners[j], corners[(j + 1) % count]);
-        let cross = a.perp_dot(b);
-        twice_area += cross;
-        moment += (a + b) * cross;
+    for (k, &(a, b)) in planes.iter().enumerate() {
+        let length_squared = b.length_squared();
+        if length_squared == 0.0 {
+            continue;
+        }
+        // The line a + b·q = 0, run with the inside (b) on its left.
+        let origin = -a * b / length_squared;
+        let along = Vec2::new(b.y, -b.x);
+        let (mut from, mut to) = (f32::NEG_INFINITY, f32::INFINITY);
+        for (j, &(aj, bj)) in planes.iter().enumerate() {
+            let (at, rate) = (aj + bj.dot(origin), bj.dot(along));
+            if j == k {
+                continue;
+            } else if rate > 0.0 {
+                from = from.max(-at / rate);
+            } else if rate < 0.0 {
+                to = to.min(-at / rate);
+            } else if at < 0.0 || (at == 0.0 && j < k) {
+                // Outside a parallel side, or on the same line as an earlier one.
+                to = f32::NEG_INFINITY;
+            }
+        }
+        if from < to {
+            let (p, q) = (origin + from * along, origin + to * along);
+            let cross = p.perp_dot(q);
+            twice_area += cross;
+            moment += (p + q) * cross;
+        }
     }
-    if twice_area.abs() <= f32::EPSILON {
+    if !(twice_area > f32::EPSILON) {
         return (0.0, Vec2::ZERO);
     }
-    (0.5 * twice_area.abs(), moment / (3.0 * twice_area))
+    (0.5 * twice_area, moment / (3.0 * twice_area))
 }
 
 /// One caustic volume, in the layout the GPU reads (§4.1's "vertical" vectors: the
@@ -687,6 +697,31 @@ mod tests {
         assert!((area - 0.125).abs() < 1e-6, "{area}");
         // Wholly outside: nothing.
         assert_eq!(footprint_coverage(Vec3::new(-1.0, 1.0, 1.0), Vec3::new(0.1, 0.0, -0.1), Vec3::ZERO).0, 0.0);
+        // Any triangle against the square counted on a 400² grid.
+        let mut rng = crate::rng::Pcg32::for_photon(7, 0, 0);
+        let mut next = || rng.next_f32() * 4.0 - 2.0;
+        for _ in 0..200 {
+            let lambda = Vec3::new(next(), next(), 0.0);
+            let lambda = Vec3::new(lambda.x, lambda.y, 1.0 - lambda.x - lambda.y) * 0.5;
+            let du = Vec3::new(next(), next(), 0.0);
+            let dv = Vec3::new(next(), next(), 0.0);
+            let (du, dv) = (Vec3::new(du.x, du.y, -du.x - du.y), Vec3::new(dv.x, dv.y, -dv.x - dv.y));
+            let (area, centroid) = footprint_coverage(lambda, du, dv);
+            let n = 400;
+            let (mut count, mut sum) = (0usize, Vec2::ZERO);
+            for i in 0..n * n {
+                let q = Vec2::new((i % n) as f32 + 0.5, (i / n) as f32 + 0.5) / n as f32 - 0.5;
+                if (lambda + q.x * du + q.y * dv).cmpge(Vec3::ZERO).all() {
+                    count += 1;
+                    sum += q;
+                }
+            }
+            let counted = count as f32 / (n * n) as f32;
+            assert!((area - counted).abs() < 0.01, "{lambda} {du} {dv}: {area} vs {counted}");
+            if counted > 0.05 {
+                assert!((centroid - sum / count as f32).length() < 0.01, "{centroid} vs {}", sum / count as f32);
+            }
+        }
     }
 
     #[test]
