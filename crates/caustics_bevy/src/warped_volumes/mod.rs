@@ -141,16 +141,13 @@ pub enum VolumeIntensity {
 }
 
 /// The shafts: `Low` marches a 64-cell grid at one pixel in sixteen, `High` a
-/// 128-cell grid at one pixel in four. The surface caustics: `Low` point-samples them
-/// (no [`WarpedVolumesSettings::footprint_filter`]: its compute pass several times
-/// cheaper on lavapipe, its focal lines aliased); past that their accuracy is the
-/// generator's tessellation.
+/// 128-cell grid at one pixel in four. The surface caustics are the same at every
+/// preset: their accuracy is the generator's tessellation.
 impl crate::QualityPreset for WarpedVolumesSettings {
     fn set_quality(&mut self, quality: crate::CausticQuality) {
         self.shaft_downsample = quality.pick([4, 4, 2]);
         self.shaft_grid = quality.pick([64, 96, 128]);
         self.shaft_steps = quality.pick([192, 256, 384]);
-        self.footprint_filter = quality.pick([false, true, true]);
     }
 }
 
