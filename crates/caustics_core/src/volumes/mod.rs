@@ -180,22 +180,22 @@ pub fn footprint_coverage(lambda: Vec3, du: Vec3, dv: Vec3) -> (f32, glam::Vec2)
         // The line a + b·q = 0, run with the inside (b) on its left.
         let origin = -a * b / length_squared;
         let along = Vec2::new(b.y, -b.x);
-        let (mut from, mut to) = (f32::NEG_INFINITY, f32::INFINITY);
+        let (mut enter, mut leave) = (f32::NEG_INFINITY, f32::INFINITY);
         for (j, &(aj, bj)) in planes.iter().enumerate() {
             let (at, rate) = (aj + bj.dot(origin), bj.dot(along));
             if j == k {
                 continue;
             } else if rate > 0.0 {
-                from = from.max(-at / rate);
+                enter = enter.max(-at / rate);
             } else if rate < 0.0 {
-                to = to.min(-at / rate);
+                leave = leave.min(-at / rate);
             } else if at < 0.0 || (at == 0.0 && j < k) {
                 // Outside a parallel side, or on the same line as an earlier one.
-                to = f32::NEG_INFINITY;
+                leave = f32::NEG_INFINITY;
             }
         }
-        if from < to {
-            let (p, q) = (origin + from * along, origin + to * along);
+        if enter < leave {
+            let (p, q) = (origin + enter * along, origin + leave * along);
             let cross = p.perp_dot(q);
             twice_area += cross;
             moment += (p + q) * cross;
