@@ -48,13 +48,21 @@ fn floor_irradiance(set: &VolumeSet, region: &GridRegion, settings: &VolumeSetti
 /// Mean irradiance over every cell of a horizontal region facing up, from `k × k`
 /// point samples per cell (a cell mean, like the tracer's, not a point sample).
 fn floor_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
+    footprint_cell_means(set, region, k, &VolumeSettings { footprint_filter: false, ..*settings })
+}
+
+/// The region's cell means from `k × k` samples a cell, each the pixel value over its
+/// footprint (a `1/k` cell), filtered or point-sampled as `settings` say.
+fn footprint_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
     let fine = GridRegion { nu: region.nu * k, nv: region.nv * k, ..*region };
-    let samples = floor_irradiance(set, &fine, settings);
+    let footprint = Footprint { du: fine.edge_u / fine.nu as f32, dv: fine.edge_v / fine.nv as f32 };
+    let samples: Vec<_> =
+        (0..fine.nv).flat_map(|r| (0..fine.nu).map(move |c| (fine.cell_center(r, c), Vec3::Y, footprint))).collect();
+    let e = set.irradiance_over_at(&samples, settings);
     (0..region.nv * region.nu)
         .map(|i| {
             let (r, c) = (i / region.nu, i % region.nu);
-            let cell = (0..k * k).map(|j| samples[(r * k + j / k) * fine.nu + c * k + j % k].x).sum::<f32>();
-            cell / (k * k) as f32
+            (0..k * k).map(|j| e[(r * k + j / k) * fine.nu + c * k + j % k].x).sum::<f32>() / (k * k) as f32
         })
         .collect()
 }
@@ -452,22 +460,6 @@ fn the_test_settings_are_the_defaults() {
     assert_eq!((d.max_magnification, d.min_ray_cosine), (INTERPOLATED.max_magnification, INTERPOLATED.min_ray_cosine));
     assert_eq!(d.intensity, IntensityMode::Conserving);
     assert!(d.footprint_filter);
-}
-
-/// The region's cell means from `k × k` samples a cell, each the pixel value over its
-/// footprint (a `1/k` cell), filtered or point-sampled as `settings` say.
-fn footprint_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
-    let fine = GridRegion { nu: region.nu * k, nv: region.nv * k, ..*region };
-    let footprint = Footprint { du: fine.edge_u / fine.nu as f32, dv: fine.edge_v / fine.nv as f32 };
-    let samples: Vec<_> =
-        (0..fine.nv).flat_map(|r| (0..fine.nu).map(move |c| (fine.cell_center(r, c), Vec3::Y, footprint))).collect();
-    let e = set.irradiance_over_at(&samples, settings);
-    (0..region.nv * region.nu)
-        .map(|i| {
-            let (r, c) = (i / region.nu, i % region.nu);
-            (0..k * k).map(|j| e[(r * k + j / k) * fine.nu + c * k + j % k].x).sum::<f32>() / (k * k) as f32
-        })
-        .collect()
 }
 
 #[test]
