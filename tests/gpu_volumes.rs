@@ -125,14 +125,14 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert!(against_points > 3.0 * error, "the pixels are not footprint means: {against_points} vs {error}");
 
     // The other intensity modes and single-sampled prepasses follow the same path, and
-    // every volume rasterised lights the same pixels as the compute pass.
-    for (intensity, msaa, splat_pixels) in [
-        (bevy_caustics::warped_volumes::VolumeIntensity::Constant, Msaa::Off, 1024),
-        (bevy_caustics::warped_volumes::VolumeIntensity::Interpolated, Msaa::Sample4, 1024),
-        (bevy_caustics::warped_volumes::VolumeIntensity::Conserving, Msaa::Sample4, 0),
+    // every volume rasterised lights the same pixels as the compute pass, filtered and
+    // point-sampled.
+    for (intensity, msaa, splat_pixels, footprint_filter) in [
+        (bevy_caustics::warped_volumes::VolumeIntensity::Constant, Msaa::Off, 1024, true),
+        (bevy_caustics::warped_volumes::VolumeIntensity::Interpolated, Msaa::Sample4, 0, true),
+        (bevy_caustics::warped_volumes::VolumeIntensity::Conserving, Msaa::Sample4, 0, false),
     ] {
-        // The rasteriser point-samples: with every volume rasterised, so does the twin.
-        let settings = WarpedVolumesSettings { intensity, splat_pixels, footprint_filter: splat_pixels != 0, ..default() };
+        let settings = WarpedVolumesSettings { intensity, splat_pixels, footprint_filter, ..default() };
         renderer.world_mut().insert_resource(settings);
         let camera = renderer.world_mut().query_filtered::<Entity, With<Camera3d>>().single(renderer.world_mut()).unwrap();
         renderer.world_mut().entity_mut(camera).insert(msaa);

@@ -22,10 +22,11 @@
 //!    shape, skips it off the view and lights the pixels it covers itself where it
 //!    covers at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
 //!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
-//!    rasteriser, which draws their back faces indirectly, so that each pixel a shape
-//!    covers runs the fragment shader at most once, and only where the back face lies
-//!    behind the pixel's receiver (a read-only test against a single-sampled copy of
-//!    the depth prepass). Both paths shade the same pixels with the same function;
+//!    rasteriser, which draws each one's box on the view indirectly and shades the
+//!    pixels the compute pass would, once each (point-sampled, only where the
+//!    receiver lies in front of the shape's farthest corner: a read-only test
+//!    against a single-sampled copy of the depth prepass). Both paths shade with the
+//!    same function;
 //!    [`CausticVolumes::surface`] counts what each did;
 //! 2. **volumetric pass** (after the main pass), only for views that see a
 //!    [`crate::ParticipatingMedium`] and show shafts (`Caustics::shafts`): the
@@ -90,10 +91,7 @@ pub struct WarpedVolumesSettings {
     pub splat_pixels: u32,
     /// Whether each pixel shows the mean of the caustic light over its footprint on
     /// the receiver (the default) or the point sample at its centre; see
-    /// [`VolumeSettings::footprint_filter`]. The volumes lit in the compute pass (those
-    /// within [`Self::splat_pixels`]) are filtered; the larger ones the rasteriser
-    /// draws are point-sampled, since across a caustic triangle of 4096 pixels the
-    /// centre's value is the footprint's mean but on its edges.
+    /// [`VolumeSettings::footprint_filter`]; both paths filter.
     pub footprint_filter: bool,
 }
 

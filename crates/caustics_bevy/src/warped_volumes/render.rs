@@ -471,6 +471,9 @@ fn splat_defs() -> [ShaderDefVal; 1] {
 pub(super) struct VolumesPipelineKey {
     volumetric: bool,
     multisampled: bool,
+    /// The surface pass's pixels are footprint means
+    /// ([`WarpedVolumesSettings::footprint_filter`]).
+    filtered: bool,
     /// The volumetric pass's pixels per shaft sample, across (1: every pixel).
     shaft_scale: u32,
     /// The colour target: the irradiance buffer's format for the surface pass, the
@@ -634,15 +637,18 @@ impl SpecializedRenderPipeline for VolumesPipeline {
                     write_mask: ColorWrites::ALL,
                 })],
             }),
-            // Back faces only: each pixel whose ray crosses a volume's convex bounding
-            // prism runs the exact test once (§4.3). The surface pass also skips back
-            // faces in front of the receiver ([`ViewSurfaceTargets::depth`]; reversed z: the
-            // back face's depth must not exceed the receiver's).
+            // Back faces only: each pixel whose ray crosses a volume's bounding prism
+            // runs the exact test once (§4.3). The surface pass draws a prism's box on
+            // the view instead, at its farthest corner's depth, and keeps the pixels
+            // whose centres the prism covers (`volumes.wgsl`); the back faces only
+            // where it reaches behind the eye. Point-sampled, it skips pixels whose
+            // receiver lies behind that depth ([`ViewSurfaceTargets::depth`]; reversed
+            // z), outside the prism; a footprint around such a point may not be.
             primitive: PrimitiveState { cull_mode: Some(Face::Front), front_face: FrontFace::Ccw, ..default() },
             depth_stencil: (!key.volumetric).then(|| DepthStencilState {
                 format: RECEIVER_DEPTH_FORMAT,
                 depth_write_enabled: Some(false),
-                depth_compare: Some(CompareFunction::LessEqual),
+                depth_compare: Some(if key.filtered { CompareFunction::Always } else { CompareFunction::LessEqual }),
                 stencil: default(),
                 bias: default(),
             }),
@@ -665,13 +671,14 @@ fn prepare_pipelines(
 ) {
     let scale = extracted.0.shaft_scale();
     let grid = extracted.0.shaft_integral == ShaftIntegral::Grid;
+    let filtered = extracted.0.footprint_filter;
     for (entity, view, msaa, prepass) in &views {
         if prepass.depth.is_none() || prepass.normal.is_none() {
             continue;
         }
         let multisampled = msaa.samples() > 1;
         let mut specialize = |volumetric, target_format, shaft_scale| {
-            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, shaft_scale, target_format })
+            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, filtered: filtered && !volumetric, shaft_scale, target_format })
         };
         let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT, 1);
         // Below full resolution, into the shaft texture, then spread over the image.
@@ -698,7 +705,7 @@ fn warm_pipelines(
 ) {
     let scale = WarpedVolumesSettings::default().shaft_scale();
     for multisampled in [false, true] {
-        let surface = VolumesPipelineKey { volumetric: false, multisampled, shaft_scale: 1, target_format: crate::CAUSTIC_IRRADIANCE_FORMAT };
+        let surface = VolumesPipelineKey { volumetric: false, multisampled, filtered: true, shaft_scale: 1, target_format: crate::CAUSTIC_IRRADIANCE_FORMAT };
         pipelines.specialize(&cache, &pipeline, surface);
         march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format: SHAFT_FORMAT });
     }

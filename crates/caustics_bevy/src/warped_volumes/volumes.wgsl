@@ -1,11 +1,13 @@
 // Warped caustic volumes (Ernst, Akenine-Möller & Jensen 2005): the GPU twin of
 // `caustics_core::volumes`. The surface pass (`SURFACE`) lights each pixel's receiver
 // point with the exact point-in-volume test (§3.3) and the interpolated intensity
-// (§3.4) of every volume whose bounding shape covers the pixel: `splat` (`SPLAT`,
-// one invocation a volume) does it for shapes that cover a few pixels, looping over
-// them, and hands the larger ones to the rasteriser, which draws the back faces of
-// their bounding prisms (§4.3) into `surface`. The volumetric pass draws every prism
-// into `volumetric`, the eye ray's single scattering in media (§3.5). Both surface
+// (§3.4) of every volume whose bounding shape covers the pixel, or with the footprint
+// filter the mean over the pixel's footprint: `splat` (`SPLAT`, one invocation a
+// volume) does it for shapes that cover a few pixels, looping over them, and hands the
+// larger ones to the rasteriser, which draws their boxes on the view into `surface`
+// (the back faces of their bounding prisms, §4.3, where they reach behind the eye).
+// The volumetric pass draws every prism into `volumetric`, the eye ray's single
+// scattering in media (§3.5). Both surface
 // paths read each pixel's receiver depth from `receiver_centre`, which the view's
 // depth copy (`receiver_depth.wgsl`) computes once a frame, not once a volume.
 
@@ -63,10 +65,71 @@ const PI: f32 = 3.141592653589793;
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
     @location(0) @interpolate(flat) volume: u32,
+#ifdef SURFACE
+    // The shape's eight corners in pixels, two a vector, where it lies in front of
+    // the eye (`outlined` 1).
+    @location(1) @interpolate(flat) corners_01: vec4<f32>,
+    @location(2) @interpolate(flat) corners_23: vec4<f32>,
+    @location(3) @interpolate(flat) corners_45: vec4<f32>,
+    @location(4) @interpolate(flat) corners_67: vec4<f32>,
+    @location(5) @interpolate(flat) outlined: u32,
+#endif
 }
 
 @vertex
 fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance: u32) -> VertexOutput {
+    var out: VertexOutput;
+#ifdef SURFACE
+    // The volumes too large for `splat`; where the rays land on one surface, the
+    // slice of the beam crossing the slab around it. Drawn as its box on the view,
+    // grown by a pixel, at the depth of its farthest corner (two triangles, each drawn
+    // both ways so that one survives the culling); `surface` keeps the pixels `splat`
+    // would light, by its arithmetic (`row_span`): each pixel the shape touches once,
+    // where the hexahedron's faces, bilinear patches split in two, may fold.
+    let volume = large[FIRST_LARGE + instance];
+    out.volume = volume;
+    let origin = view.viewport.xy;
+    let size = view.viewport.zw;
+    var corners: array<vec2<f32>, 8>;
+    var lo = vec2(3.0e38);
+    var hi = vec2(-3.0e38);
+    var farthest = 1.0;
+    var projected = true;
+    for (var k = 0; k < 8; k++) {
+        let clip = view.clip_from_world * vec4(volumes[volume].surface_corners[k].xyz, 1.0);
+        let ndc = clip.xy / clip.w;
+        corners[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
+        lo = min(lo, ndc);
+        hi = max(hi, ndc);
+        farthest = min(farthest, clip.z / clip.w);
+        // As `splat` decides: behind the eye, or so near its plane that the corner
+        // leaves every float.
+        projected = projected && clip.w > 0.0 && all(abs(ndc) < vec2(1.0e30));
+    }
+    if projected {
+        let pixel = 2.0 / size;
+        let i = vertex_index % 6u;
+        // Vertices 0–5: the box's corners 0, 1, 2 and 0, 2, 3 (counter-clockwise from
+        // the bottom left); 6–11 the same triangles clockwise; the rest nothing.
+        var box = array(0u, 1u, 2u, 0u, 2u, 3u);
+        var k = box[i];
+        if vertex_index >= 6u && vertex_index < 12u {
+            k = box[5u - i];
+        }
+        let x = select(lo.x - pixel.x, hi.x + pixel.x, k == 1u || k == 2u);
+        let y = select(lo.y - pixel.y, hi.y + pixel.y, k >= 2u);
+        // A hair farther (reversed z), so that the depth test keeps the receiver
+        // points at that corner's depth to rounding.
+        out.position = select(vec4(0.0, 0.0, 0.0, 1.0), vec4(x, y, farthest * (1.0 - 1.0e-4), 1.0), vertex_index < 12u);
+        out.corners_01 = vec4(corners[0], corners[1]);
+        out.corners_23 = vec4(corners[2], corners[3]);
+        out.corners_45 = vec4(corners[4], corners[5]);
+        out.corners_67 = vec4(corners[6], corners[7]);
+        out.outlined = 1u;
+        return out;
+    }
+    out.outlined = 0u;
+#endif
     // `HEXAHEDRON_TRIANGLES` of caustics_core: outward, counter-clockwise.
     var triangles = array<u32, 36>(
         0u, 1u, 2u, 0u, 2u, 3u, 4u, 6u, 5u, 4u, 7u, 6u, 0u, 4u, 5u, 0u, 5u, 1u,
@@ -74,24 +137,57 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     );
     let k = triangles[vertex_index];
 #ifdef SURFACE
-    // The volumes too large for `splat`; where the rays land on one surface, the
-    // slice of the beam crossing the slab around it.
-    let volume = large[FIRST_LARGE + instance];
+    // Partly behind the eye: the back faces of the hexahedron, clipped.
     let corner = volumes[volume].surface_corners[k];
 #else
     let volume = instance;
+    out.volume = volume;
     let corner = volumes[instance].corners[k];
 #endif
-    var out: VertexOutput;
     out.position = view.clip_from_world * vec4(corner.xyz, 1.0);
     // A hair farther (reversed z), so that the surface pass's depth test keeps the
     // back faces through a receiver point to rounding.
     out.position.z *= 1.0 - 1.0e-4;
-    out.volume = volume;
     return out;
 }
 
 #ifdef RECEIVER_CENTRE
+// The least and greatest x of a convex shape's twelve edges (`corner`, the hexahedron's
+// corners in pixels) over the rows `y0 ≤ y ≤ y1`.
+fn row_span(corner: array<vec2<f32>, 8>, y0: f32, y1: f32) -> vec2<f32> {
+    // The hexahedron's edges: around the top, around the bottom, top to bottom.
+    var start = array(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
+    var end = array(1, 2, 3, 0, 5, 6, 7, 4, 4, 5, 6, 7);
+    var span = vec2(3.0e38, -3.0e38);
+    for (var e = 0; e < 12; e++) {
+        let a = corner[start[e]];
+        let b = corner[end[e]];
+        let low = min(a.y, b.y);
+        let high = max(a.y, b.y);
+        if low <= y1 && y0 <= high {
+            var x0 = a.x;
+            var x1 = b.x;
+            if a.y != b.y {
+                x0 = mix(a.x, b.x, clamp((clamp(y0, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
+                x1 = mix(a.x, b.x, clamp((clamp(y1, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
+            }
+            span = vec2(min(span.x, min(x0, x1)), max(span.y, max(x0, x1)));
+        }
+    }
+    return span;
+}
+
+// The columns `first ≤ x ≤ last` of the pixels in a row whose centres lie in `span`
+// (`reach` 0) or whose squares meet it (`reach` ½); empty where `span` is.
+fn columns(span: vec2<f32>, first: i32, last: i32, reach: f32) -> vec2<i32> {
+    if !(span.x <= span.y) {
+        return vec2(1, 0);
+    }
+    let from_x = i32(ceil(clamp(span.x, f32(first) - 1.0, f32(last) + 1.0) - 0.5 - reach));
+    let to_x = i32(floor(clamp(span.y, f32(first) - 1.0, f32(last) + 1.0) - 0.5 + reach));
+    return vec2(max(from_x, first), min(to_x, last));
+}
+
 // `caustics_core::volumes::MAX_FOOTPRINT_STRETCH`.
 const MAX_FOOTPRINT_STRETCH: f32 = 8.0;
 
@@ -142,47 +238,59 @@ fn surface_light(v: CausticVolume, pixel: vec2<i32>, filtered: bool) -> vec3<f32
     return exposed(v.color.rgb * e, view.exposure).rgb;
 }
 
+#ifdef SURFACE
 @fragment
 fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
-    // The rasterised volumes are the large ones, point-sampled at pixel centres.
-    return vec4(surface_light(volumes[in.volume], vec2<i32>(in.position.xy), false), 0.0);
+    // The large volumes, at the pixels `splat` would light (`add_light`).
+    let pixel = vec2<i32>(in.position.xy);
+    let filtered = settings.footprint_filter != 0u;
+    if in.outlined != 0u {
+        let corners = array(in.corners_01.xy, in.corners_01.zw, in.corners_23.xy, in.corners_23.zw, in.corners_45.xy, in.corners_45.zw, in.corners_67.xy, in.corners_67.zw);
+        let row = f32(pixel.y) + 0.5;
+        let reach = select(0.0, 0.5, filtered);
+        let lit = columns(row_span(corners, row - reach, row + reach), pixel.x - 2, pixel.x + 2, reach);
+        if pixel.x < lit.x || pixel.x > lit.y {
+            discard;
+        }
+    }
+    return vec4(surface_light(volumes[in.volume], pixel, filtered), 0.0);
 }
+#endif
 #endif
 
 #ifdef SPLAT
-// The least and greatest x of a convex shape's twelve edges (`corner`, the hexahedron's
-// corners in pixels) over the rows `y0 ≤ y ≤ y1`.
-fn row_span(corner: array<vec2<f32>, 8>, y0: f32, y1: f32) -> vec2<f32> {
-    // The hexahedron's edges: around the top, around the bottom, top to bottom.
-    var start = array(0, 1, 2, 3, 4, 5, 6, 7, 0, 1, 2, 3);
-    var end = array(1, 2, 3, 0, 5, 6, 7, 4, 4, 5, 6, 7);
-    var span = vec2(3.0e38, -3.0e38);
-    for (var e = 0; e < 12; e++) {
-        let a = corner[start[e]];
-        let b = corner[end[e]];
-        let low = min(a.y, b.y);
-        let high = max(a.y, b.y);
-        if low <= y1 && y0 <= high {
-            var x0 = a.x;
-            var x1 = b.x;
-            if a.y != b.y {
-                x0 = mix(a.x, b.x, clamp((clamp(y0, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
-                x1 = mix(a.x, b.x, clamp((clamp(y1, low, high) - a.y) / (b.y - a.y), 0.0, 1.0));
+// Adds volume `v`'s light to `splatted` at the pixels of the box `first`..`last` that
+// its convex shape (`corner`, in pixels) may light: with `settings.footprint_filter`
+// every pixel it touches, with the mean over the pixel's footprint, else those whose
+// centres it covers, with the point sample. Returns the number of pixels shaded.
+fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, last: vec2<i32>) -> u32 {
+    let filtered = settings.footprint_filter != 0u;
+    let reach = select(0.0, 0.5, filtered);
+    let origin = vec2<i32>(view.viewport.xy);
+    let width = i32(view.viewport.z);
+    var shaded = 0u;
+    for (var y = first.y; y <= last.y; y++) {
+        let row = f32(y) + 0.5;
+        let lit = columns(row_span(corner, row - reach, row + reach), first.x, last.x, reach);
+        for (var x = lit.x; x <= lit.y; x++) {
+            shaded++;
+            let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
+            let pixel = 3u * u32((y - origin.y) * width + x - origin.x);
+            for (var c = 0u; c < 3u; c++) {
+                if light[c] != 0u {
+                    atomicAdd(&splatted[pixel + c], light[c]);
+                }
             }
-            span = vec2(min(span.x, min(x0, x1)), max(span.y, max(x0, x1)));
         }
     }
-    return span;
+    return shaded;
 }
 
 // One volume of the surface pass: where its surface bounding shape projects onto at
-// most `settings.splat_pixels` pixels, it lights the pixels the shape may
-// light, added to `splatted`: with `settings.footprint_filter` every pixel the shape
-// touches (the shape is convex, so a row of pixels meets it between the outermost
-// points of its twelve edges over the row) with the mean over the pixel's footprint,
-// else the pixels whose centres it covers (those the rasteriser would shade) with the
-// point sample. A larger or clipped shape goes to the rasteriser's list, and one off
-// the viewport lights nothing.
+// most `settings.splat_pixels` pixels, it lights the pixels the shape may light
+// (`add_light`; the shape is convex, so a row of pixels meets it between the outermost
+// points of its twelve edges over the row). A larger or clipped shape goes to the
+// rasteriser's list, and one off the viewport lights nothing.
 @compute @workgroup_size(64)
 fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let index = id.x + id.y * groups.x * 64u;
@@ -248,28 +356,8 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         atomicStore(&large[FIRST_LARGE + slot], index);
         return;
     }
-    var shaded = 0u;
-    for (var y = first.y; y <= last.y; y++) {
-        let row = f32(y) + 0.5;
-        let span = row_span(corner, row - reach, row + reach);
-        if !(span.x <= span.y) {
-            continue;
-        }
-        let from_x = max(i32(ceil(clamp(span.x, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5 - reach)), first.x);
-        let to_x = min(i32(floor(clamp(span.y, f32(first.x) - 1.0, f32(last.x) + 1.0) - 0.5 + reach)), last.x);
-        for (var x = from_x; x <= to_x; x++) {
-            shaded++;
-            let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
-            let pixel = 3u * u32((y - i32(origin.y)) * i32(size.x) + x - i32(origin.x));
-            for (var c = 0u; c < 3u; c++) {
-                if light[c] != 0u {
-                    atomicAdd(&splatted[pixel + c], light[c]);
-                }
-            }
-        }
-    }
+    atomicAdd(&large[SPLATTED_PIXELS], add_light(v, corner, first, last));
     atomicAdd(&large[SPLATTED_VOLUMES], 1u);
-    atomicAdd(&large[SPLATTED_PIXELS], shaded);
 }
 #endif
 
