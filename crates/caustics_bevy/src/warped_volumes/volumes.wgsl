@@ -76,56 +76,101 @@ struct VertexOutput {
 #endif
 }
 
+#ifdef SURFACE
+// The convex hull of thirty-two points, in order around it (gift wrapping): `count`
+// of `points`.
+struct Outline {
+    points: array<vec2<f32>, 32>,
+    count: u32,
+}
+
+fn outline(p: array<vec2<f32>, 32>) -> Outline {
+    var start = 0u;
+    for (var k = 1u; k < 32u; k++) {
+        if p[k].x < p[start].x || (p[k].x == p[start].x && p[k].y < p[start].y) {
+            start = k;
+        }
+    }
+    var out: Outline;
+    out.count = 0u;
+    var current = start;
+    loop {
+        out.points[out.count] = p[current];
+        out.count++;
+        // The point that leaves every other on one side, the farthest where in line.
+        var next = (current + 1u) % 32u;
+        for (var k = 0u; k < 32u; k++) {
+            let a = p[next] - p[current];
+            let b = p[k] - p[current];
+            let turn = a.x * b.y - a.y * b.x;
+            if turn < 0.0 || (turn == 0.0 && dot(b, b) > dot(a, a)) {
+                next = k;
+            }
+        }
+        current = next;
+        if current == start || out.count == 32u {
+            break;
+        }
+    }
+    return out;
+}
+#endif
+
 @vertex
 fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance: u32) -> VertexOutput {
     var out: VertexOutput;
 #ifdef SURFACE
     // The volumes too large for `splat`; where the rays land on one surface, the
-    // slice of the beam crossing the slab around it. Drawn as its box on the view,
-    // grown by a pixel, at the depth of its farthest corner (two triangles, each drawn
-    // both ways so that one survives the culling); `surface` keeps the pixels `splat`
-    // would light, by its arithmetic (`row_span`): each pixel the shape touches once,
-    // where the hexahedron's faces, bilinear patches split in two, may fold.
+    // slice of the beam crossing the slab around it. Drawn as its outline on the view
+    // grown by a pixel (the convex hull of its corners moved a pixel each way, a fan
+    // of at most ten triangles, each drawn both ways so that one survives the
+    // culling), at the depth of its farthest corner; `surface` keeps the pixels
+    // `splat` would light, by its arithmetic (`row_span`): each pixel the shape
+    // touches once, where the hexahedron's faces, bilinear patches split in two, may
+    // fold.
     let volume = large[FIRST_LARGE + instance];
     out.volume = volume;
     let origin = view.viewport.xy;
     let size = view.viewport.zw;
     var corners: array<vec2<f32>, 8>;
-    var lo = vec2(3.0e38);
-    var hi = vec2(-3.0e38);
+    var grown: array<vec2<f32>, 32>;
     var farthest = 1.0;
     var projected = true;
     for (var k = 0; k < 8; k++) {
         let clip = view.clip_from_world * vec4(volumes[volume].surface_corners[k].xyz, 1.0);
         let ndc = clip.xy / clip.w;
         corners[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
-        lo = min(lo, ndc);
-        hi = max(hi, ndc);
+        for (var j = 0; j < 4; j++) {
+            grown[4 * k + j] = corners[k] + vec2(f32(j & 1), f32(j >> 1u)) * 2.0 - 1.0;
+        }
         farthest = min(farthest, clip.z / clip.w);
         // As `splat` decides: behind the eye, or so near its plane that the corner
         // leaves every float.
         projected = projected && clip.w > 0.0 && all(abs(ndc) < vec2(1.0e30));
     }
     if projected {
-        let pixel = 2.0 / size;
-        let i = vertex_index % 6u;
-        // Vertices 0–5: the box's corners 0, 1, 2 and 0, 2, 3 (counter-clockwise from
-        // the bottom left); 6–11 the same triangles clockwise; the rest nothing.
-        var box = array(0u, 1u, 2u, 0u, 2u, 3u);
-        var k = box[i];
-        if vertex_index >= 6u && vertex_index < 12u {
-            k = box[5u - i];
-        }
-        let x = select(lo.x - pixel.x, hi.x + pixel.x, k == 1u || k == 2u);
-        let y = select(lo.y - pixel.y, hi.y + pixel.y, k >= 2u);
+        let hull = outline(grown);
+        let t = (vertex_index / 3u) % 10u;
+        let i = vertex_index % 3u;
+        let flip = vertex_index >= 30u;
+        let k = select(t + select(1u, 2u, (i == 2u) != flip), 0u, i == 0u);
+        let p = (hull.points[min(k, hull.count - 1u)] - origin) / size;
         // A hair farther (reversed z), so that the depth test keeps the receiver
         // points at that corner's depth to rounding.
-        out.position = select(vec4(0.0, 0.0, 0.0, 1.0), vec4(x, y, farthest * (1.0 - 1.0e-4), 1.0), vertex_index < 12u);
+        out.position = vec4(p.x * 2.0 - 1.0, 1.0 - p.y * 2.0, farthest * (1.0 - 1.0e-4), 1.0);
+        if t + 2u >= hull.count {
+            out.position = vec4(0.0, 0.0, 0.0, 1.0);
+        }
         out.corners_01 = vec4(corners[0], corners[1]);
         out.corners_23 = vec4(corners[2], corners[3]);
         out.corners_45 = vec4(corners[4], corners[5]);
         out.corners_67 = vec4(corners[6], corners[7]);
         out.outlined = 1u;
+        return out;
+    }
+    // Partly behind the eye: the back faces of the hexahedron, clipped.
+    if vertex_index >= 36u {
+        out.position = vec4(0.0, 0.0, 0.0, 1.0);
         return out;
     }
     out.outlined = 0u;
@@ -137,7 +182,6 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     );
     let k = triangles[vertex_index];
 #ifdef SURFACE
-    // Partly behind the eye: the back faces of the hexahedron, clipped.
     let corner = volumes[volume].surface_corners[k];
 #else
     let volume = instance;
@@ -295,7 +339,7 @@ fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, la
 fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let index = id.x + id.y * groups.x * 64u;
     if index == 0u {
-        atomicStore(&large[0], 36u);
+        atomicStore(&large[0], 60u);
     }
     if index >= counters[1] {
         return;
