@@ -106,41 +106,6 @@ fn light_views_project_and_rasterise_consistently() {
     assert_eq!(LightView::for_light(&inside, bounds, bounds).len(), 6);
 }
 
-/// A point light's cube face spends its photon buffer on the generators' image: across
-/// and down, the least power-of-two part of the face's own square that holds it, its
-/// start on a lattice of an eighth of it (so photons stay on a lattice of the map's
-/// texels), and photon texels and map points map back and forth. A light inside the
-/// generators' box keeps its faces whole.
-#[test]
-fn a_cube_face_narrows_its_photons_to_the_generators_image() {
-    let scene = (Vec3::splat(-4.0), Vec3::splat(4.0));
-    let generators = (Vec3::new(0.3, -0.2, -0.1), Vec3::new(0.7, 0.2, 0.4));
-    let light = Light::white(LightKind::Point { position: Vec3::Y * 3.0, intensity: 1.0 });
-    let views = LightView::for_light(&light, generators, scene);
-    assert_eq!(views.len(), 1);
-    let v = views[0];
-    assert_eq!(v.emission, 0.5, "the scene reaches past the face");
-    assert!(v.photon_side.cmple(Vec2::splat(v.emission / 4.0)).all(), "sides {}", v.photon_side);
-    assert!(v.photon_side.x.log2().fract() == 0.0 && v.photon_side.y.log2().fract() == 0.0, "sides {}", v.photon_side);
-    let lattice = v.photon_origin / (v.photon_side / 8.0);
-    assert!((lattice - lattice.round()).abs().max_element() < 1e-3, "corner {}", v.photon_origin);
-    let own = Vec2::splat(0.5 - 0.5 * v.emission);
-    assert!(v.photon_origin.cmpge(own).all() && (v.photon_origin + v.photon_side).cmple(own + v.emission).all());
-    for i in 0..8 {
-        let c = Vec3::new([generators.0.x, generators.1.x][i & 1], [generators.0.y, generators.1.y][(i >> 1) & 1], [generators.0.z, generators.1.z][i >> 2]);
-        let uv = v.uv(c).unwrap();
-        assert!(uv.cmpge(v.photon_origin).all() && uv.cmple(v.photon_origin + v.photon_side).all(), "corner {c} at {uv} outside the photons");
-    }
-    for (x, y) in [(0, 0), (17, 300), (511, 511)] {
-        assert_eq!(v.photon_texel(v.photon_uv(x, y, 512), 512), Some((x, y)));
-    }
-    assert!((v.photon_measure(512) - v.texel_measure(512) * v.photon_side.x * v.photon_side.y).abs() < 1e-12);
-    let inside = Light::white(LightKind::Point { position: Vec3::new(0.5, 0.0, 0.1), intensity: 1.0 });
-    for face in LightView::for_light(&inside, generators, scene) {
-        assert_eq!((face.photon_origin, face.photon_side), (Vec2::splat(0.5 - 0.5 * face.emission), Vec2::splat(face.emission)));
-    }
-}
-
 #[test]
 fn the_receiver_jacobian_is_the_solid_angle_per_image_area() {
     // Perspective: a small patch at p, normal n, covers dω = dA cos θ / r²; on the

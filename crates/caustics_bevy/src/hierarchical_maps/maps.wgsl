@@ -32,12 +32,9 @@ fn generator_vertex(
     let i = instances[instance];
     let world = (i.world_from_local * vec4(position, 1.0)).xyz;
     let n = (i.normal_from_local * vec4(normal, 0.0)).xyz;
-    // The photons' rectangle of the view (`LightView::photon_origin`, `photon_side`) fills
-    // the front and back maps: its centre to the middle, its side to the whole.
+    // The photons' part of the view (`LightView::emission`) fills the front and back maps.
     let clip = view.clip_from_world * vec4(world, 1.0);
-    let centre = view.photon_origin + 0.5 * view.photon_side;
-    let middle = vec2(2.0 * centre.x - 1.0, 1.0 - 2.0 * centre.y);
-    return SurfaceOutput(vec4((clip.xy - middle * clip.w) / view.photon_side, clip.zw), world, n, i.material.x);
+    return SurfaceOutput(vec4(clip.xy / view.emission, clip.zw), world, n, i.material.x);
 }
 
 // Depth, the normal as the mesh orients it, and the generator.

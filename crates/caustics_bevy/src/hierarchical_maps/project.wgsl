@@ -48,6 +48,7 @@ fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     // `caustic_map::bilinear` of the resolved map.
     let b = bilinear_taps(uv.xy * f32(m) - 0.5, m);
     let c = bilinear_mix(b, resolved_at(b.low.x, b.low.y), resolved_at(b.high.x, b.low.y), resolved_at(b.low.x, b.high.y), resolved_at(b.high.x, b.high.y));
-    let e = c * map_texels_per_photon(light) * receiver_jacobian(light, p, n);
+    let ratio = map_texels_per_photon(light);
+    let e = c * ratio * ratio * receiver_jacobian(light, p, n);
     return exposed(light.color.rgb * e, view.exposure);
 }

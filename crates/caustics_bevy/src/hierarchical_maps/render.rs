@@ -65,8 +65,7 @@ pub(super) struct GpuLightView {
     path_epsilon: f32,
     /// Where the BVH's instances start in its buffer (vec4s), 0 without a BVH.
     bvh_instances: u32,
-    photon_origin: Vec2,
-    photon_side: Vec2,
+    emission: f32,
 }
 
 /// `DRAWN_HERE` and `ONE_SIDED` in `types.wgsl`.
@@ -195,8 +194,7 @@ impl GpuLightView {
             traced_paths: bvh.is_some() as u32,
             path_epsilon: bvh.map_or(0.0, InstancedBvh::ray_offset),
             bvh_instances: bvh.map_or(0, InstancedBvh::gpu_instance_offset),
-            photon_origin: v.photon_origin,
-            photon_side: v.photon_side,
+            emission: v.emission,
         };
         (gpu, pyramid_nodes, map_texels)
     }

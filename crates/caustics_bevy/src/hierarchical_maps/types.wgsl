@@ -60,10 +60,8 @@ struct LightView {
     path_epsilon: f32,
     // Where the BVH's instances start in `triangle_bvh` (vec4s); 0: no BVH.
     bvh_instances: u32,
-    // `LightView::photon_origin` and `photon_side`: the rectangle of the map the
-    // photons cover.
-    photon_origin: vec2<f32>,
-    photon_side: vec2<f32>,
+    // `LightView::emission`: the central fraction of the image the photons cover.
+    emission: f32,
 }
 
 // `PhotonMaterial::drawn_here` and `PhotonMaterial::one_sided`.
@@ -136,20 +134,19 @@ fn texel_center(x: u32, y: u32, resolution: u32) -> vec2<f32> {
 
 // `LightView::photon_uv`.
 fn photon_texel_center(view: LightView, x: u32, y: u32) -> vec2<f32> {
-    return view.photon_origin + texel_center(x, y, view.photon_resolution) * view.photon_side;
+    return 0.5 + (texel_center(x, y, view.photon_resolution) - 0.5) * view.emission;
 }
 
 // `LightView::photon_measure`.
 fn photon_measure(view: LightView) -> f32 {
-    let h = half_extent(view) * view.photon_side;
+    let h = half_extent(view) * view.emission;
     let n = f32(view.photon_resolution);
     return 4.0 * h.x * h.y / (n * n);
 }
 
 // `LightView::map_texels_per_photon`.
 fn map_texels_per_photon(view: LightView) -> f32 {
-    let across = f32(view.map_resolution) / f32(view.photon_resolution);
-    return across * across * view.photon_side.x * view.photon_side.y;
+    return f32(view.map_resolution) * view.emission / f32(view.photon_resolution);
 }
 
 // `LightView::relative_beam`.
@@ -207,7 +204,7 @@ fn texel_size(view: LightView, z: f32, resolution: u32) -> f32 {
 // `photons::texel_of`: the texel `uv` falls in, z 1 inside the map.
 // `LightView::photon_texel`.
 fn photon_texel(view: LightView, uv: vec2<f32>) -> vec3<u32> {
-    return texel_of((uv - view.photon_origin) / view.photon_side, view.photon_resolution);
+    return texel_of(0.5 + (uv - 0.5) / view.emission, view.photon_resolution);
 }
 
 fn texel_of(uv: vec2<f32>, resolution: u32) -> vec3<u32> {

@@ -287,7 +287,7 @@ pub fn visible_from_light(view: &LightView, maps: &LightMaps, p: Vec3, n: Vec3) 
 /// `view` (photons traced at `photon_resolution`, a light of `intensity`: irradiance
 /// for parallel light, intensity per steradian for a point light): zero where the light
 /// does not see `p`. Photon units per texel become flux per image-plane area by
-/// [`LightView::map_texels_per_photon`] (a photon's measure over a texel's), and irradiance by the receiver's
+/// `(M·emission/P)²` (a photon's measure over a texel's), and irradiance by the receiver's
 /// Jacobian.
 pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photon_resolution: u32, intensity: f32, p: Vec3, n: Vec3) -> f32 {
     if !visible_from_light(view, maps, p, n) {
@@ -296,7 +296,8 @@ pub fn irradiance_at(view: &LightView, maps: &LightMaps, resolved: &[f32], photo
     let m = maps.map_resolution;
     let Some(uv) = view.uv(p) else { return 0.0 };
     let c = bilinear(uv * m as f32 - 0.5, m, |x, y| resolved[(y * m + x) as usize]);
-    c * intensity * view.map_texels_per_photon(photon_resolution, m) * view.receiver_jacobian(p, n)
+    let ratio = view.map_texels_per_photon(photon_resolution, m);
+    c * intensity * ratio * ratio * view.receiver_jacobian(p, n)
 }
 
 /// The photon buffer texels (row-major indices) below node `index` of pyramid level `level`.

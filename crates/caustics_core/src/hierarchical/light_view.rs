@@ -43,20 +43,12 @@ pub struct LightView {
     pub near: f32,
     /// View depth behind everything the view draws.
     pub far: f32,
-    /// The central fraction of the image, across and down, within which the view's
-    /// photons leave; the receiver and caustic maps cover all of it. 1 but for a point
-    /// light's cube faces that the scene extends past, whose maps reach further
-    /// ([`CUBE_FACE_REACH`]) so that light one face emits lands on its own map.
+    /// The central fraction of the image, across and down, that the photon buffer (and
+    /// the front and back maps) covers; the receiver and caustic maps cover all of it.
+    /// 1 but for a point light's cube faces that the scene extends past, whose maps
+    /// reach further ([`CUBE_FACE_REACH`]) so that light one face emits lands on its
+    /// own map.
     pub emission: f32,
-    /// The top-left corner, in map coordinates, of the rectangle the photon buffer
-    /// (and the front and back maps) covers: within the central `emission`, around the
-    /// generators' image ([`Self::photon_side`]).
-    pub photon_origin: Vec2,
-    /// The width and height of that rectangle: `emission`, or where a perspective
-    /// view sees its generators small the least power-of-two part of it, across and
-    /// down, that holds their image (past the paper, whose light view is fitted to the
-    /// refractor by the application). Photons that meet no generator make no caustic.
-    pub photon_side: Vec2,
 }
 
 /// Tangent of the half-angle a point light's cube face's receiver and caustic maps
@@ -144,63 +136,26 @@ impl LightView {
     }
 
     /// Map coordinates of the centre of photon texel `(x, y)` of a `resolution²` photon
-    /// buffer, which covers the rectangle at [`Self::photon_origin`].
+    /// buffer, which covers the central [`Self::emission`] of the map.
     #[inline]
     pub fn photon_uv(&self, x: u32, y: u32, resolution: u32) -> Vec2 {
-        self.photon_origin + Self::texel_center(x, y, resolution) * self.photon_side
+        Vec2::splat(0.5) + (Self::texel_center(x, y, resolution) - 0.5) * self.emission
     }
 
     /// The photon texel of a `resolution²` photon buffer at map coordinates `uv`.
     #[inline]
     pub fn photon_texel(&self, uv: Vec2, resolution: u32) -> Option<(u32, u32)> {
-        super::photons::texel_of((uv - self.photon_origin) / self.photon_side, resolution)
+        super::photons::texel_of(Vec2::splat(0.5) + (uv - 0.5) / self.emission, resolution)
     }
 
     /// The image-plane area of one photon of a `resolution²` photon buffer.
     pub fn photon_measure(&self, resolution: u32) -> f32 {
-        self.texel_measure(resolution) * self.photon_side.x * self.photon_side.y
+        self.texel_measure(resolution) * self.emission * self.emission
     }
 
-    /// The map texels a photon texel covers: `(M/P)²` times the rectangle's area.
+    /// Map texels per photon texel, across: `M·emission / P`.
     pub fn map_texels_per_photon(&self, photon_resolution: u32, map_resolution: u32) -> f32 {
-        let across = map_resolution as f32 / photon_resolution as f32;
-        across * across * self.photon_side.x * self.photon_side.y
-    }
-
-    /// This view with its photon rectangle narrowed to the image of the generators'
-    /// box `(lo, hi)` within [`Self::emission`] ([`Self::photon_side`]): across and
-    /// down, the least power-of-two part of the emission square whose start, on a
-    /// lattice of an eighth of it, lets it hold the box's projection, at most 256 times
-    /// narrower. Powers of two on that lattice keep the photons on a lattice of the
-    /// map's texels ([`CUBE_FACE_REACH`]). Unchanged where a corner of the box lies
-    /// beside or behind a perspective light, and for parallel light, whose view is
-    /// already fitted to the generators' shadow.
-    fn focused_on(self, (lo, hi): (Vec3, Vec3)) -> Self {
-        if matches!(self.projection, Projection::Orthographic { .. }) {
-            return self;
-        }
-        let (mut a, mut b) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
-        for c in box_corners(lo, hi) {
-            let Some(uv) = self.uv(c) else { return self };
-            (a, b) = (a.min(uv), b.max(uv));
-        }
-        let own = 0.5 - 0.5 * self.emission;
-        let axis = |a: f32, b: f32| {
-            let (a, b) = (a.max(own), b.min(own + self.emission));
-            let holding = |side: f32| {
-                let step = side / 8.0;
-                let start = ((a / step).floor() * step).clamp(own, own + self.emission - side);
-                (start <= a && start + side >= b).then_some(start)
-            };
-            let (mut start, mut side) = (own, self.emission);
-            while a <= b && side > self.emission / 256.0 {
-                let Some(narrower) = holding(0.5 * side) else { break };
-                (start, side) = (narrower, 0.5 * side);
-            }
-            (start, side)
-        };
-        let ((u, width), (v, height)) = (axis(a.x, b.x), axis(a.y, b.y));
-        LightView { photon_origin: Vec2::new(u, v), photon_side: Vec2::new(width, height), ..self }
+        map_resolution as f32 * self.emission / photon_resolution as f32
     }
 
     /// The image-plane area of one texel of a `resolution²` map: m² across the beam
@@ -289,10 +244,8 @@ impl LightView {
     /// spot up to [`MAX_SPOT_HALF_ANGLE`] along its cone; otherwise the faces of a cube
     /// around the light, only those whose frustum meets the generators (all six when
     /// the light is inside their bounds). Photons that hit no generator make no
-    /// caustic, so a view that sees none is left out, and a perspective view's photons
-    /// cover only the part of it that sees the generators ([`Self::photon_side`]).
-    /// Where the scene extends past a face, its maps reach [`CUBE_FACE_REACH`]; its
-    /// photons stay within it.
+    /// caustic, so a view that sees none is left out. Where the scene extends past a
+    /// face, its maps reach [`CUBE_FACE_REACH`]; its photons stay within it.
     pub fn for_light(light: &Light, generators: (Vec3, Vec3), scene: (Vec3, Vec3)) -> Vec<LightView> {
         let (lo, hi) = (scene.0.min(generators.0), scene.1.max(generators.1));
         let corners = box_corners(lo, hi);
@@ -311,8 +264,6 @@ impl LightView {
                     near: 0.0,
                     far: 1.0,
                     emission: 1.0,
-                    photon_origin: Vec2::ZERO,
-                    photon_side: Vec2::ONE,
                 };
                 let extent = |points: &[Vec3]| {
                     points.iter().fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(a, b), &c| {
@@ -340,7 +291,7 @@ impl LightView {
                 let (right, up) = view_basis(forward);
                 let tan_half_fov = (outer_angle.max(1e-3).tan() * 1.01).max(1e-3);
                 let view = perspective(position, right, up, forward, tan_half_fov, &corners, size);
-                if frustum_meets_box(&view, generators) { vec![view.focused_on(generators)] } else { vec![] }
+                if frustum_meets_box(&view, generators) { vec![view] } else { vec![] }
             }
             LightKind::Point { position, .. } | LightKind::Spot { position, .. } => {
                 let axes = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::NEG_Y, Vec3::Z, Vec3::NEG_Z];
@@ -349,12 +300,9 @@ impl LightView {
                         let (right, up) = view_basis(forward);
                         let face = perspective(position, right, up, forward, 1.0, &corners, size);
                         let reach = face_reach(&face, &corners);
-                        let emission = 1.0 / reach;
-                        let photon_origin = Vec2::splat(0.5 - 0.5 * emission);
-                        LightView { projection: Projection::Perspective { tan_half_fov: reach }, emission, photon_origin, photon_side: Vec2::splat(emission), ..face }
+                        LightView { projection: Projection::Perspective { tan_half_fov: reach }, emission: 1.0 / reach, ..face }
                     })
                     .filter(|view| frustum_meets_box(view, generators))
-                    .map(|view| view.focused_on(generators))
                     .collect()
             }
         }
@@ -393,8 +341,6 @@ fn perspective(
         near: (1e-4 * far).max(1e-6),
         far,
         emission: 1.0,
-        photon_origin: Vec2::ZERO,
-        photon_side: Vec2::ONE,
     }
 }
 
