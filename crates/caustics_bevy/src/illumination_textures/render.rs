@@ -127,6 +127,8 @@ pub struct IlluminationTexturesGpu {
     pub(super) frames: Vec<FrameGpu>,
     /// The receivers the virtual cameras see (`triangle_bvh`).
     receivers: InstancedBvhBuffer,
+    /// The buffer the frames' bind groups hold of them.
+    receivers_buffer: Option<BufferId>,
 }
 
 impl IlluminationTexturesGpu {
@@ -322,8 +324,9 @@ impl SpecializedRenderPipeline for IlluminationPipelines {
 }
 
 /// Uploads each frame of a new generation: its uniform and volumes, with room for the
-/// virtual camera's depth map and a texture array for its planes (both kept while its
-/// size and plane count stay), and the receivers' BVH.
+/// virtual camera's depth map and a texture array for its planes, and the receivers'
+/// BVH. While a frame's size and plane count stay, its buffers, textures, views and
+/// bind groups are kept and written into.
 fn prepare_frames(
     extracted: Res<ExtractedFrames>,
     mut gpu: ResMut<IlluminationTexturesGpu>,
@@ -340,66 +343,84 @@ fn prepare_frames(
     gpu.dirty = true;
     if extracted.frames.is_empty() {
         // Nothing to draw: the GPU memory goes back.
-        (gpu.frames, gpu.receivers) = (Vec::new(), InstancedBvhBuffer::default());
+        (gpu.frames, gpu.receivers, gpu.receivers_buffer) = (Vec::new(), InstancedBvhBuffer::default(), None);
         return;
     }
     let receivers = gpu.receivers.write(&extracted.receivers, "caustic_illumination_receivers", &device, &queue);
+    let receivers_moved = gpu.receivers_buffer.replace(receivers.id()) != Some(receivers.id());
     let (draw_layout, see_layout) = (pipelines.draw_layout.get(&cache), pipelines.see_layout.get(&cache));
-    let old = std::mem::take(&mut gpu.frames);
-    for (k, t) in extracted.frames.iter().enumerate() {
-        let mut uniform = UniformBuffer::from(GpuIlluminationFrame::new(t, extracted.cosine, &extracted.receivers));
-        uniform.set_label(Some("caustic_illumination_frame"));
-        uniform.write_buffer(&device, &queue);
+    // The virtual camera's (`see`) and the planes' (`draw`) bind groups of a frame.
+    let bind_groups = |uniform: &UniformBuffer<GpuIlluminationFrame>, volumes: &StorageBuffer<Vec<GpuVolume>>, surface: &Buffer, seen: &Buffer| {
+        let (frame, volumes) = (uniform.binding()?, volumes.binding()?);
+        let see = device.create_bind_group(
+            "illumination_see_bind_group",
+            see_layout,
+            &BindGroupEntries::with_indices((
+                (0, frame.clone()),
+                (1, surface.as_entire_binding()),
+                (2, seen.as_entire_binding()),
+                (14, receivers.as_entire_binding()),
+            )),
+        );
+        let draw = device.create_bind_group(
+            "illumination_draw_bind_group",
+            draw_layout,
+            &BindGroupEntries::sequential((frame, volumes, surface.as_entire_binding(), seen.as_entire_binding())),
+        );
+        Some((see, draw))
+    };
+    let mut old = std::mem::take(&mut gpu.frames).into_iter();
+    for t in extracted.frames.iter() {
+        let frame = GpuIlluminationFrame::new(t, extracted.cosine, &extracted.receivers);
         let mut volumes: Vec<GpuVolume> = t.volumes.iter().map(GpuVolume::from).collect();
         let volume_count = volumes.len() as u32;
         // A binding may not be empty.
         if volumes.is_empty() {
             volumes.push(GpuVolume::default());
         }
+        let layers = t.planes.len() as u32;
+        // A frame of the same size and planes keeps its buffers, textures, views and
+        // bind groups (a turning glass ball: every frame); its new uniform and volumes
+        // are written into them, and a bind group is made again only for a buffer that
+        // had to grow.
+        if let Some(mut kept) = old.next().filter(|f| f.textures.width() == t.size && f.layers.len() as u32 == layers) {
+            let volumes_before = kept.volumes.buffer().map(|b| b.id());
+            kept.uniform.set(frame);
+            kept.uniform.write_buffer(&device, &queue);
+            kept.volumes.set(volumes);
+            kept.volumes.write_buffer(&device, &queue);
+            kept.volume_count = volume_count;
+            if receivers_moved || kept.volumes.buffer().map(|b| b.id()) != volumes_before {
+                let Some((see, draw)) = bind_groups(&kept.uniform, &kept.volumes, &kept.surface, &kept.seen) else { continue };
+                (kept.see_bind_group, kept.draw_bind_group) = (see, draw);
+            }
+            gpu.frames.push(kept);
+            continue;
+        }
+        let mut uniform = UniformBuffer::from(frame);
+        uniform.set_label(Some("caustic_illumination_frame"));
+        uniform.write_buffer(&device, &queue);
         let mut volume_buffer = StorageBuffer::from(volumes);
         volume_buffer.set_label(Some("caustic_illumination_volumes"));
         volume_buffer.write_buffer(&device, &queue);
-        let layers = t.planes.len() as u32;
-        let reuse = old.get(k).filter(|f| f.textures.width() == t.size && f.layers.len() as u32 == layers);
-        let textures = reuse.map(|f| f.textures.clone()).unwrap_or_else(|| {
-            device.create_texture(&TextureDescriptor {
-                label: Some("caustic_illumination_textures"),
-                size: Extent3d { width: t.size, height: t.size, depth_or_array_layers: layers },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: pipelines.format,
-                usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
-                view_formats: &[],
-            })
+        let textures = device.create_texture(&TextureDescriptor {
+            label: Some("caustic_illumination_textures"),
+            size: Extent3d { width: t.size, height: t.size, depth_or_array_layers: layers },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: TextureDimension::D2,
+            format: pipelines.format,
+            usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
+            view_formats: &[],
         });
         let buffer = |label, size| device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC, mapped_at_creation: false });
-        let (surface, seen) = reuse.map(|f| (f.surface.clone(), f.seen.clone())).unwrap_or_else(|| {
-            (buffer("caustic_illumination_depth_map", u64::from(t.size).pow(2) * SURFACE_TEXEL_BYTES), buffer("caustic_illumination_seen_depths", 8))
-        });
+        let (surface, seen) = (buffer("caustic_illumination_depth_map", u64::from(t.size).pow(2) * SURFACE_TEXEL_BYTES), buffer("caustic_illumination_seen_depths", 8));
         let view = |dimension, base_array_layer, array_layer_count| {
             textures.create_view(&TextureViewDescriptor { dimension: Some(dimension), base_array_layer, array_layer_count, ..default() })
         };
         let layer_views = (0..layers).map(|l| view(TextureViewDimension::D2, l, Some(1))).collect();
         let array = view(TextureViewDimension::D2Array, 0, Some(layers));
-        let (Some(frame_binding), Some(volume_binding)) = (uniform.binding(), volume_buffer.binding()) else {
-            continue;
-        };
-        let see_bind_group = device.create_bind_group(
-            "illumination_see_bind_group",
-            see_layout,
-            &BindGroupEntries::with_indices((
-                (0, frame_binding.clone()),
-                (1, surface.as_entire_binding()),
-                (2, seen.as_entire_binding()),
-                (14, receivers.as_entire_binding()),
-            )),
-        );
-        let draw_bind_group = device.create_bind_group(
-            "illumination_draw_bind_group",
-            draw_layout,
-            &BindGroupEntries::sequential((frame_binding, volume_binding, surface.as_entire_binding(), seen.as_entire_binding())),
-        );
+        let Some((see_bind_group, draw_bind_group)) = bind_groups(&uniform, &volume_buffer, &surface, &seen) else { continue };
         let projections = ViewBindGroups::default();
         gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group, projections });
     }
