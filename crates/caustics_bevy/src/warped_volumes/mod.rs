@@ -22,8 +22,8 @@
 //!    shape, skips it off the view and lights the pixels it covers itself where it
 //!    covers at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
 //!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
-//!    rasteriser, which draws each one's box on the view indirectly and shades the
-//!    pixels the compute pass would, once each (point-sampled, only where the
+//!    rasteriser, which draws each one's outline on the view, grown by a pixel,
+//!    indirectly and shades the pixels the compute pass would, once each (point-sampled, only where the
 //!    receiver lies in front of the shape's farthest corner: a read-only test
 //!    against a single-sampled copy of the depth prepass). Both paths shade with the
 //!    same function;

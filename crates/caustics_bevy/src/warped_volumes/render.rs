@@ -638,10 +638,10 @@ impl SpecializedRenderPipeline for VolumesPipeline {
                 })],
             }),
             // Back faces only: each pixel whose ray crosses a volume's bounding prism
-            // runs the exact test once (§4.3). The surface pass draws a prism's box on
-            // the view instead, at its farthest corner's depth, and keeps the pixels
-            // whose centres the prism covers (`volumes.wgsl`); the back faces only
-            // where it reaches behind the eye. Point-sampled, it skips pixels whose
+            // runs the exact test once (§4.3). The surface pass draws a prism's outline
+            // on the view instead, grown by a pixel, at its farthest corner's depth, and
+            // keeps the pixels the compute pass would light (`volumes.wgsl`); the back
+            // faces only where it reaches behind the eye. Point-sampled, it skips pixels whose
             // receiver lies behind that depth ([`ViewSurfaceTargets::depth`]; reversed
             // z), outside the prism; a footprint around such a point may not be.
             primitive: PrimitiveState { cull_mode: Some(Face::Front), front_face: FrontFace::Ccw, ..default() },

@@ -4,8 +4,9 @@
 // (§3.4) of every volume whose bounding shape covers the pixel, or with the footprint
 // filter the mean over the pixel's footprint: `splat` (`SPLAT`, one invocation a
 // volume) does it for shapes that cover a few pixels, looping over them, and hands the
-// larger ones to the rasteriser, which draws their boxes on the view into `surface`
-// (the back faces of their bounding prisms, §4.3, where they reach behind the eye).
+// larger ones to the rasteriser, which draws their outlines on the view into
+// `surface` (the back faces of their bounding prisms, §4.3, where they reach behind
+// the eye).
 // The volumetric pass draws every prism into `volumetric`, the eye ray's single
 // scattering in media (§3.5). Both surface
 // paths read each pixel's receiver depth from `receiver_centre`, which the view's
@@ -137,16 +138,13 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     var farthest = 1.0;
     var projected = true;
     for (var k = 0; k < 8; k++) {
-        let clip = view.clip_from_world * vec4(volumes[volume].surface_corners[k].xyz, 1.0);
-        let ndc = clip.xy / clip.w;
-        corners[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
+        let seen = view_pixel(volumes[volume].surface_corners[k].xyz);
+        corners[k] = seen.xy;
         for (var j = 0; j < 4; j++) {
             grown[4 * k + j] = corners[k] + vec2(f32(j & 1), f32(j >> 1u)) * 2.0 - 1.0;
         }
-        farthest = min(farthest, clip.z / clip.w);
-        // As `splat` decides: behind the eye, or so near its plane that the corner
-        // leaves every float.
-        projected = projected && clip.w > 0.0 && all(abs(ndc) < vec2(1.0e30));
+        farthest = min(farthest, seen.z);
+        projected = projected && seen.w != 0.0;
     }
     if projected {
         let hull = outline(grown);
@@ -232,6 +230,26 @@ fn columns(span: vec2<f32>, first: i32, last: i32, reach: f32) -> vec2<i32> {
     return vec2(max(from_x, first), min(to_x, last));
 }
 
+// The columns `first ≤ x ≤ last` of row `y` that a volume's shape (`corner`, in
+// pixels) lights: with `settings.footprint_filter` the pixels it touches, else those
+// whose centres it covers. `splat` and the rasteriser's `surface` both ask it, so
+// that they light the same pixels.
+fn lit_columns(corner: array<vec2<f32>, 8>, y: i32, first: i32, last: i32) -> vec2<i32> {
+    let reach = select(0.0, 0.5, settings.footprint_filter != 0u);
+    let row = f32(y) + 0.5;
+    return columns(row_span(corner, row - reach, row + reach), first, last, reach);
+}
+
+// A point of the view in pixels of its target (`xy`) and its depth (`z`, reversed);
+// `w` 0 behind the eye, or so near its plane that the point leaves every float, else 1.
+fn view_pixel(p: vec3<f32>) -> vec4<f32> {
+    let clip = view.clip_from_world * vec4(p, 1.0);
+    let ndc = clip.xyz / clip.w;
+    let projected = clip.w > 0.0 && all(abs(ndc.xy) < vec2(1.0e30));
+    let pixel = view.viewport.xy + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * view.viewport.zw;
+    return vec4(pixel, ndc.z, select(0.0, 1.0, projected));
+}
+
 // `caustics_core::volumes::MAX_FOOTPRINT_STRETCH`.
 const MAX_FOOTPRINT_STRETCH: f32 = 8.0;
 
@@ -287,17 +305,14 @@ fn surface_light(v: CausticVolume, pixel: vec2<i32>, filtered: bool) -> vec3<f32
 fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
     // The large volumes, at the pixels `splat` would light (`add_light`).
     let pixel = vec2<i32>(in.position.xy);
-    let filtered = settings.footprint_filter != 0u;
     if in.outlined != 0u {
         let corners = array(in.corners_01.xy, in.corners_01.zw, in.corners_23.xy, in.corners_23.zw, in.corners_45.xy, in.corners_45.zw, in.corners_67.xy, in.corners_67.zw);
-        let row = f32(pixel.y) + 0.5;
-        let reach = select(0.0, 0.5, filtered);
-        let lit = columns(row_span(corners, row - reach, row + reach), pixel.x - 2, pixel.x + 2, reach);
+        let lit = lit_columns(corners, pixel.y, pixel.x - 2, pixel.x + 2);
         if pixel.x < lit.x || pixel.x > lit.y {
             discard;
         }
     }
-    return vec4(surface_light(volumes[in.volume], pixel, filtered), 0.0);
+    return vec4(surface_light(volumes[in.volume], pixel, settings.footprint_filter != 0u), 0.0);
 }
 #endif
 #endif
@@ -309,13 +324,11 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
 // centres it covers, with the point sample. Returns the number of pixels shaded.
 fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, last: vec2<i32>) -> u32 {
     let filtered = settings.footprint_filter != 0u;
-    let reach = select(0.0, 0.5, filtered);
     let origin = vec2<i32>(view.viewport.xy);
     let width = i32(view.viewport.z);
     var shaded = 0u;
     for (var y = first.y; y <= last.y; y++) {
-        let row = f32(y) + 0.5;
-        let lit = columns(row_span(corner, row - reach, row + reach), first.x, last.x, reach);
+        let lit = lit_columns(corner, y, first.x, last.x);
         for (var x = lit.x; x <= lit.y; x++) {
             shaded++;
             let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
@@ -357,12 +370,9 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     var hi = vec2(-3.0e38);
     var behind = 0;
     for (var k = 0; k < 8; k++) {
-        let clip = view.clip_from_world * vec4(v.surface_corners[k].xyz, 1.0);
-        let ndc = clip.xy / clip.w;
-        // Behind the eye, or so near its plane that the corner leaves every float.
-        let projected = clip.w > 0.0 && all(abs(ndc) < vec2(1.0e30));
-        behind += select(1, 0, projected);
-        corner[k] = origin + vec2(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5) * size;
+        let seen = view_pixel(v.surface_corners[k].xyz);
+        behind += select(1, 0, seen.w != 0.0);
+        corner[k] = seen.xy;
         lo = min(lo, corner[k]);
         hi = max(hi, corner[k]);
     }
