@@ -403,7 +403,7 @@ fn the_multiresolution_map_keeps_each_splat_small_and_its_flux() {
     let mut map = CausticMap::new(m, 3);
     for (level, diameter) in [(0, 3.0), (1, 12.0), (2, 25.0), (3, 50.0)] {
         assert_eq!(splat_level(diameter), level);
-        let off = map.splat(caustic_map::Splat { uv: Vec2::new(0.43, 0.57), flux: 1.0, diameter }, level);
+        let off = map.splat(caustic_map::Splat::round(Vec2::new(0.43, 0.57), 1.0, diameter), level);
         assert_eq!(off, 0.0);
     }
     assert!((map.total_flux() - 4.0).abs() < 1e-4);
@@ -413,7 +413,7 @@ fn the_multiresolution_map_keeps_each_splat_small_and_its_flux() {
     // resolved, its peak is a quarter per level (the 1/4ⁱ of eq. 3).
     let peak = |level: u32| {
         let mut one = CausticMap::new(m, 3);
-        one.splat(caustic_map::Splat { uv: Vec2::splat(0.5), flux: 1.0, diameter: 2.0 * (1 << level) as f32 }, level);
+        one.splat(caustic_map::Splat::round(Vec2::splat(0.5), 1.0, 2.0 * (1 << level) as f32), level);
         one.resolve().iter().copied().fold(0.0, f32::max)
     };
     assert!(peak(1) < peak(0) && peak(2) < peak(1));
@@ -432,6 +432,39 @@ fn the_paper_level_cap_drops_energy_clamping_keeps_it() {
     assert!(dropped.flux_dropped_by_cap > 0.9 * dropped.flux_in, "{dropped:?}");
     assert_eq!(clamped.flux_dropped_by_cap, 0.0);
     assert!((map.total_flux() + clamped.flux_off_map) / clamped.flux_in > 0.999);
+}
+
+/// The resolved map of every photon of `photons` splatted by `splats` into a `map`²
+/// map (the flat gather: each photon its own splat).
+fn splatted(photons: &PhotonBuffer, splats: Splats, map: u32) -> Vec<f32> {
+    let pyramid = PhotonPyramid::new(photons, map);
+    let (entries, _) = hierarchy::gather(&pyramid, Gather::Flat);
+    CausticMap::splat_all(photons, &pyramid, &entries, splats, map).0.resolve()
+}
+
+#[test]
+fn variable_splats_follow_the_photons_spacing_in_each_direction() {
+    // 48² photons on texel centres 4 texels apart across and 2 down a 256² map: the
+    // anisotropic splats tile it as bilinear splats tile a grid, flat inside the
+    // photons' patch.
+    let m = 256;
+    let photons = synthetic(48, |x, y| Photon { uv: Vec2::new(32.5 + 4.0 * x as f32, 64.5 + 2.0 * y as f32) / m as f32, flux: 1.0, solid_angle: 1.0 });
+    let map = splatted(&photons, VARIABLE, m);
+    let inside: Vec<f32> = (70..150).flat_map(|y| (40..212).map(move |x| (y * m + x) as usize)).map(|i| map[i]).collect();
+    let mean = inside.iter().sum::<f32>() / inside.len() as f32;
+    let spread = inside.iter().map(|&c| (c / mean - 1.0).abs()).fold(0.0, f32::max);
+    assert!((mean * 8.0 - 1.0).abs() < 1e-3 && spread < 1e-3, "mean {mean} (a photon to 8 texels), {spread} off it");
+    // Photons that converge down the map onto one row and stay 6 texels apart across
+    // it, a focal line: a round splat as wide as the spacing across blurs the line
+    // over ±6 rows; the footprint keeps it within the texel either side.
+    let line = synthetic(32, |x, y| Photon { uv: Vec2::new(32.5 + 6.0 * x as f32, 100.5 + 0.02 * y as f32) / m as f32, flux: 1.0, solid_angle: 1.0 });
+    let near_the_line = |map: &[f32]| -> f64 {
+        let total: f64 = map.iter().map(|&c| c as f64).sum();
+        (99..=102).flat_map(|y| (0..m).map(move |x| (y * m + x) as usize)).map(|i| map[i] as f64).sum::<f64>() / total
+    };
+    let sharp = near_the_line(&splatted(&line, VARIABLE, m));
+    let round = near_the_line(&splatted(&line, Splats::Fixed { diameter: 12.0 }, m));
+    assert!(sharp > 0.99 && round < 0.6, "flux within a texel of the focal line: {sharp} by the footprints, {round} by round splats");
 }
 
 /// A glass ball under a spot that focuses it onto the floor, and an opaque box (a

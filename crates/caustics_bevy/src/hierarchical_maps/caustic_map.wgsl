@@ -644,6 +644,88 @@ fn divergence_diameter(index: u32) -> f32 {
     return max(2.0 * spacing, MIN_SPLAT_DIAMETER);
 }
 
+// Photon (x, y)'s offset from `here` in caustic-map texels, w = 1 where it is a valid
+// photon, 0 where it is not (or lies outside the buffer).
+fn neighbour_offset(x: i32, y: i32, here: vec2<f32>) -> vec3<f32> {
+    let n = i32(view.photon_resolution);
+    if x < 0 || y < 0 || x >= n || y >= n {
+        return vec3(0.0);
+    }
+    let p = photon_at(u32(y * n + x));
+    if p.flux <= 0.0 {
+        return vec3(0.0);
+    }
+    return vec3((p.uv - here) * f32(view.map_resolution), 1.0);
+}
+
+// The spacing from the neighbours before and after (`divergence_axes`' central
+// difference, or the one valid); w = 0 where neither is.
+fn spacing(before: vec3<f32>, after: vec3<f32>) -> vec3<f32> {
+    if before.z > 0.0 && after.z > 0.0 {
+        return vec3(0.5 * (after.xy - before.xy), 1.0);
+    }
+    if after.z > 0.0 {
+        return after;
+    }
+    return vec3(-before.xy, before.z);
+}
+
+// `caustic_map::divergence_axes`.
+fn divergence_axes(index: u32) -> mat2x2<f32> {
+    let n = view.photon_resolution;
+    let x = i32(index % n);
+    let y = i32(index / n);
+    let here = photon_uv[index];
+    let row = spacing(neighbour_offset(x - 1, y, here), neighbour_offset(x + 1, y, here));
+    let column = spacing(neighbour_offset(x, y - 1, here), neighbour_offset(x, y + 1, here));
+    if row.z > 0.0 && column.z > 0.0 {
+        let j = mat2x2(row.xy, column.xy);
+        return spd_sqrt(j * transpose(j));
+    }
+    return round_axes(divergence_diameter(index));
+}
+
+fn round_axes(diameter: f32) -> mat2x2<f32> {
+    return mat2x2(0.5 * diameter, 0.0, 0.0, 0.5 * diameter);
+}
+
+// `caustic_map::spd_sqrt`.
+fn spd_sqrt(m: mat2x2<f32>) -> mat2x2<f32> {
+    let s = sqrt(max(determinant(m), 0.0));
+    let t = sqrt(m[0].x + m[1].y + 2.0 * s);
+    if t > 0.0 {
+        return (m + mat2x2(s, 0.0, 0.0, s)) * (1.0 / t);
+    }
+    return mat2x2(0.0, 0.0, 0.0, 0.0);
+}
+
+// `caustic_map::eigen_spread`: half the trace and half the eigenvalues' difference.
+fn eigen_spread(a: mat2x2<f32>) -> vec2<f32> {
+    let half_difference = 0.5 * (a[0].x - a[1].y);
+    return vec2(0.5 * (a[0].x + a[1].y), sqrt(half_difference * half_difference + a[1].x * a[1].x));
+}
+
+// `caustic_map::clamp_half_axes`.
+fn clamp_half_axes(a: mat2x2<f32>, low: f32, high: f32) -> mat2x2<f32> {
+    let e = eigen_spread(a);
+    let longer = clamp(e.x + e.y, low, high);
+    let shorter = clamp(e.x - e.y, low, high);
+    let p = a[0].x;
+    let b = a[1].x;
+    let r = a[1].y;
+    var v = vec2(b, e.x + e.y - p);
+    if p >= r {
+        v = vec2(e.x + e.y - r, b);
+    }
+    let l = length(v);
+    if !(l > 0.0) {
+        return mat2x2(shorter, 0.0, 0.0, shorter);
+    }
+    v = v / l;
+    let d = longer - shorter;
+    return mat2x2(shorter + d * v.x * v.x, d * v.x * v.y, d * v.x * v.y, shorter + d * v.y * v.y);
+}
+
 // `caustic_map::splat_level`.
 fn splat_level(diameter: f32) -> u32 {
     var level = 0u;
@@ -653,8 +735,18 @@ fn splat_level(diameter: f32) -> u32 {
     return level;
 }
 
-fn tent(t: f32, r: f32) -> f32 {
-    return max(1.0 - abs(t) / r, 0.0);
+// `caustic_map::splat_level_of`.
+fn splat_level_of(axes: mat2x2<f32>, top: u32) -> u32 {
+    var level = splat_level(2.0 * sqrt(abs(determinant(axes))));
+    let e = eigen_spread(axes);
+    while level < top && e.x + e.y > MAX_SPLAT_RADIUS * f32(1u << level) {
+        level += 1u;
+    }
+    return level;
+}
+
+fn tent(t: f32) -> f32 {
+    return max(1.0 - abs(t), 0.0);
 }
 
 // `caustic_map::fixed_point`, added to a texel's two words with the carry.
@@ -685,25 +777,25 @@ fn splat(
     let index = entry & 0x00ffffffu;
     var uv: vec2<f32>;
     var flux: f32;
-    var diameter = max(view.fixed_diameter, MIN_SPLAT_DIAMETER);
+    var axes = round_axes(max(view.fixed_diameter, MIN_SPLAT_DIAMETER));
     if entry_level == 0u {
         let p = photon_at(index);
         uv = p.uv;
         flux = p.flux;
         if view.variable_splats != 0u {
-            diameter = divergence_diameter(index);
+            axes = divergence_axes(index);
         }
     } else {
         let node = pyramid_node(entry_level, index);
         uv = node.moment / node.flux;
         flux = node.flux;
         if view.variable_splats != 0u {
-            diameter = MIN_SPLAT_DIAMETER;
+            axes = round_axes(MIN_SPLAT_DIAMETER);
         }
     }
     var level = 0u;
     if view.variable_splats != 0u {
-        level = splat_level(diameter);
+        level = splat_level_of(axes, view.top_level);
         if level > view.top_level {
             if view.discard_above_top != 0u {
                 return;
@@ -712,26 +804,29 @@ fn splat(
         }
     }
     let width = max(view.map_resolution >> level, 1u);
-    let radius = clamp(0.5 * diameter / f32(1u << level), 1.0, MAX_SPLAT_RADIUS);
+    let here = clamp_half_axes(axes * (1.0 / f32(1u << level)), 1.0, MAX_SPLAT_RADIUS);
+    // `Mat2::inverse`.
+    let to_footprint = mat2x2(here[1].y, -here[0].y, -here[1].x, here[0].x) * (1.0 / determinant(here));
     let p = uv * f32(width) - 0.5;
-    let x0 = i32(floor(p.x - radius));
-    let x1 = i32(ceil(p.x + radius));
-    let y0 = i32(floor(p.y - radius));
-    let y1 = i32(ceil(p.y + radius));
-    var sx = 0.0;
-    for (var i = x0; i <= x1; i++) {
-        sx = sx + tent(f32(i) - p.x, radius);
+    // The footprint's box: the parallelogram p + A[-1, 1]².
+    let reach = abs(here[0]) + abs(here[1]);
+    let x0 = i32(floor(p.x - reach.x));
+    let x1 = i32(ceil(p.x + reach.x));
+    let y0 = i32(floor(p.y - reach.y));
+    let y1 = i32(ceil(p.y + reach.y));
+    var sum = 0.0;
+    for (var y = y0; y <= y1; y++) {
+        for (var x = x0; x <= x1; x++) {
+            let st = to_footprint * (vec2(f32(x), f32(y)) - p);
+            sum = sum + tent(st.x) * tent(st.y);
+        }
     }
-    var sy = 0.0;
-    for (var i = y0; i <= y1; i++) {
-        sy = sy + tent(f32(i) - p.y, radius);
-    }
-    let scale = flux * FLUX_UNITS / (sx * sy);
+    let scale = flux * FLUX_UNITS / sum;
     let offset = level_offset(view, level);
     for (var y = max(y0, 0); y <= min(y1, i32(width) - 1); y++) {
-        let wy = tent(f32(y) - p.y, radius);
         for (var x = max(x0, 0); x <= min(x1, i32(width) - 1); x++) {
-            let w = wy * tent(f32(x) - p.x, radius);
+            let st = to_footprint * (vec2(f32(x), f32(y)) - p);
+            let w = tent(st.x) * tent(st.y);
             if w > 0.0 {
                 add_fixed_point(offset + u32(y) * width + u32(x), scale * w);
             }
