@@ -467,6 +467,32 @@ fn variable_splats_follow_the_photons_spacing_in_each_direction() {
     assert!(sharp > 0.99 && round < 0.6, "flux within a texel of the focal line: {sharp} by the footprints, {round} by round splats");
 }
 
+#[test]
+fn a_splat_row_walks_every_texel_its_footprint_covers() {
+    // Slanted, long and thin, round and tiny footprints at off-texel centres: every texel
+    // of positive weight in the footprint's box lies in its row's span.
+    let mut rng = caustics_core::rng::Pcg32::for_photon(5, 0, 0);
+    for case in 0..500 {
+        let mut uniform = || rng.next_f32();
+        let (angle, long, short) = (std::f32::consts::PI * uniform(), 1.0 + 15.0 * uniform(), 1.0 + 3.0 * uniform());
+        let (sin, cos) = angle.sin_cos();
+        let rotation = glam::Mat2::from_cols(Vec2::new(cos, sin), Vec2::new(-sin, cos));
+        let axes = rotation * glam::Mat2::from_diagonal(Vec2::new(long, short)) * rotation.transpose();
+        let to_footprint = axes.inverse();
+        let p = Vec2::new(40.0 * uniform(), 40.0 * uniform());
+        let reach = axes.x_axis.abs() + axes.y_axis.abs();
+        let columns = ((p.x - reach.x).floor(), (p.x + reach.x).ceil());
+        for y in (p.y - reach.y).floor() as i32..=(p.y + reach.y).ceil() as i32 {
+            let (from, to) = caustic_map::row_span(to_footprint, p, y as f32, columns);
+            for x in columns.0 as i32..=columns.1 as i32 {
+                let st = to_footprint * (Vec2::new(x as f32, y as f32) - p);
+                let covered = st.x.abs() < 1.0 && st.y.abs() < 1.0;
+                assert!(!covered || (from..=to).contains(&(x as f32)), "case {case}: texel ({x}, {y}) at {st} is outside {from}..={to}");
+            }
+        }
+    }
+}
+
 /// A glass ball under a spot that focuses it onto the floor, and an opaque box (a
 /// receiver, with its corners) standing in part of the focused light.
 fn ball_and_block() -> (Scene, (Vec3, Vec3)) {

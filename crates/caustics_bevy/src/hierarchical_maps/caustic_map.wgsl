@@ -745,6 +745,28 @@ fn splat_level_of(axes: mat2x2<f32>, top: u32) -> u32 {
     return level;
 }
 
+// `caustic_map::row_span`.
+fn row_span(to_footprint: mat2x2<f32>, p: vec2<f32>, y: f32, columns: vec2<f32>) -> vec2<f32> {
+    let dy = y - p.y;
+    var low = columns.x - p.x;
+    var high = columns.y - p.x;
+    // The rows (a, b) of s and t: |a·dx + b·dy| ≤ 1.
+    var rows = array<vec2<f32>, 2>(vec2(to_footprint[0].x, to_footprint[1].x), vec2(to_footprint[0].y, to_footprint[1].y));
+    for (var k = 0u; k < 2u; k++) {
+        let a = rows[k].x;
+        let c = rows[k].y * dy;
+        if a != 0.0 {
+            let u = (-1.0 - c) / a;
+            let v = (1.0 - c) / a;
+            low = max(low, min(u, v));
+            high = min(high, max(u, v));
+        } else if abs(c) > 1.0 {
+            return vec2(1.0, 0.0);
+        }
+    }
+    return vec2(max(ceil(p.x + low - 0.01), columns.x), min(floor(p.x + high + 0.01), columns.y));
+}
+
 fn tent(t: f32) -> f32 {
     return max(1.0 - abs(t), 0.0);
 }
@@ -814,9 +836,11 @@ fn splat(
     let x1 = i32(ceil(p.x + reach.x));
     let y0 = i32(floor(p.y - reach.y));
     let y1 = i32(ceil(p.y + reach.y));
+    let columns = vec2(f32(x0), f32(x1));
     var sum = 0.0;
     for (var y = y0; y <= y1; y++) {
-        for (var x = x0; x <= x1; x++) {
+        let span = row_span(to_footprint, p, f32(y), columns);
+        for (var x = i32(span.x); x <= i32(span.y); x++) {
             let st = to_footprint * (vec2(f32(x), f32(y)) - p);
             sum = sum + tent(st.x) * tent(st.y);
         }
@@ -824,7 +848,8 @@ fn splat(
     let scale = flux * FLUX_UNITS / sum;
     let offset = level_offset(view, level);
     for (var y = max(y0, 0); y <= min(y1, i32(width) - 1); y++) {
-        for (var x = max(x0, 0); x <= min(x1, i32(width) - 1); x++) {
+        let span = row_span(to_footprint, p, f32(y), columns);
+        for (var x = max(i32(span.x), 0); x <= min(i32(span.y), i32(width) - 1); x++) {
             let st = to_footprint * (vec2(f32(x), f32(y)) - p);
             let w = tent(st.x) * tent(st.y);
             if w > 0.0 {

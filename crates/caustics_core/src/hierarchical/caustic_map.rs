@@ -219,6 +219,28 @@ pub fn entry_splat(photons: &PhotonBuffer, pyramid: &PhotonPyramid, entry: Gathe
     }
 }
 
+/// The columns of row `y` that a footprint centred at `p` may cover, within `columns`
+/// (inclusive, empty where the first passes the last): the `x` with `|s|, |t| ≤ 1` for
+/// `(s, t) = to_footprint · ((x, y) − p)`, a parallelogram's chord, widened by a
+/// hundredth of a texel so that rounding never drops a texel of positive weight. A
+/// splat walks these rather than its box, whose corners a long, slanted footprint
+/// leaves empty.
+pub fn row_span(to_footprint: Mat2, p: Vec2, y: f32, columns: (f32, f32)) -> (f32, f32) {
+    let dy = y - p.y;
+    let (mut low, mut high) = (columns.0 - p.x, columns.1 - p.x);
+    for (a, b) in [(to_footprint.x_axis.x, to_footprint.y_axis.x), (to_footprint.x_axis.y, to_footprint.y_axis.y)] {
+        // |a·dx + b·dy| ≤ 1.
+        let c = b * dy;
+        if a != 0.0 {
+            let (u, v) = ((-1.0 - c) / a, (1.0 - c) / a);
+            (low, high) = (low.max(u.min(v)), high.min(u.max(v)));
+        } else if c.abs() > 1.0 {
+            return (1.0, 0.0);
+        }
+    }
+    ((p.x + low - 0.01).ceil().max(columns.0), (p.x + high + 0.01).floor().min(columns.1))
+}
+
 /// The tent's weight at `t` footprint radii from its centre.
 #[inline]
 fn tent(t: f32) -> f32 {
@@ -288,12 +310,23 @@ impl CausticMap {
             let st = to_footprint * (Vec2::new(x as f32, y as f32) - p);
             tent(st.x) * tent(st.y)
         };
-        let sum: f32 = (y0..=y1).flat_map(|y| (x0..=x1).map(move |x| (x, y))).map(|(x, y)| weight(x, y)).sum();
+        let row = |y: i64| {
+            let (from, to) = row_span(to_footprint, p, y as f32, (x0 as f32, x1 as f32));
+            (from as i64, to as i64)
+        };
+        let mut sum = 0.0f32;
+        for y in y0..=y1 {
+            let (from, to) = row(y);
+            for x in from..=to {
+                sum += weight(x, y);
+            }
+        }
         let scale = splat.flux * FLUX_UNITS / sum;
         let texels = &mut self.levels[level as usize];
         let mut off_map = 0.0f64;
         for y in y0..=y1 {
-            for x in x0..=x1 {
+            let (from, to) = row(y);
+            for x in from..=to {
                 let w = weight(x, y);
                 if w <= 0.0 {
                     continue;
