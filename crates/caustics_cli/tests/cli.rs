@@ -261,38 +261,10 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
         // Shadows from the generator: the box standing in the pool.
         ("boxed_pool", &["volumes", "maps"]),
     ];
-    for (scene, method) in cases.iter().flat_map(|&(scene, methods)| methods.iter().map(move |&m| (scene, m))) {
-        let gpu = method_plane(&dir, scene, method, false);
-        let twin = method_plane(&dir, scene, method, true);
+    for (scene, methods) in cases {
         let truth = method_plane(&dir, scene, "reference", false);
-        let (agree, error) = (relative_l2(&gpu, &twin), relative_l2(&gpu, &truth));
-        eprintln!("{scene} {method}: GPU vs twin relative L2 {agree:.1e}, GPU vs reference {error:.4}");
-        // Measured on lavapipe: 4·10⁻⁴ (sphere, maps) and 7·10⁻⁴ (pool, volumes). The GPU stores E in
-        // half floats (5·10⁻⁴ relative) and samples the same 4 × 4 points per cell.
-        assert!(agree < 5e-3, "{scene} {method}: the GPU passes and their twin differ: relative L2 {agree}");
-        // Against the tracer (10⁶ photons on 64² cells), measured: 0.009 on the sphere,
-        // 0.57–0.63 on the pools (the volumes' error on 128² water cells, docs/warped-volumes.md), 0.98
-        // for the roofed pool's maps (they lose its shadow's edge, docs/choosing-a-technique.md). Well past
-        // that is a failure.
-        let bound = if scene == "sphere" { 0.02 } else { 1.3 };
-        assert!(error < bound, "{scene} {method}: relative L2 {error} against the reference");
-        if scene == "roofed_pool" {
-            // The floor under the roof (x < 0, the left half of every row) stays dark.
-            let under_roof = (0..64 * 64).filter(|i| i % 64 < 32).map(|i| gpu[i]).fold(0.0, f64::max);
-            assert_eq!(under_roof, 0.0, "{method}: caustic light under the roof");
-        }
-        if scene == "boxed_pool" {
-            // The box's caustic shadow: floor cells (off the box's top, x, z ∈ [−0.3, 0.2],
-            // with a cell's margin) that the tracer leaves dark with their neighbours.
-            let centre = |i: usize| -1.0 + (i as f64 + 0.5) / 32.0;
-            let on_box = |r: usize, c: usize| (-0.35..0.25).contains(&centre(r)) && (-0.35..0.25).contains(&centre(c));
-            let dark = |r: usize, c: usize| {
-                (r.saturating_sub(1)..=(r + 1).min(63)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(63)).all(|cc| truth[rr * 64 + cc] == 0.0))
-            };
-            let shadow: Vec<usize> = (0..64 * 64).filter(|&i| !on_box(i / 64, i % 64) && dark(i / 64, i % 64)).collect();
-            assert!(shadow.len() >= 10, "the box's caustic shadow: {} cells", shadow.len());
-            let lit = shadow.iter().map(|&i| gpu[i]).fold(0.0, f64::max);
-            assert_eq!(lit, 0.0, "{method}: caustic light in the box's caustic shadow ({} cells)", shadow.len());
+        for &method in methods {
+            check_method_plane(&dir, scene, method, &truth);
         }
     }
     // A method that does not apply: one line, non-zero exit.
@@ -300,6 +272,42 @@ fn every_technique_renders_an_irradiance_plane_on_the_gpu_like_its_twin() {
     assert_clean_failure(&out, "does not apply");
     let out = caustics(&["render", "sphere", "--method", "convolution", "--irradiance-plane", "--size", "16x16"]);
     assert_clean_failure(&out, "does not apply");
+}
+
+/// `method`'s irradiance plane of `scene` by the GPU passes against its CPU twin, and
+/// against the tracer's `truth`.
+fn check_method_plane(dir: &std::path::Path, scene: &str, method: &str, truth: &[f64]) {
+    let gpu = method_plane(dir, scene, method, false);
+    let twin = method_plane(dir, scene, method, true);
+    let (agree, error) = (relative_l2(&gpu, &twin), relative_l2(&gpu, truth));
+    eprintln!("{scene} {method}: GPU vs twin relative L2 {agree:.1e}, GPU vs reference {error:.4}");
+    // Measured on lavapipe: 4·10⁻⁴ (sphere, maps) and 7·10⁻⁴ (pool, volumes). The GPU stores E in
+    // half floats (5·10⁻⁴ relative) and samples the same 4 × 4 points per cell.
+    assert!(agree < 5e-3, "{scene} {method}: the GPU passes and their twin differ: relative L2 {agree}");
+    // Against the tracer (10⁶ photons on 64² cells), measured: 0.009 on the sphere,
+    // 0.57–0.63 on the pools (the volumes' error on 128² water cells, docs/warped-volumes.md), 0.98
+    // for the roofed pool's maps (they lose its shadow's edge, docs/choosing-a-technique.md). Well past
+    // that is a failure.
+    let bound = if scene == "sphere" { 0.02 } else { 1.3 };
+    assert!(error < bound, "{scene} {method}: relative L2 {error} against the reference");
+    if scene == "roofed_pool" {
+        // The floor under the roof (x < 0, the left half of every row) stays dark.
+        let under_roof = (0..64 * 64).filter(|i| i % 64 < 32).map(|i| gpu[i]).fold(0.0, f64::max);
+        assert_eq!(under_roof, 0.0, "{method}: caustic light under the roof");
+    }
+    if scene == "boxed_pool" {
+        // The box's caustic shadow: floor cells (off the box's top, x, z ∈ [−0.3, 0.2],
+        // with a cell's margin) that the tracer leaves dark with their neighbours.
+        let centre = |i: usize| -1.0 + (i as f64 + 0.5) / 32.0;
+        let on_box = |r: usize, c: usize| (-0.35..0.25).contains(&centre(r)) && (-0.35..0.25).contains(&centre(c));
+        let dark = |r: usize, c: usize| {
+            (r.saturating_sub(1)..=(r + 1).min(63)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(63)).all(|cc| truth[rr * 64 + cc] == 0.0))
+        };
+        let shadow: Vec<usize> = (0..64 * 64).filter(|&i| !on_box(i / 64, i % 64) && dark(i / 64, i % 64)).collect();
+        assert!(shadow.len() >= 10, "the box's caustic shadow: {} cells", shadow.len());
+        let lit = shadow.iter().map(|&i| gpu[i]).fold(0.0, f64::max);
+        assert_eq!(lit, 0.0, "{method}: caustic light in the box's caustic shadow ({} cells)", shadow.len());
+    }
 }
 
 /// Quads as glTF mesh data: four vertices of their own and two triangles each,
