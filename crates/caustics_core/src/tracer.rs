@@ -54,6 +54,20 @@ pub struct PhotonHit {
     pub receiver: u32,
 }
 
+/// One straight piece of a caustic photon path: from a generator to where it next
+/// meets a surface (or, escaping, to infinity). What a participating medium scatters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhotonSegment {
+    /// Where it leaves the generator (world space).
+    pub origin: Vec3,
+    /// Unit direction of travel.
+    pub direction: Vec3,
+    /// Its length: infinite for a photon that leaves the scene.
+    pub length: f32,
+    /// RGB flux carried (light units × m²).
+    pub flux: Vec3,
+}
+
 /// Where deposits go. Each worker fills its own empty copy; copies are merged in a
 /// fixed order, so a sink's result does not depend on the number of threads.
 pub trait PhotonSink: Send + Sync + Sized {
@@ -61,6 +75,10 @@ pub trait PhotonSink: Send + Sync + Sized {
     fn empty_like(&self) -> Self;
     /// Records one deposit.
     fn deposit(&mut self, hit: &PhotonHit);
+    /// Records one segment of a caustic path (after at least one specular
+    /// interaction); only sinks that estimate light in a medium need them.
+    #[inline]
+    fn segment(&mut self, _segment: &PhotonSegment) {}
     /// Adds another sink's deposits to this one.
     fn merge(&mut self, other: Self);
 }
@@ -380,7 +398,12 @@ impl<'a> PhotonTracer<'a> {
         while len > 0 {
             len -= 1;
             let b = stack[len];
-            let Some(hit) = self.bvh.intersect(b.origin, b.dir, 0.0, f32::INFINITY) else {
+            let hit = self.bvh.intersect(b.origin, b.dir, 0.0, f32::INFINITY);
+            if b.depth > 0 {
+                let length = hit.as_ref().map_or(f32::INFINITY, |hit| hit.t);
+                sink.segment(&PhotonSegment { origin: b.origin, direction: b.dir, length, flux: b.flux });
+            }
+            let Some(hit) = hit else {
                 stats.escaped += b.flux.as_dvec3();
                 continue;
             };
