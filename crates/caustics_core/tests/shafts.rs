@@ -2,16 +2,17 @@
 //! integral of §3.5 (`in_scattered_radiance`) and against analytic beams; the exact
 //! integral against the photon tracer's beams (`PhotonBeams`).
 
+use caustics_core::estimate::PhotonBeams;
 use caustics_core::glam::{Affine3A, Quat, Vec2, Vec3};
 use caustics_core::mesh::TriMesh;
-use caustics_core::estimate::PhotonBeams;
 use caustics_core::metrics::relative_l2;
-use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::ocean::{OceanSettings, OceanSpectrum};
 use caustics_core::params::{MediumCoefficients, SpecularInteraction};
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
+use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::view::PinholeCamera;
 use caustics_core::volumes::{BeamGrid, MediumBox, VolumeSettings, build_scene_volumes, in_scattered_radiance};
+use rayon::prelude::*;
 
 fn floor(size: f32, y: f32) -> Receiver {
     Receiver { mesh: TriMesh::quad(Vec3::Y * y, Vec3::Z * (0.5 * size), Vec3::X * (0.5 * size)), albedo: Vec3::ONE }
@@ -87,25 +88,29 @@ fn shaft_images(
     assert!(set.volumes.len() > 100, "{} volumes", set.volumes.len());
     let mut grid = BeamGrid::new(medium, longest);
     grid.deposit_all(&set.volumes, &settings);
-    let image = |sub: u32, radiance: &dyn Fn(Vec3, Vec3) -> Vec3| -> Vec<f32> {
-        let fine = PinholeCamera { width: camera.width * sub, height: camera.height * sub, ..*camera };
-        (0..camera.width * camera.height)
-            .map(|i| {
-                let (x, y) = (i % camera.width, i / camera.width);
-                (0..sub * sub)
-                    .map(|k| {
-                        let (o, d) = fine.ray(x * sub + k % sub, y * sub + k / sub);
-                        let t = if d.y < 0.0 { (-o.y / d.y).min(20.0) } else { 20.0 };
-                        radiance(o, o + t * d).element_sum()
-                    })
-                    .sum::<f32>()
-                    / (sub * sub) as f32
-            })
-            .collect()
-    };
-    let exact = image(sub.0, &|o, e| in_scattered_radiance(&set.volumes, o, e, &medium, &settings));
-    let marched = image(sub.1, &|o, e| grid.in_scattered_radiance(o, e, steps));
+    let exact = footprint_image(camera, sub.0, &|o, e| in_scattered_radiance(&set.volumes, o, e, &medium, &settings));
+    let marched = footprint_image(camera, sub.1, &|o, e| grid.in_scattered_radiance(o, e, steps));
     (exact, marched)
+}
+
+/// The image of `radiance(eye, end)` seen by `camera` (its rays ending on the plane
+/// y = 0, or 20 m away), each pixel the mean of its channels over `sub²` rays.
+fn footprint_image(camera: &PinholeCamera, sub: u32, radiance: &(dyn Fn(Vec3, Vec3) -> Vec3 + Sync)) -> Vec<f32> {
+    let fine = PinholeCamera { width: camera.width * sub, height: camera.height * sub, ..*camera };
+    (0..camera.width * camera.height)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = (i % camera.width, i / camera.width);
+            (0..sub * sub)
+                .map(|k| {
+                    let (o, d) = fine.ray(x * sub + k % sub, y * sub + k / sub);
+                    let t = if d.y < 0.0 { (-o.y / d.y).min(20.0) } else { 20.0 };
+                    radiance(o, o + t * d).element_sum()
+                })
+                .sum::<f32>()
+                / (sub * sub) as f32
+        })
+        .collect()
 }
 
 #[test]
@@ -225,29 +230,10 @@ fn shafts_under_rippled_water_match_the_tracers_photon_beams() {
         beams
     };
     let (a, b) = (beams(1), beams(2));
-    // Each pixel the mean over its footprint, from sub² rays ending on the floor.
-    let image = |sub: u32, radiance: &(dyn Fn(Vec3, Vec3) -> Vec3 + Sync)| -> Vec<f32> {
-        use rayon::prelude::*;
-        let fine = PinholeCamera { width: camera.width * sub, height: camera.height * sub, ..camera };
-        (0..camera.width * camera.height)
-            .into_par_iter()
-            .map(|i| {
-                let (x, y) = (i % camera.width, i / camera.width);
-                (0..sub * sub)
-                    .map(|k| {
-                        let (o, d) = fine.ray(x * sub + k % sub, y * sub + k / sub);
-                        let t = if d.y < 0.0 { (-o.y / d.y).min(20.0) } else { 20.0 };
-                        radiance(o, o + t * d).element_sum()
-                    })
-                    .sum::<f32>()
-                    / (sub * sub) as f32
-            })
-            .collect()
-    };
-    let exact = image(8, &|o, e| in_scattered_radiance(&volumes, o, e, &medium, &settings));
+    let exact = footprint_image(&camera, 8, &|o, e| in_scattered_radiance(&volumes, o, e, &medium, &settings));
     let radius = 0.02;
-    let traced_a = image(4, &|o, e| a.in_scattered_radiance(o, e, radius));
-    let traced_b = image(4, &|o, e| b.in_scattered_radiance(o, e, radius));
+    let traced_a = footprint_image(&camera, 4, &|o, e| a.in_scattered_radiance(o, e, radius));
+    let traced_b = footprint_image(&camera, 4, &|o, e| b.in_scattered_radiance(o, e, radius));
     let traced: Vec<f32> = traced_a.iter().zip(&traced_b).map(|(a, b)| 0.5 * (a + b)).collect();
     // The two halves differ by √2 of one half's noise: the mean's is half that.
     let noise = 0.5 * relative_l2(&traced_a, &traced_b);
