@@ -7,9 +7,8 @@ use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticPa
 use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, ViewBindGroups, write_changed};
-use crate::irradiance::{ActiveCausticTechniques, ViewCausticIrradiance, ViewProjectionPipeline};
+use crate::irradiance::{ActiveCausticTechniques, ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
-use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::platform::collections::HashMap;
@@ -23,7 +22,7 @@ use bevy::render::{
     },
     renderer::{RenderContext, RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue, ViewQuery},
     sync_world::MainEntity,
-    view::{ViewUniform, ViewUniformOffset, ViewUniforms},
+    view::ViewUniform,
 };
 use std::sync::Arc;
 
@@ -505,18 +504,15 @@ fn compute_floor_irradiance(
 
 /// Adds each pool's floor irradiance where the view sees its floor.
 fn project_floor_irradiance(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<ConvolutionPipelines>)>,
-    views: Query<(), With<ViewProjectionPipeline<ConvolutionPipelines>>>,
+    view: ViewQuery<ProjectionView<ConvolutionPipelines>>,
     mut gpu: ResMut<PoolGpu>,
     pipelines: Res<ConvolutionPipelines>,
-    cache: Res<PipelineCache>,
-    view_uniforms: Res<ViewUniforms>,
-    recorder: Res<PassRecorder>,
+    projection: ProjectionContext<ConvolutionPipelines>,
     mut ctx: RenderContext,
 ) {
     let entity = view.entity();
     let (buffer, prepass, offset, pipeline) = view.into_inner();
-    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
+    let Some(inputs) = projection.inputs(pipeline, prepass, &pipelines.project_layouts) else { return };
     let device = ctx.render_device().clone();
     let bind_groups: Vec<BindGroup> = gpu
         .0
@@ -524,7 +520,7 @@ fn project_floor_irradiance(
         .filter_map(|buffers| {
             let (uniform, binding) = (buffers.uniform.buffer()?, buffers.uniform.binding()?);
             let source = [uniform.into(), (&buffers.irradiance).into()];
-            Some(inputs.bind_group(&mut buffers.projections, (entity, |e| views.contains(e)), &source, || {
+            Some(inputs.bind_group(&mut buffers.projections, (entity, |e| projection.exists(e)), &source, || {
                 device.create_bind_group(
                     "pool_project_bind_group",
                     inputs.layout,
@@ -533,7 +529,7 @@ fn project_floor_irradiance(
             }))
         })
         .collect();
-    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, ("pool_floor", "caustics/pool_floor", "pool floor"), &recorder);
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, ("pool_floor", "caustics/pool_floor", "pool floor"), &projection.recorder);
 }
 
 #[cfg(test)]

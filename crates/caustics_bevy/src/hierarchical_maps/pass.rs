@@ -2,9 +2,8 @@
 //! and its projection into every view each frame.
 
 use super::render::{CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw, COUNTERS_PER_VIEW};
-use crate::irradiance::{ViewCausticIrradiance, ViewProjectionPipeline};
+use crate::irradiance::{ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
-use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::prelude::*;
 use bevy::render::{
     diagnostic::RecordDiagnostics,
@@ -12,7 +11,6 @@ use bevy::render::{
     render_asset::RenderAssets,
     render_resource::*,
     renderer::{RenderContext, ViewQuery},
-    view::{ViewUniformOffset, ViewUniforms},
 };
 use caustics_core::hierarchical::light_maps::NO_SURFACE;
 
@@ -133,13 +131,10 @@ pub(super) fn make_caustic_maps(
 
 /// Adds every light view's caustic irradiance where the view sees its receivers.
 pub(super) fn project_caustic_maps(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<CausticMapPipelines>)>,
-    views: Query<(), With<ViewProjectionPipeline<CausticMapPipelines>>>,
+    view: ViewQuery<ProjectionView<CausticMapPipelines>>,
     mut gpu: ResMut<CausticMapsGpu>,
     pipelines: Res<CausticMapPipelines>,
-    cache: Res<PipelineCache>,
-    view_uniforms: Res<ViewUniforms>,
-    recorder: Res<PassRecorder>,
+    projection: ProjectionContext<CausticMapPipelines>,
     mut ctx: RenderContext,
 ) {
     let entity = view.entity();
@@ -147,7 +142,7 @@ pub(super) fn project_caustic_maps(
     if gpu.generation.is_none() || gpu.views.is_empty() {
         return;
     }
-    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
+    let Some(inputs) = projection.inputs(pipeline, prepass, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
     let device = ctx.render_device().clone();
     let bind_groups: Vec<BindGroup> = gpu
@@ -156,7 +151,7 @@ pub(super) fn project_caustic_maps(
         .filter_map(|v| {
             let (uniform, binding) = (v.uniform.buffer()?, v.uniform.binding()?);
             let source = [uniform.into(), (&v.receivers.1).into(), (&v.resolved).into()];
-            Some(inputs.bind_group(&mut v.projections, (entity, |e| views.contains(e)), &source, || {
+            Some(inputs.bind_group(&mut v.projections, (entity, |e| projection.exists(e)), &source, || {
                 device.create_bind_group(
                     "caustic_map_project_bind_group",
                     inputs.layout,
@@ -166,5 +161,5 @@ pub(super) fn project_caustic_maps(
         })
         .collect();
     let names = ("caustic_map_projection", "caustic_maps/projection", "caustic map projection");
-    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &projection.recorder);
 }

@@ -2,15 +2,13 @@
 //! change, and their projection into every view each frame.
 
 use super::render::{IlluminationPipelines, IlluminationTexturesGpu};
-use crate::irradiance::{ViewCausticIrradiance, ViewProjectionPipeline};
+use crate::irradiance::{ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
-use bevy::core_pipeline::prepass::ViewPrepassTextures;
 use bevy::prelude::*;
 use bevy::render::{
     diagnostic::RecordDiagnostics,
     render_resource::*,
     renderer::{RenderContext, ViewQuery},
-    view::{ViewUniformOffset, ViewUniforms},
 };
 
 /// Once per frame in which the frames changed: what each light's virtual camera sees
@@ -69,13 +67,10 @@ pub(super) fn draw_illumination_textures(
 
 /// Adds every light's illumination textures where the view sees receivers.
 pub(super) fn project_illumination_textures(
-    view: ViewQuery<(&ViewCausticIrradiance, &ViewPrepassTextures, &ViewUniformOffset, &ViewProjectionPipeline<IlluminationPipelines>)>,
-    views: Query<(), With<ViewProjectionPipeline<IlluminationPipelines>>>,
+    view: ViewQuery<ProjectionView<IlluminationPipelines>>,
     mut gpu: ResMut<IlluminationTexturesGpu>,
     pipelines: Res<IlluminationPipelines>,
-    cache: Res<PipelineCache>,
-    view_uniforms: Res<ViewUniforms>,
-    recorder: Res<PassRecorder>,
+    projection: ProjectionContext<IlluminationPipelines>,
     mut ctx: RenderContext,
 ) {
     let entity = view.entity();
@@ -83,7 +78,7 @@ pub(super) fn project_illumination_textures(
     if gpu.frames.is_empty() || gpu.dirty {
         return;
     }
-    let Some(inputs) = pipeline.inputs(&cache, prepass, &view_uniforms, &pipelines.project_layouts) else { return };
+    let Some(inputs) = projection.inputs(pipeline, prepass, &pipelines.project_layouts) else { return };
     let Some(normal) = inputs.normal else { return };
     let device = ctx.render_device().clone();
     let bind_groups: Vec<BindGroup> = gpu
@@ -92,7 +87,7 @@ pub(super) fn project_illumination_textures(
         .filter_map(|f| {
             let (uniform, binding) = (f.uniform.buffer()?, f.uniform.binding()?);
             let source = [uniform.into(), (&f.array).into(), (&f.surface).into(), (&f.seen).into()];
-            Some(inputs.bind_group(&mut f.projections, (entity, |v| views.contains(v)), &source, || {
+            Some(inputs.bind_group(&mut f.projections, (entity, |v| projection.exists(v)), &source, || {
                 device.create_bind_group(
                     "illumination_project_bind_group",
                     inputs.layout,
@@ -110,5 +105,5 @@ pub(super) fn project_illumination_textures(
         })
         .collect();
     let names = ("illumination_projection", "illumination_textures/projection", "illumination textures projection");
-    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &recorder);
+    buffer.project(&mut ctx, inputs.pipeline, &bind_groups, offset.offset, names, &projection.recorder);
 }

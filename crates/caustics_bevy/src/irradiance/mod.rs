@@ -32,6 +32,7 @@ use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::ecs::component::ComponentId;
+use bevy::ecs::system::SystemParam;
 use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, StandardMaterial};
 use std::marker::PhantomData;
 use bevy::platform::collections::{HashMap, HashSet};
@@ -309,6 +310,34 @@ impl ProjectionInputs<'_> {
         let inputs = [self.layout.into(), self.view_buffer.into(), self.depth.into()].into_iter().chain(self.normal.map(Bound::from));
         let bound: Vec<Bound> = inputs.chain(source.iter().copied()).collect();
         kept.get(view, exists, &bound, make)
+    }
+}
+
+/// What a technique's projection system reads of a view: its caustics buffer, prepass,
+/// view uniform offset and `P`'s pipeline.
+pub type ProjectionView<P> = (&'static ViewCausticIrradiance, &'static ViewPrepassTextures, &'static ViewUniformOffset, &'static ViewProjectionPipeline<P>);
+
+/// What every technique's projection system reads besides its view and its own
+/// resources: which views still have `P`'s pipeline, the pipeline cache, the view
+/// uniforms and the pass recorder.
+#[derive(SystemParam)]
+pub struct ProjectionContext<'w, 's, P: 'static> {
+    views: Query<'w, 's, (), With<ViewProjectionPipeline<P>>>,
+    cache: Res<'w, PipelineCache>,
+    view_uniforms: Res<'w, ViewUniforms>,
+    /// Where the projection records that it ran.
+    pub recorder: Res<'w, PassRecorder>,
+}
+
+impl<P: 'static> ProjectionContext<'_, '_, P> {
+    /// The view's inputs ([`ViewProjectionPipeline::inputs`]).
+    pub fn inputs<'a>(&'a self, pipeline: &ViewProjectionPipeline<P>, prepass: &'a ViewPrepassTextures, layouts: &'a [KeptLayout; 2]) -> Option<ProjectionInputs<'a>> {
+        pipeline.inputs(&self.cache, prepass, &self.view_uniforms, layouts)
+    }
+
+    /// Whether `view` still has `P`'s pipeline (its kept bind groups stay).
+    pub fn exists(&self, view: Entity) -> bool {
+        self.views.contains(view)
     }
 }
 
