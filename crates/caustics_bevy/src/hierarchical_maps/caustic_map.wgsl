@@ -685,6 +685,7 @@ fn divergence_axes(index: u32) -> mat2x2<f32> {
     return round_axes(divergence_diameter(index));
 }
 
+// `caustic_map::round_axes`.
 fn round_axes(diameter: f32) -> mat2x2<f32> {
     return mat2x2(0.5 * diameter, 0.0, 0.0, 0.5 * diameter);
 }

@@ -79,7 +79,7 @@ pub struct Splat {
 impl Splat {
     /// A round splat of `diameter` full-resolution texels.
     pub fn round(uv: Vec2, flux: f32, diameter: f32) -> Self {
-        Self { uv, flux, axes: Mat2::from_diagonal(Vec2::splat(0.5 * diameter)) }
+        Self { uv, flux, axes: round_axes(diameter) }
     }
 
     /// The diameter of the round splat of the same area, `2√det A`, in full-resolution
@@ -87,6 +87,11 @@ impl Splat {
     pub fn diameter(&self) -> f32 {
         2.0 * self.axes.determinant().abs().sqrt()
     }
+}
+
+/// The half-axes of a round splat of `diameter` texels.
+pub fn round_axes(diameter: f32) -> Mat2 {
+    Mat2::from_diagonal(Vec2::splat(0.5 * diameter))
 }
 
 /// The level of a splat of `diameter` full-resolution texels: `⌊log₂ max(1, D/5)⌋`,
@@ -158,7 +163,7 @@ pub fn divergence_axes(photons: &PhotonBuffer, x: u32, y: u32, map_resolution: u
             let j = Mat2::from_cols(u, v);
             spd_sqrt(j * j.transpose())
         }
-        None => Splat::round(here, 0.0, divergence_diameter(photons, x, y, map_resolution)).axes,
+        None => round_axes(divergence_diameter(photons, x, y, map_resolution)),
     }
 }
 
