@@ -3,11 +3,13 @@
 //! by exp(−σₐ ℓ), for a camera with `Caustics` and for one without; a directional
 //! light into a slab of scattering medium gives the single-scattering radiance of the
 //! analytic integral; caustic light on the board is dimmed once, with the rest of the
-//! pixel. Without the medium's `FogVolume` the board is not dimmed and the slab is
-//! black. Under a rippled pond in a wider medium, Bevy's fog scattering the sun
-//! beside the water and the plugin's shafts under it add up to the photon tracer's
-//! single scattering, caustic and direct, and a camera without `Caustics` sees the
-//! direct part alone: the water's shadow keeps Bevy's sun out of the shafts.
+//! pixel; seen through a transmissive sheet (water from above), in front of the
+//! medium or inside it, the board dims by the same exp(−σₐ ℓ). Without the medium's
+//! `FogVolume` the board is not dimmed and the slab is black. Under a rippled pond in
+//! a wider medium, Bevy's fog scattering the sun beside the water and the plugin's
+//! shafts under it add up to the photon tracer's single scattering, caustic and
+//! direct, and a camera without `Caustics` sees the direct part alone: the water's
+//! shadow keeps Bevy's sun out of the shafts.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
@@ -99,6 +101,22 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     eprintln!("caustic light through the medium: {caustic}");
     assert!((caustic / expected - Vec3::ONE).abs().max_element() < 0.02, "caustic light dims to {caustic}, not once by exp(−0.5) = {expected}");
     renderer.world_mut().entity_mut(camera).remove::<InjectedIrradiance>();
+
+    // Seen through a transmissive surface (water from above): Bevy's fog ends at the
+    // surface and Bevy's transmission shows the opaque image from before the fog; the
+    // plugin dims it by the medium behind the surface. In front of the medium and
+    // inside it, the board dims by exp(−0.5) once.
+    let sheet = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Rectangle::new(4.0, 4.0));
+    let clear_glass = StandardMaterial { specular_transmission: 1.0, thickness: 0.0, ior: 1.0, reflectance: 0.0, perceptual_roughness: 0.0, ..default() };
+    let clear_glass = renderer.world_mut().resource_mut::<Assets<StandardMaterial>>().add(clear_glass);
+    let glass = renderer.world_mut().spawn((Mesh3d(sheet), MeshMaterial3d(clear_glass), Transform::from_xyz(0.0, 0.0, -0.5))).id();
+    for z in [-0.5, -1.5] {
+        renderer.world_mut().entity_mut(glass).insert(Transform::from_xyz(0.0, 0.0, z));
+        let dimmed = centre(&render(&mut renderer, 3)) / clear;
+        eprintln!("through a transmissive sheet at z = {z}: {dimmed}");
+        assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "behind a transmissive sheet at z = {z} the board dims to {dimmed}, not {expected}");
+    }
+    renderer.world_mut().despawn(glass);
 
     // Single scattering: a slab 1 m deep along the view and 1 m high, its top 0.1 m
     // above the eye ray, lit from above and behind it; black behind. The radiance at the

@@ -172,7 +172,7 @@ fn extract_phases(
 
 /// Draws the view's composite phase onto its image, loading the opaque pass's colour
 /// and depth.
-fn draw_composite(
+pub(crate) fn draw_composite(
     world: &World,
     view: ViewQuery<(&ExtractedCamera, &ExtractedView, &ViewTarget, &ViewDepthTexture, Option<&MainPassResolutionOverride>)>,
     phases: Res<ViewSortedRenderPhases<CausticComposite3d>>,

@@ -54,6 +54,7 @@ use bevy::render::{
 };
 
 pub use composite::CausticCompositePipeline;
+pub(crate) use composite::draw_composite;
 
 /// Format of the caustic irradiance buffer: HDR float, blendable so that passes can
 /// accumulate with additive blending.

@@ -14,6 +14,12 @@
 //! point: the fog's `light_intensity` cancels it, which leaves the light unattenuated
 //! inside the box (exact for a thin medium, or one the light enters through a
 //! generator, whose light the plugin carries).
+//!
+//! Where a transmissive surface is in front (water seen from above), Bevy's fog ends
+//! its march at the surface and Bevy's transmission shows an undimmed copy of what lies
+//! behind: [`behind_transmission`] dims that copy by the media behind the surface.
+
+mod behind_transmission;
 
 use crate::components::{InvalidCausticParams, ParticipatingMedium};
 use bevy::light::{FogVolume, VolumetricFog, VolumetricLight};
@@ -40,6 +46,7 @@ pub(crate) fn build(app: &mut App) {
         PostUpdate,
         (crate::cpu_time::timed(&cpu, keep_fog_volumes), crate::cpu_time::timed(&cpu, give_fog_to_views)).chain().in_set(crate::CausticSystems::ReadScene),
     );
+    behind_transmission::build(app);
 }
 
 /// What Bevy's fog draws of a medium: density, σₐ, σₛ, g and the light intensity that
