@@ -196,7 +196,8 @@ struct GpuMedia {
     media: [GpuMedium; MAX_MEDIA],
 }
 
-/// Render world: the media's uniform, uploaded when they change.
+/// Render world: the media's uniform, uploaded when they change and dropped while no
+/// view dims behind transmission.
 #[derive(Resource, Default)]
 struct MediaUniform(UniformBuffer<GpuMedia>);
 
@@ -289,9 +290,11 @@ fn prepare_bind_groups(
     queue: Res<RenderQueue>,
 ) {
     if views.is_empty() {
+        uniform.0 = default();
         return;
     }
     let (padded, count) = media.padded();
+    uniform.0.set_label(Some("caustic_media"));
     write_changed(&mut uniform.0, GpuMedia { count, media: padded }, &device, &queue);
     let (Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
         return;
@@ -304,7 +307,7 @@ fn prepare_bind_groups(
         let depth = texture_cache.get(
             &device,
             TextureDescriptor {
-                label: Some("medium_surface_depth"),
+                label: Some("caustic_medium_surface_depth"),
                 size: Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 },
                 mip_level_count: 1,
                 sample_count: 1,
