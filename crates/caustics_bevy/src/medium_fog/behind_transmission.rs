@@ -25,7 +25,6 @@
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
 use crate::report::PassRecorder;
-use bevy::camera::Viewport;
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
 use bevy::ecs::query::ROQueryItem;
@@ -351,7 +350,7 @@ fn dim_behind_transmission(
     ) else {
         return;
     };
-    let viewport = camera.viewport.as_ref().map(Viewport::clone);
+    let viewport = camera.viewport.clone();
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
 
