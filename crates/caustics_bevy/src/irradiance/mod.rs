@@ -216,6 +216,14 @@ pub fn compute_pipelines<const N: usize>(
     })
 }
 
+/// A single-sampled 2D texture of `size` from Bevy's texture cache, which hands a view
+/// the same texture frame after frame while its descriptor stays the same.
+pub fn cached_texture(cache: &mut TextureCache, device: &RenderDevice, label: &'static str, size: UVec2, format: TextureFormat, usage: TextureUsages) -> CachedTexture {
+    let size = Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 };
+    let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
+    cache.get(device, descriptor)
+}
+
 /// A technique's fullscreen pass that adds the irradiance it computes at each pixel's
 /// receiver point to the view's buffer: `layout`, the fragment entry point `project`
 /// of `shader` (with `MULTISAMPLED` defined for a multisampled prepass), additive
@@ -630,20 +638,9 @@ fn prepare_irradiance_buffers(
         let Some(size) = camera.physical_target_size.filter(|s| s.x > 0 && s.y > 0) else {
             continue;
         };
-        let texture = texture_cache.get(
-            &device,
-            TextureDescriptor {
-                label: Some("caustic_irradiance"),
-                size: Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: CAUSTIC_IRRADIANCE_FORMAT,
-                // COPY_SRC: tools read it back (`HeadlessRenderer::caustic_irradiance`).
-                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT | TextureUsages::COPY_SRC,
-                view_formats: &[],
-            },
-        );
+        // COPY_SRC: tools read it back (`HeadlessRenderer::caustic_irradiance`).
+        let usage = TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT | TextureUsages::COPY_SRC;
+        let texture = cached_texture(&mut texture_cache, &device, "caustic_irradiance", size, CAUSTIC_IRRADIANCE_FORMAT, usage);
         // Where Bevy's volumetric fog draws the media (`medium_fog.rs`), it dims the
         // caustics with the rest of the pixel.
         let medium_count = if bevy_fog { 0 } else { medium_count };

@@ -23,7 +23,7 @@
 //! between transmissive layers.
 
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, cached_texture};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
@@ -303,19 +303,8 @@ fn prepare_bind_groups(
             view.depth = None;
             continue;
         };
-        let depth = texture_cache.get(
-            &device,
-            TextureDescriptor {
-                label: Some("caustic_medium_surface_depth"),
-                size: Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: CORE_3D_DEPTH_FORMAT,
-                usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
-            },
-        );
+        let usage = TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING;
+        let depth = cached_texture(&mut texture_cache, &device, "caustic_medium_surface_depth", size, CORE_3D_DEPTH_FORMAT, usage);
         let layout = pipeline.layouts[view.multisampled as usize].get(&pipeline_cache);
         let Some(view_buffer) = view_uniforms.uniforms.buffer() else { return };
         let bound = [layout.into(), view_buffer.into(), view_depth.view().into(), (&depth.default_view).into(), media_buffer.into()];

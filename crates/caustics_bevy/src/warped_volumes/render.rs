@@ -7,7 +7,7 @@ use super::beam_grid::{self, BeamGridPipelines, MarchKey};
 use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
 use crate::cpu_time::timed;
 use crate::components::Caustics;
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork, cached_texture};
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use bevy::camera::primitives::{Aabb, Frustum};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
@@ -734,19 +734,8 @@ fn prepare_shaft_textures(
             commands.entity(entity).remove::<ViewShafts>();
             continue;
         };
-        let texture = texture_cache.get(
-            &device,
-            TextureDescriptor {
-                label: Some("caustic_shafts"),
-                size: Extent3d { width: size.x.div_ceil(scale), height: size.y.div_ceil(scale), depth_or_array_layers: 1 },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: TextureDimension::D2,
-                format: SHAFT_FORMAT,
-                usage: TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            },
-        );
+        let usage = TextureUsages::TEXTURE_BINDING | TextureUsages::RENDER_ATTACHMENT;
+        let texture = cached_texture(&mut texture_cache, &device, "caustic_shafts", size.map(|n| n.div_ceil(scale)), SHAFT_FORMAT, usage);
         // Kept while the texture cache hands the view the same texture.
         let bind_group = match shafts.filter(|s| s.texture.default_view.id() == texture.default_view.id()) {
             Some(shafts) => shafts.bind_group.clone(),
@@ -792,11 +781,8 @@ fn prepare_surface_targets(
             commands.entity(entity).remove::<ViewSurfaceTargets>();
             continue;
         };
-        let mut target = |label, format, usage| {
-            let size = irradiance.texture.texture.size();
-            let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
-            texture_cache.get(&device, descriptor)
-        };
+        let size = irradiance.texture.texture.size();
+        let mut target = |label, format, usage| cached_texture(&mut texture_cache, &device, label, UVec2::new(size.width, size.height), format, usage);
         let texture = target("caustic_receiver_depth", RECEIVER_DEPTH_FORMAT, TextureUsages::RENDER_ATTACHMENT);
         let centre = target("caustic_receiver_centre", RECEIVER_CENTRE_FORMAT, TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING);
         let multisampled = (msaa.samples() > 1) as usize;
