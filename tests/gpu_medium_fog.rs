@@ -3,8 +3,9 @@
 //! by exp(−σₐ ℓ), for a camera with `Caustics` and for one without; a directional
 //! light into a slab of scattering medium gives the single-scattering radiance of the
 //! analytic integral; caustic light on the board is dimmed once, with the rest of the
-//! pixel; seen through a transmissive sheet (water from above), in front of the
-//! medium or inside it, the board dims by the same exp(−σₐ ℓ). Without the medium's
+//! pixel, on a lightmapped board too; seen through a transmissive sheet (water from
+//! above), in front of the medium, inside it or lightmapped, the board dims by the same
+//! exp(−σₐ ℓ). Without the medium's
 //! `FogVolume` the board is not dimmed and the slab is black. Under a rippled pond in
 //! a wider medium, Bevy's fog scattering the sun beside the water and the plugin's
 //! shafts under it add up to the photon tracer's single scattering, caustic and
@@ -18,6 +19,7 @@ mod support;
 use bevy::camera::Exposure;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::{FogVolume, GlobalAmbientLight, VolumetricFog, VolumetricLight};
+use bevy::pbr::Lightmap;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
 use bevy_caustics::pixels::irradiance_image;
@@ -51,6 +53,23 @@ fn centre(image: &RenderedImage) -> Vec3 {
 /// `(1 − e^{−σD})/σ`, or `D` as σ → 0.
 fn integral(sigma: f32, d: f32) -> f32 {
     if sigma > 0.0 { (1.0 - (-sigma * d).exp()) / sigma } else { d }
+}
+
+/// A 4 m square facing +z with a second UV layer, and a black lightmap for it.
+fn lightmapped_rectangle(renderer: &mut HeadlessRenderer) -> (Handle<Mesh>, Lightmap) {
+    let black = Image::new_fill(
+        bevy::render::render_resource::Extent3d { width: 4, height: 4, depth_or_array_layers: 1 },
+        bevy::render::render_resource::TextureDimension::D2,
+        &[0, 0, 0, 255],
+        bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb,
+        bevy::asset::RenderAssetUsages::default(),
+    );
+    let image = renderer.world_mut().resource_mut::<Assets<Image>>().add(black);
+    let mut mesh = Rectangle::new(4.0, 4.0).mesh().build();
+    let uvs = mesh.attribute(Mesh::ATTRIBUTE_UV_0).expect("a rectangle's UVs").clone();
+    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_1, uvs);
+    let mesh = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(mesh);
+    (mesh, Lightmap { image, uv_rect: Rect::new(0.0, 0.0, 1.0, 1.0), bicubic_sampling: false })
 }
 
 #[test]
@@ -100,6 +119,14 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     let caustic = (centre(&render(&mut renderer, 2)) - unlit) / (10.0 / PI * exposure());
     eprintln!("caustic light through the medium: {caustic}");
     assert!((caustic / expected - Vec3::ONE).abs().max_element() < 0.02, "caustic light dims to {caustic}, not once by exp(−0.5) = {expected}");
+    // The same on a lightmapped receiver, which the composite binds as Bevy does.
+    let (mesh, lightmap) = lightmapped_rectangle(&mut renderer);
+    let plain = renderer.world_mut().get::<Mesh3d>(board).expect("the board's mesh").clone();
+    renderer.world_mut().entity_mut(board).insert((Mesh3d(mesh), lightmap));
+    let lightmapped = (centre(&render(&mut renderer, 2)) - unlit) / (10.0 / PI * exposure());
+    eprintln!("caustic light on a lightmapped receiver through the medium: {lightmapped}");
+    assert!((lightmapped / expected - Vec3::ONE).abs().max_element() < 0.02, "on a lightmapped receiver caustic light dims to {lightmapped}, not {expected}");
+    renderer.world_mut().entity_mut(board).insert(plain).remove::<Lightmap>();
     renderer.world_mut().entity_mut(camera).remove::<InjectedIrradiance>();
 
     // Seen through a transmissive surface (water from above): Bevy's fog ends at the
@@ -116,6 +143,13 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
         eprintln!("through a transmissive sheet at z = {z}: {dimmed}");
         assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "behind a transmissive sheet at z = {z} the board dims to {dimmed}, not {expected}");
     }
+    // A lightmapped sheet: Bevy binds its mesh with the lightmap's textures, which the
+    // depth pass's pipeline lays out too.
+    let (mesh, lightmap) = lightmapped_rectangle(&mut renderer);
+    renderer.world_mut().entity_mut(glass).insert((Mesh3d(mesh), lightmap));
+    let dimmed = centre(&render(&mut renderer, 3)) / clear;
+    eprintln!("through a lightmapped transmissive sheet: {dimmed}");
+    assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "behind a lightmapped sheet the board dims to {dimmed}, not {expected}");
     renderer.world_mut().despawn(glass);
 
     // Single scattering: a slab 1 m deep along the view and 1 m high, its top 0.1 m

@@ -256,7 +256,7 @@ impl SpecializedMeshPipeline for CausticCompositePipeline {
             layout: vec![
                 view_layout.main_layout,
                 self.view_layout.descriptor.clone(),
-                self.mesh_pipeline.mesh_layouts.model_only.clone(),
+                super::mesh_layout(&self.mesh_pipeline, key),
                 self.material_layout.descriptor.clone(),
             ],
             vertex: VertexState {
@@ -411,8 +411,9 @@ pub(super) fn queue(
             let Some(instance) = mesh_instances.render_mesh_queue_data(*main_entity) else { continue };
             let Some(mesh) = render_meshes.get(instance.mesh_asset_id()) else { continue };
             let Some(slabs) = mesh_allocator.mesh_slabs(&instance.mesh_asset_id()) else { continue };
-            let key = view_key
-                | MeshPipelineKey::from_primitive_topology_and_strip_index(mesh.primitive_topology(), mesh.index_format());
+            // A skinned or morphed receiver gets no caustics.
+            let Some(mesh_key) = super::mesh_key(&instance, mesh) else { continue };
+            let key = view_key | mesh_key;
             let Ok(pipeline_id) = pipelines.specialize(&pipeline_cache, &pipeline, key, &mesh.layout) else {
                 continue;
             };

@@ -33,7 +33,8 @@ use bevy::camera::{Hdr, Viewport};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::ecs::component::ComponentId;
 use bevy::ecs::system::SystemParam;
-use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, StandardMaterial};
+use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, MeshPipeline, MeshPipelineKey, RenderMeshQueueData, StandardMaterial};
+use bevy::render::mesh::RenderMesh;
 use std::marker::PhantomData;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
@@ -214,6 +215,25 @@ pub fn compute_pipelines<const N: usize>(
             ..default()
         })
     })
+}
+
+/// The key bits of a mesh instance that the plugin's passes draw with Bevy's mesh bind
+/// group ([`mesh_layout`]): its topology, and [`MeshPipelineKey::LIGHTMAPPED`] where it
+/// has a lightmap; `None` for a skinned or morphed mesh, whose bind group binds joints
+/// or morph targets that those passes' vertex stages do not read.
+pub fn mesh_key(instance: &RenderMeshQueueData, mesh: &RenderMesh) -> Option<MeshPipelineKey> {
+    if mesh.layout.0.contains(Mesh::ATTRIBUTE_JOINT_INDEX) || mesh.has_morph_targets() {
+        return None;
+    }
+    let lightmapped = if instance.lightmap_slab_index().is_some() { MeshPipelineKey::LIGHTMAPPED } else { MeshPipelineKey::NONE };
+    Some(MeshPipelineKey::from_primitive_topology_and_strip_index(mesh.primitive_topology(), mesh.index_format()) | lightmapped)
+}
+
+/// The layout of the mesh bind group that Bevy's `SetMeshBindGroup` binds for a mesh
+/// of `key` that is neither skinned nor morphed: the model alone, or with a lightmap.
+pub fn mesh_layout(mesh_pipeline: &MeshPipeline, key: MeshPipelineKey) -> BindGroupLayoutDescriptor {
+    let layouts = &mesh_pipeline.mesh_layouts;
+    if key.contains(MeshPipelineKey::LIGHTMAPPED) { layouts.lightmapped.clone() } else { layouts.model_only.clone() }
 }
 
 /// A single-sampled 2D texture of `size` from Bevy's texture cache, which hands a view

@@ -23,7 +23,7 @@
 //! between transmissive layers.
 
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, cached_texture};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, cached_texture, mesh_key, mesh_layout};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
@@ -95,7 +95,7 @@ impl SpecializedMeshPipeline for SurfaceDepthPipeline {
         let view_layout = self.mesh_pipeline.get_view_layout(MeshPipelineViewLayoutKey::from(key));
         Ok(RenderPipelineDescriptor {
             label: Some("medium_surface_depth_pipeline".into()),
-            layout: vec![view_layout.main_layout, view_layout.binding_array_layout, self.mesh_pipeline.mesh_layouts.model_only.clone()],
+            layout: vec![view_layout.main_layout, view_layout.binding_array_layout, mesh_layout(&self.mesh_pipeline, key)],
             vertex: VertexState {
                 shader: self.shader.clone(),
                 shader_defs,
@@ -236,7 +236,7 @@ fn queue(
     for entity in &others {
         commands.entity(entity).remove::<ViewMediumBehindTransmission>();
     }
-    for (entity, view, target, msaa, kept) in &mut views {
+    for (entity, view, target, msaa, mut kept) in &mut views {
         let phase = phases.get(&view.retained_view_entity).filter(|p| !p.items.is_empty());
         let (Some(phase), Some(&view_key), false) = (phase, view_key_cache.get(&view.retained_view_entity), media.0.is_empty()) else {
             if kept.is_some() {
@@ -244,15 +244,14 @@ fn queue(
             }
             continue;
         };
-        let mut surfaces = HashMap::default();
+        let mut surfaces = kept.as_mut().map(|kept| std::mem::take(&mut kept.surfaces)).unwrap_or_default();
+        surfaces.clear();
         for item in phase.items.values() {
             let main_entity = item.main_entity();
-            let Some(mesh) = mesh_instances.mesh_asset_id(main_entity).and_then(|id| render_meshes.get(id)) else { continue };
-            // Skinned and morphed meshes bind more than the model-only mesh layout.
-            if mesh.layout.0.contains(Mesh::ATTRIBUTE_JOINT_INDEX) || mesh.has_morph_targets() {
-                continue;
-            }
-            let key = view_key | MeshPipelineKey::from_primitive_topology_and_strip_index(mesh.primitive_topology(), mesh.index_format());
+            let Some(instance) = mesh_instances.render_mesh_queue_data(main_entity) else { continue };
+            let Some(mesh) = render_meshes.get(instance.mesh_asset_id()) else { continue };
+            let Some(mesh_key) = mesh_key(&instance, mesh) else { continue };
+            let key = view_key | mesh_key;
             if let Ok(pipeline) = surface_pipelines.specialize(&pipeline_cache, &surface_pipeline, key, &mesh.layout) {
                 surfaces.insert(main_entity, pipeline);
             }
