@@ -1,16 +1,15 @@
-//! A `ParticipatingMedium` drawn by Bevy's own volumetric fog (`medium_fog.rs`), held
+//! A `ParticipatingMedium` drawn by Bevy's own volumetric fog (`medium_fog/`), held
 //! to physics on lavapipe: a lit board seen through a metre of absorbing medium dims
 //! by exp(−σₐ ℓ), for a camera with `Caustics` and for one without; a directional
 //! light into a slab of scattering medium gives the single-scattering radiance of the
 //! analytic integral; caustic light on the board is dimmed once, with the rest of the
 //! pixel, on a lightmapped board too; seen through a transmissive sheet (water from
 //! above), in front of the medium, inside it or lightmapped, the board dims by the same
-//! exp(−σₐ ℓ). Without the medium's
-//! `FogVolume` the board is not dimmed and the slab is black. Under a rippled pond in
-//! a wider medium, Bevy's fog scattering the sun beside the water and the plugin's
-//! shafts under it add up to the photon tracer's single scattering, caustic and
-//! direct, and a camera without `Caustics` sees the direct part alone: the water's
-//! shadow keeps Bevy's sun out of the shafts.
+//! exp(−σₐ ℓ). Without the medium's `FogVolume` the board is not dimmed and the slab
+//! is black. Under a rippled pond in a wider medium, Bevy's fog scattering the sun
+//! beside the water and the plugin's shafts under it add up to the photon tracer's
+//! single scattering, caustic and direct, and a camera without `Caustics` sees the
+//! direct part alone: the water's shadow keeps Bevy's sun out of the shafts.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
