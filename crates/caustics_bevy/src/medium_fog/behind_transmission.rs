@@ -294,7 +294,7 @@ fn prepare_bind_groups(
     let (padded, count) = media.padded();
     uniform.0.set_label(Some("caustic_media"));
     write_changed(&mut uniform.0, GpuMedia { count, media: padded }, &device, &queue);
-    let (Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
+    let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
         return;
     };
     for (camera, view_depth, mut view) in &mut views {
@@ -305,7 +305,6 @@ fn prepare_bind_groups(
         let usage = TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING;
         let depth = cached_texture(&mut texture_cache, &device, "caustic_medium_surface_depth", size, CORE_3D_DEPTH_FORMAT, usage);
         let layout = pipeline.layouts[view.multisampled as usize].get(&pipeline_cache);
-        let Some(view_buffer) = view_uniforms.uniforms.buffer() else { return };
         let bound = [layout.into(), view_buffer.into(), view_depth.view().into(), (&depth.default_view).into(), media_buffer.into()];
         view.bind_group.get(&bound, || {
             device.create_bind_group(
