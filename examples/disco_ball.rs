@@ -112,7 +112,7 @@ fn spawn_room(world: &mut World, facets: usize) {
     ));
     // A thin haze fills the room: the facets' beams show in it.
     world.spawn((
-        ParticipatingMedium { scattering: 0.08, absorption: 0.01, asymmetry: 0.3 },
+        ParticipatingMedium { scattering: 0.08, absorption: Vec3::splat(0.01), asymmetry: 0.3 },
         Transform::from_xyz(0.0, h, 0.0).with_scale(Vec3::splat(ROOM)),
     ));
     world.spawn((

@@ -70,7 +70,7 @@ fn spawn_sea(world: &mut World, resolution: u32, wind_speed: f32) {
     ));
     // The water body scatters the focused light into shafts.
     world.spawn((
-        ParticipatingMedium { scattering: 0.06, absorption: 0.04, asymmetry: 0.6 },
+        ParticipatingMedium { scattering: 0.06, absorption: ParticipatingMedium::WATER_ABSORPTION, asymmetry: 0.6 },
         Transform::from_xyz(0.0, DEPTH / 2.0, 0.0).with_scale(Vec3::new(PATCH, DEPTH, PATCH)),
     ));
     world.spawn((

@@ -128,7 +128,7 @@ impl Churn {
                 world.spawn((Mesh3d(mesh), MeshMaterial3d(self.receiver_material.clone()), CausticReceiver)).id()
             }
             3 => {
-                let medium = ParticipatingMedium { scattering: 0.3 * self.uniform(), absorption: 0.1 * self.uniform(), asymmetry: 0.9 * self.uniform() };
+                let medium = ParticipatingMedium { scattering: 0.3 * self.uniform(), absorption: Vec3::splat(0.1) * self.uniform(), asymmetry: 0.9 * self.uniform() };
                 world.spawn((medium, Transform::from_scale(Vec3::splat(6.0)))).id()
             }
             4 => self.spawn_light(world, position),

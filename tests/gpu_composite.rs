@@ -149,9 +149,9 @@ fn composite_pass_report_validation_and_tagging_on_a_real_adapter() {
         reported.0.push(insert.entity);
     });
     let bad_generator = world.spawn(CausticGenerator::refractive(0.5)).id();
-    let bad_medium = world.spawn(ParticipatingMedium { scattering: -1.0, absorption: f32::NAN, asymmetry: 0.0 }).id();
-    let nan_medium = world.spawn(ParticipatingMedium { scattering: 0.1, absorption: f32::NAN, asymmetry: 0.0 }).id();
-    let water = ParticipatingMedium { scattering: 0.05, absorption: 0.1, asymmetry: 0.9 };
+    let bad_medium = world.spawn(ParticipatingMedium { scattering: -1.0, absorption: Vec3::new(0.1, f32::NAN, 0.1), asymmetry: 0.0 }).id();
+    let nan_medium = world.spawn(ParticipatingMedium { scattering: 0.1, absorption: Vec3::new(0.1, f32::NAN, 0.1), asymmetry: 0.0 }).id();
+    let water = ParticipatingMedium { scattering: 0.05, absorption: Vec3::splat(0.1), asymmetry: 0.9 };
     let bad_water = world.spawn((CausticGenerator::refractive(0.9), water)).id();
     let good = world.spawn((CausticGenerator::refractive(1.5), water)).id();
     renderer.render(2).unwrap_or_else(|e| panic!("{e}"));

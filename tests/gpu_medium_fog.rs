@@ -91,18 +91,21 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     let clear = centre(&render(&mut renderer, 3));
     assert!(clear.x > 0.1, "the board is not seen: {clear}");
 
-    // A metre of medium that only absorbs, σₐ = 0.5, between the camera and the board.
-    let medium = ParticipatingMedium { scattering: 0.0, absorption: 0.5, asymmetry: 0.0 };
+    // A metre of medium that only absorbs, σₐ = 0.5 in green, more in red and less in
+    // blue, between the camera and the board. Bevy's fog dims by the blue channel's
+    // σₐ, the plugin's tint by the rest.
+    let absorption = Vec3::new(0.8, 0.5, 0.3);
+    let medium = ParticipatingMedium { scattering: 0.0, absorption, asymmetry: 0.0 };
     let box_ = renderer.world_mut().spawn((medium, Transform::from_xyz(0.0, 0.0, -1.5).with_scale(Vec3::new(4.0, 4.0, 1.0)))).id();
     let dimmed = centre(&render(&mut renderer, 3)) / clear;
-    let expected = (-0.5f32).exp();
-    eprintln!("behind 1 m of σa = 0.5: {dimmed} of the light, exp(−0.5) = {expected:.4}");
-    assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "the board dims to {dimmed}, not exp(−0.5) = {expected}");
+    let expected = (-absorption).exp();
+    eprintln!("behind 1 m of σa = {absorption}: {dimmed} of the light, exp(−σa) = {expected}");
+    assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "the board dims to {dimmed}, not exp(−σa) = {expected}");
     let world = renderer.world_mut();
     assert!(world.get::<FogVolume>(box_).is_some(), "the medium brought no FogVolume");
     assert!(world.get::<VolumetricFog>(camera).is_some() && world.get::<VolumetricLight>(sun).is_some(), "the camera or the sun was not given Bevy's fog");
 
-    // A camera without `Caustics` sees the medium as Bevy draws it.
+    // A camera without `Caustics` sees the medium the same.
     renderer.world_mut().entity_mut(camera).remove::<Caustics>();
     let dimmed = centre(&render(&mut renderer, 2)) / clear;
     eprintln!("without Caustics: {dimmed}");
@@ -117,7 +120,7 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     renderer.world_mut().entity_mut(camera).insert(InjectedIrradiance(injected));
     let caustic = (centre(&render(&mut renderer, 2)) - unlit) / (10.0 / PI * exposure());
     eprintln!("caustic light through the medium: {caustic}");
-    assert!((caustic / expected - Vec3::ONE).abs().max_element() < 0.02, "caustic light dims to {caustic}, not once by exp(−0.5) = {expected}");
+    assert!((caustic / expected - Vec3::ONE).abs().max_element() < 0.02, "caustic light dims to {caustic}, not once by exp(−σa) = {expected}");
     // The same on a lightmapped receiver, which the composite binds as Bevy does.
     let (mesh, lightmap) = lightmapped_rectangle(&mut renderer);
     let plain = renderer.world_mut().get::<Mesh3d>(board).expect("the board's mesh").clone();
@@ -131,7 +134,7 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     // Seen through a transmissive surface (water from above): Bevy's fog ends at the
     // surface and Bevy's transmission shows the opaque image from before the fog; the
     // plugin dims it by the medium behind the surface. In front of the medium and
-    // inside it, the board dims by exp(−0.5) once.
+    // inside it, the board dims by exp(−σa) once.
     let sheet = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Rectangle::new(4.0, 4.0));
     let clear_glass = StandardMaterial { specular_transmission: 1.0, thickness: 0.0, ior: 1.0, reflectance: 0.0, perceptual_roughness: 0.0, ..default() };
     let clear_glass = renderer.world_mut().resource_mut::<Assets<StandardMaterial>>().add(clear_glass);
@@ -156,7 +159,7 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     // eye is ∫ σₛ p(θ) E e^{−σₜ s} e^{−σₜ ℓ(s)} ds, with ℓ(s) the light's path inside.
     renderer.world_mut().despawn(board);
     let (sigma_s, sigma_a, g) = (0.2, 0.02, 0.4);
-    let medium = ParticipatingMedium { scattering: sigma_s, absorption: sigma_a, asymmetry: g };
+    let medium = ParticipatingMedium { scattering: sigma_s, absorption: Vec3::splat(sigma_a), asymmetry: g };
     let (top, near, depth) = (0.1f32, 1.0f32, 1.0f32);
     renderer.world_mut().entity_mut(box_).insert((medium, Transform::from_xyz(0.0, top - 0.5, -near - depth / 2.0).with_scale(Vec3::new(4.0, 1.0, depth))));
     let seen = centre(&render(&mut renderer, 3));
@@ -178,6 +181,23 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     let expected = radiance * exposure();
     eprintln!("scattered sunlight: {seen} against {expected:.5} (σₜ-only path {:.5})", sigma_s * phase * SUN * integral(sigma_t, depth) * exposure());
     assert!(((seen / expected) - Vec3::ONE).abs().max_element() < 0.05, "single scattering: {seen} against the analytic {expected}");
+    assert_eq!(renderer.pass_report().views("medium_tint"), 0, "a grey medium was tinted");
+
+    // The haze of deep coloured water: the same slab 40 m long, σₐ different per
+    // channel. The light the eye ray gathers is σₛ p E (1 − e^{−σₜ,c D})/σₜ,c per
+    // channel: its colour against physics. Its magnitude comes out 15 % low in every
+    // channel alike: Bevy marches 64 steps over the 40 m, each dimmed to its far end.
+    let absorption = Vec3::new(0.3, 0.1, 0.02);
+    let deep = 40.0f32;
+    let medium = ParticipatingMedium { scattering: sigma_s, absorption, asymmetry: g };
+    renderer.world_mut().entity_mut(box_).insert((medium, Transform::from_xyz(0.0, top - 0.5, -near - deep / 2.0).with_scale(Vec3::new(4.0, 1.0, deep))));
+    let seen = centre(&render(&mut renderer, 3));
+    let sigma_t = sigma_s + absorption;
+    let expected = Vec3::new(integral(sigma_t.x, deep), integral(sigma_t.y, deep), integral(sigma_t.z, deep)) * (sigma_s * phase * SUN * exposure());
+    let (colour, expected_colour) = (seen / seen.z, expected / expected.z);
+    eprintln!("haze of deep coloured water: {seen} against {expected}, colour {colour} against {expected_colour}");
+    assert!((colour / expected_colour - Vec3::ONE).abs().max_element() < 0.02, "the haze's colour {colour} is not the analytic {expected_colour}");
+    assert!(renderer.pass_report().views("medium_tint") > 0, "the coloured medium was not tinted");
 
     renderer.world_mut().despawn(box_);
     renderer.world_mut().despawn(sun);
@@ -207,7 +227,7 @@ fn shafts_and_bevy_fog_add_up_to_the_tracers_single_scattering(renderer: &mut He
         // A black floor far below, out of view: the volumes end on a receiver.
         receivers: vec![Receiver { mesh: TriMesh::quad(glam::Vec3::Y * -5.0, glam::Vec3::Z * 2.0, glam::Vec3::X * 2.0), albedo: glam::Vec3::ZERO }],
     };
-    let coefficients = MediumCoefficients { scattering: 0.04, absorption: 0.01, asymmetry: 0.5 };
+    let coefficients = MediumCoefficients { scattering: 0.04, absorption: Vec3::splat(0.01), asymmetry: 0.5 };
     let (size, centre) = (glam::Vec3::new(3.0, 1.0, 2.0), glam::Vec3::Y * 0.5);
     let medium = MediumBox { world_from_local: Affine3A::from_scale_rotation_translation(size, glam::Quat::IDENTITY, centre), coefficients };
     let view = PinholeCamera {
@@ -252,7 +272,8 @@ fn shafts_and_bevy_fog_add_up_to_the_tracers_single_scattering(renderer: &mut He
         beams
     };
     let (beams_a, beams_b) = (beams(1), beams(2));
-    let sigma_t = coefficients.extinction();
+    // Grey: one σₜ for every channel.
+    let sigma_t = coefficients.extinction().x;
     let direct = |o: glam::Vec3, d: glam::Vec3| -> f32 {
         let Some((enter, exit)) = medium.clip(o, d, 20.0) else { return 0.0 };
         let phase = henyey_greenstein(sun.dot(-d), coefficients.asymmetry);

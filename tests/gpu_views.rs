@@ -224,8 +224,8 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     // An absorbing medium 1 m thick between the camera and the plate (no scattering,
     // so no shafts): the caustic seen through it is exp(−σₐ · 1 m) of itself. Bevy's
     // own light does not know the medium.
-    let absorption = 0.5;
-    let medium = ParticipatingMedium { scattering: 0.0, absorption, asymmetry: 0.0 };
+    let absorption = 0.5f32;
+    let medium = ParticipatingMedium { scattering: 0.0, absorption: Vec3::splat(absorption), asymmetry: 0.0 };
     let slab = renderer.world_mut().spawn((medium, Transform::from_xyz(0.0, 2.5, 0.0).with_scale(Vec3::new(10.0, 1.0, 10.0)))).id();
     let through = difference(&view_pixels(&render(&mut renderer, 2), 0), &direct);
     let expected: Vec<f32> = caustic.iter().map(|c| c * (-absorption).exp()).collect();

@@ -147,8 +147,9 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     }
 
     // A medium in view: the volumetric pass runs, and adds the CPU twin's
-    // in-scattered radiance (§3.5) along each pixel's ray down to the floor. The floor
-    // turns black, so that the half-float image holds the in-scattering alone.
+    // in-scattered radiance (§3.5) along each pixel's ray down to the floor, each
+    // channel dimmed by its own σₜ. The floor turns black, so that the half-float image
+    // holds the in-scattering alone.
     let mut materials = renderer.world_mut().resource_mut::<Assets<StandardMaterial>>();
     for (_, material) in materials.iter_mut() {
         material.base_color = Color::BLACK;
@@ -156,7 +157,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     }
     let clear = render(&mut renderer, 3);
     assert!(clear.pixels.iter().all(|p| p.x.abs() < 1e-4), "the black floor is not black");
-    let medium = ParticipatingMedium { scattering: 0.3, absorption: 0.05, asymmetry: 0.5 };
+    let medium = ParticipatingMedium { scattering: 0.3, absorption: Vec3::new(0.05, 0.3, 0.9), asymmetry: 0.5 };
     let medium_transform = Transform::from_xyz(0.0, 0.4, 0.0).with_scale(Vec3::new(4.0, 0.8, 4.0));
     renderer.world_mut().spawn((medium, medium_transform));
     // Every pixel integrated, to hold the pass to the twin pixel by pixel (the
@@ -175,13 +176,14 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         coefficients: medium.coefficients(),
     };
     let cpu: Vec<f32> = (0..SIZE * SIZE)
-        .map(|i| {
+        .flat_map(|i| {
             let floor = to_core(world_at(i % SIZE, i / SIZE));
             let eye = floor + caustics_core::glam::Vec3::Y * 5.0;
-            in_scattered_radiance(&set.volumes, eye, floor, &medium_box, &settings.core()).x
+            in_scattered_radiance(&set.volumes, eye, floor, &medium_box, &settings.core()).to_array()
         })
         .collect();
-    let gpu: Vec<f32> = foggy.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let added = |image: &RenderedImage| -> Vec<f32> { image.pixels.iter().zip(&clear.pixels).flat_map(|(a, b)| ((*a - *b).truncate() / exposure()).to_array()).collect() };
+    let gpu = added(&foggy);
     let scattered = cpu.iter().sum::<f32>() / cpu.len() as f32;
     let error = relative_l2(&gpu, &cpu);
     eprintln!("GPU vs CPU twin, in-scattering: relative L2 {error:.2e} (mean radiance {scattered:.3})");
@@ -198,12 +200,12 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let mut grid = BeamGrid::new(medium_box, marched.shaft_grid);
     grid.deposit_all(&set.volumes, &settings.core());
     let grid_twin: Vec<f32> = (0..SIZE * SIZE)
-        .map(|i| {
+        .flat_map(|i| {
             let floor = to_core(world_at(i % SIZE, i / SIZE));
-            grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).x
+            grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
         })
         .collect();
-    let gpu_grid: Vec<f32> = grid_image.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let gpu_grid = added(&grid_image);
     let (against_twin, against_exact) = (relative_l2(&gpu_grid, &grid_twin), relative_l2(&gpu_grid, &cpu));
     eprintln!("shafts marched through the grid: relative L2 {against_twin:.2e} from its twin, {against_exact:.2e} from the exact integral's");
     assert!(against_twin < 0.01, "GPU and CPU beam grids differ: relative L2 {against_twin}");
@@ -242,7 +244,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().entity_mut(camera).insert(Caustics { intensity: 0.5, ..default() });
     let dimmed = render(&mut renderer, 3);
     let half: Vec<f32> = cpu.iter().map(|e| 0.5 * e).collect();
-    let gpu: Vec<f32> = dimmed.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let gpu = added(&dimmed);
     let error = relative_l2(&gpu, &half);
     eprintln!("GPU vs half the CPU twin, in-scattering at intensity ½: relative L2 {error:.2e}");
     assert!(error < 0.01, "shafts at intensity ½: relative L2 {error}");
@@ -252,7 +254,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let full = gpu_grid;
     renderer.world_mut().insert_resource(WarpedVolumesSettings::default());
     let sampled = render(&mut renderer, 3);
-    let gpu: Vec<f32> = sampled.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a.x - b.x) / exposure()).collect();
+    let gpu = added(&sampled);
     let (against_full, against_twin) = (relative_l2(&gpu, &full), relative_l2(&gpu, &cpu));
     eprintln!("shafts at one pixel in sixteen: relative L2 {against_full:.2e} from every pixel's, {against_twin:.2e} from the twin's");
     assert!(against_full > 0.0 && against_full < 0.03 && against_twin < 0.03, "shafts at one pixel in sixteen: {against_full}, {against_twin}");

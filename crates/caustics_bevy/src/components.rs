@@ -130,7 +130,8 @@ pub struct CausticReceiver;
 
 /// A homogeneous participating medium in which caustic light scatters into visible
 /// shafts (Ernst et al. 2005 §3.5), with physical coefficients: σₛ and σₐ per metre
-/// and a Henyey–Greenstein phase. It brings a Bevy `FogVolume` of the same box and
+/// (σₐ per linear RGB channel, which colours what is seen through it) and a
+/// Henyey–Greenstein phase. It brings a Bevy `FogVolume` of the same box and
 /// coefficients ([`crate::medium_fog`]), so that Bevy's volumetric fog dims what is
 /// seen through it and scatters the direct light of shadow-mapped suns, while the
 /// plugin scatters the light the generators focus.
@@ -143,13 +144,19 @@ pub struct CausticReceiver;
 pub struct ParticipatingMedium {
     /// Scattering coefficient σₛ (1/m).
     pub scattering: f32,
-    /// Absorption coefficient σₐ (1/m).
-    pub absorption: f32,
+    /// Absorption coefficient σₐ per linear RGB channel (1/m): `Vec3::splat` for a grey
+    /// medium; [`Self::WATER_ABSORPTION`] for clear water.
+    pub absorption: Vec3,
     /// Henyey–Greenstein asymmetry g ∈ (−1, 1): > 0 scatters forwards.
     pub asymmetry: f32,
 }
 
 impl ParticipatingMedium {
+    /// Roughly pure water's absorption at the red, green and blue primaries (about 620,
+    /// 540 and 465 nm; Pope and Fry 1997), per metre: red is gone after a few metres,
+    /// blue carries on, which is why deep clear water is blue-green.
+    pub const WATER_ABSORPTION: Vec3 = Vec3::new(0.28, 0.045, 0.01);
+
     /// The coefficients as the core algorithms see them.
     pub fn coefficients(&self) -> MediumCoefficients {
         MediumCoefficients { scattering: self.scattering, absorption: self.absorption, asymmetry: self.asymmetry }

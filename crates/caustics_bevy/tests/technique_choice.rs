@@ -55,7 +55,7 @@ fn auto_picks_by_what_the_generator_is() {
     let mirror = spawn(&mut app, Cuboid::default().into(), CausticGenerator::mirror(), Vec3::new(5.0, 0.0, 0.0));
     let hazy_mirror = spawn(&mut app, Cuboid::default().into(), CausticGenerator::mirror(), Vec3::new(-5.0, 0.0, 0.0));
     app.world_mut().spawn((
-        ParticipatingMedium { scattering: 0.1, absorption: 0.0, asymmetry: 0.0 },
+        ParticipatingMedium { scattering: 0.1, absorption: Vec3::splat(0.0), asymmetry: 0.0 },
         Transform::from_xyz(-5.0, 0.0, 0.0).with_scale(Vec3::splat(4.0)),
         // No visibility plugin here to inherit it.
         InheritedVisibility::VISIBLE,

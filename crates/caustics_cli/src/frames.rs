@@ -469,7 +469,7 @@ fn ocean(world: &mut World, target: RenderTarget, resolution: u32) -> u64 {
         Transform::from_xyz(0.0, 3.0, 0.0),
     ));
     world.spawn((
-        ParticipatingMedium { scattering: 0.06, absorption: 0.04, asymmetry: 0.6 },
+        ParticipatingMedium { scattering: 0.06, absorption: Vec3::splat(0.04), asymmetry: 0.6 },
         Transform::from_xyz(0.0, 1.5, 0.0).with_scale(Vec3::new(12.0, 3.0, 12.0)),
     ));
     u64::from(resolution + 1).pow(2)
@@ -600,7 +600,7 @@ fn rippled_pool(world: &mut World, target: RenderTarget, resolution: u32) -> u64
         Raining,
     ));
     world.spawn((
-        ParticipatingMedium { scattering: 0.25, absorption: 0.1, asymmetry: 0.6 },
+        ParticipatingMedium { scattering: 0.25, absorption: Vec3::splat(0.1), asymmetry: 0.6 },
         Transform::from_xyz(0.0, 0.5, 0.0).with_scale(Vec3::new(4.0, 1.0, 4.0)),
     ));
     u64::from(resolution + 1).pow(2)

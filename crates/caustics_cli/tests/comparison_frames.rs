@@ -84,7 +84,7 @@ fn spawn_game_scene(renderer: &mut HeadlessRenderer) -> Entity {
     ));
     // Its water scatters the focused light into shafts.
     world.spawn((
-        ParticipatingMedium { scattering: 0.3, absorption: 0.05, asymmetry: 0.5 },
+        ParticipatingMedium { scattering: 0.3, absorption: Vec3::splat(0.05), asymmetry: 0.5 },
         Transform::from_xyz(-1.0, 0.25, 0.0).with_scale(Vec3::new(1.6, 0.5, 1.6)),
     ));
     world.spawn((Mesh3d(ball), CausticGenerator::refractive(1.5), Transform::from_xyz(0.6, 0.6, 0.1)));

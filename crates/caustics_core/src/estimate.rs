@@ -371,7 +371,7 @@ impl PhotonBeams {
                 continue;
             }
             let phase = henyey_greenstein(w.dot(-d), c.asymmetry);
-            sum += beam.flux * (phase * (-sigma_t * (t - enter + s)).exp() / sin2.sqrt());
+            sum += beam.flux * (-sigma_t * (t - enter + s)).exp() * (phase / sin2.sqrt());
         }
         sum * (c.scattering / (2.0 * radius))
     }

@@ -2,6 +2,7 @@
 //! before a value reaches an algorithm. Invalid input is an error, never a panic.
 
 use crate::optics::CauchyDispersion;
+use glam::Vec3;
 use thiserror::Error;
 
 /// A parameter that no algorithm can use, with the reason in words.
@@ -139,28 +140,47 @@ impl SpecularInteraction {
     }
 }
 
-/// A homogeneous participating medium (Ernst et al. 2005 §3.5).
+/// A homogeneous participating medium (Ernst et al. 2005 §3.5). Absorption is per
+/// linear RGB channel: water absorbs red metres sooner than blue, which is its colour.
+/// A scene file may give it as one number for all three channels.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MediumCoefficients {
     /// Scattering coefficient σₛ (1/m).
     pub scattering: f32,
-    /// Absorption coefficient σₐ (1/m).
-    pub absorption: f32,
+    /// Absorption coefficient σₐ per linear RGB channel (1/m).
+    #[serde(deserialize_with = "per_channel")]
+    pub absorption: Vec3,
     /// Henyey–Greenstein asymmetry g.
     pub asymmetry: f32,
 }
 
 impl MediumCoefficients {
-    /// Extinction `σₜ = σₛ + σₐ`.
-    pub fn extinction(&self) -> f32 {
-        self.scattering + self.absorption
+    /// Extinction `σₜ = σₛ + σₐ` per channel.
+    pub fn extinction(&self) -> Vec3 {
+        self.absorption + self.scattering
     }
 
-    /// Validates all three coefficients.
+    /// Validates all three coefficients, each channel of σₐ.
     pub fn validate(&self) -> Result<(), ParamError> {
         check_coefficient("scattering", self.scattering)?;
-        check_coefficient("absorption", self.absorption)?;
+        for (name, value) in ["absorption (red)", "absorption (green)", "absorption (blue)"].into_iter().zip(self.absorption.to_array()) {
+            check_coefficient(name, value)?;
+        }
         check_asymmetry(self.asymmetry)?;
         Ok(())
     }
+}
+
+/// A per-channel value from a scene file: `[r, g, b]`, or one number for all three.
+fn per_channel<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Vec3, D::Error> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum PerChannel {
+        Grey(f32),
+        Rgb(Vec3),
+    }
+    Ok(match serde::Deserialize::deserialize(deserializer)? {
+        PerChannel::Grey(value) => Vec3::splat(value),
+        PerChannel::Rgb(value) => value,
+    })
 }

@@ -298,7 +298,7 @@ mod tests {
         };
         let medium = MediumView {
             transform: glam::Affine3A::from_scale(Vec3::new(4.0, 1.0, 4.0)),
-            coefficients: MediumCoefficients { scattering: 0.25, absorption: 0.05, asymmetry: 0.6 },
+            coefficients: MediumCoefficients { scattering: 0.25, absorption: Vec3::splat(0.05), asymmetry: 0.6 },
         };
         SceneView { scene, shown: 1, camera, pools: vec![pool], media: vec![medium] }
     }

@@ -13,11 +13,24 @@ fn impossible_parameters_are_refused_with_a_reason() {
     assert_eq!(check_ior(1.0), Ok(1.0));
     let bad = SpecularInteraction::Refract { ior: 1.5, dispersion: Some(CauchyDispersion { a: 0.9, b: 0.001 }) };
     assert!(bad.validate().is_err());
-    let medium = MediumCoefficients { scattering: -0.1, absorption: 0.0, asymmetry: 0.0 };
+    let medium = MediumCoefficients { scattering: -0.1, absorption: Vec3::splat(0.0), asymmetry: 0.0 };
     let err = medium.validate().unwrap_err();
     assert!(err.to_string().contains("scattering"), "{err}");
-    assert!(MediumCoefficients { scattering: 0.1, absorption: f32::NAN, asymmetry: 0.0 }.validate().is_err());
-    assert!(MediumCoefficients { scattering: 0.1, absorption: 0.1, asymmetry: 1.0 }.validate().is_err());
+    let err = MediumCoefficients { scattering: 0.1, absorption: Vec3::new(0.1, f32::NAN, 0.1), asymmetry: 0.0 }.validate().unwrap_err();
+    assert!(err.to_string().contains("absorption (green)"), "{err}");
+    assert!(MediumCoefficients { scattering: 0.1, absorption: Vec3::splat(0.1), asymmetry: 1.0 }.validate().is_err());
+}
+
+#[test]
+fn a_scene_file_gives_absorption_per_channel_or_as_one_number() {
+    let parse = |json: &str| serde_json::from_str::<MediumCoefficients>(json);
+    let rgb = parse(r#"{"scattering": 0.2, "absorption": [0.3, 0.05, 0.01], "asymmetry": 0.5}"#).unwrap();
+    assert_eq!(rgb.absorption, Vec3::new(0.3, 0.05, 0.01));
+    assert!(rgb.extinction().abs_diff_eq(Vec3::new(0.5, 0.25, 0.21), 1e-6), "{}", rgb.extinction());
+    let grey = parse(r#"{"scattering": 0.2, "absorption": 0.05, "asymmetry": 0.5}"#).unwrap();
+    assert_eq!(grey.absorption, Vec3::splat(0.05));
+    assert_eq!(parse(&serde_json::to_string(&rgb).unwrap()).unwrap(), rgb);
+    assert!(parse(r#"{"scattering": 0.2, "absorption": [0.3, 0.05], "asymmetry": 0.5}"#).is_err());
 }
 
 #[test]

@@ -99,6 +99,6 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The eye ray from the near plane (any projection) to the receiver.
     let eye = world_at(view, in.clip_position.xy, 1.0);
     let seen = transmittance(caustics.media, caustics.medium_count, eye, in.world_position);
-    let radiance = albedo / PI * exposed_irradiance * (caustics.intensity * seen);
+    let radiance = albedo / PI * exposed_irradiance * seen * caustics.intensity;
     return vec4(through_fog(radiance, in.world_position), 0.0);
 }

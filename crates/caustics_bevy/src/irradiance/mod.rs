@@ -109,11 +109,19 @@ pub struct ViewCausticWork(pub Caustics);
 pub const MAX_MEDIA: usize = 4;
 
 /// A [`ParticipatingMedium`] as the shaders read it (`Medium` in `receiver.wgsl`): the
-/// unit cube `[-½, ½]³` of its entity's transform, and (σₛ, σₐ, g).
+/// unit cube `[-½, ½]³` of its entity's transform, σₜ per channel, and (σₛ, g).
 #[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub struct GpuMedium {
     pub(crate) local_from_world: Mat4,
+    pub(crate) extinction: Vec4,
     pub(crate) coefficients: Vec4,
+}
+
+impl GpuMedium {
+    /// Whether it dims every channel alike.
+    pub fn is_grey(&self) -> bool {
+        self.extinction.x == self.extinction.y && self.extinction.y == self.extinction.z
+    }
 }
 
 /// Render world: the visible valid media of this frame, at most [`MAX_MEDIA`].
@@ -589,7 +597,8 @@ fn extract_media(mut extracted: ResMut<ExtractedMedia>, media: Extract<MediumQue
         .take(MAX_MEDIA)
         .map(|(m, t, _)| GpuMedium {
             local_from_world: t.to_matrix().inverse(),
-            coefficients: Vec4::new(m.scattering, m.absorption, m.asymmetry, 0.0),
+            extinction: m.coefficients().extinction().extend(0.0),
+            coefficients: Vec4::new(m.scattering, m.asymmetry, 0.0, 0.0),
         })
         .collect();
 }

@@ -60,9 +60,10 @@ fn centre_depth(view: View, depth: texture_depth_2d, pixel: vec2<i32>, n: vec3<f
 #endif
 
 // A `ParticipatingMedium` (`caustics_bevy::irradiance::GpuMedium`): the unit cube
-// [-½, ½]³ of `local_from_world`, and (σs, σa, g).
+// [-½, ½]³ of `local_from_world`, σt per linear RGB channel, and (σs, g).
 struct Medium {
     local_from_world: mat4x4<f32>,
+    extinction: vec4<f32>,
     coefficients: vec4<f32>,
 }
 
@@ -85,17 +86,27 @@ fn clip_medium(m: Medium, o: vec3<f32>, d: vec3<f32>, len: f32) -> vec2<f32> {
     return t;
 }
 
-// exp(−σt · ℓ) along the segment from `start` to `end`, ℓ the length inside each medium.
-fn transmittance(media: array<Medium, 4>, count: u32, start: vec3<f32>, end: vec3<f32>) -> f32 {
+// exp(−σt · ℓ) per channel along the segment from `start` to `end`, ℓ the length inside
+// each medium.
+fn transmittance(media: array<Medium, 4>, count: u32, start: vec3<f32>, end: vec3<f32>) -> vec3<f32> {
+    return exp(-optical_depth(media, count, start, end, false));
+}
+
+// Σ σt ℓ per channel over the media along the segment from `start` to `end`; with
+// `tint`, only each medium's σt beyond its least channel (the part of σa that Bevy's
+// grey fog leaves to `medium_fog::tint`).
+fn optical_depth(media: array<Medium, 4>, count: u32, start: vec3<f32>, end: vec3<f32>, tint: bool) -> vec3<f32> {
     let len = distance(start, end);
-    if len <= 0.0 {
-        return 1.0;
+    if !(len > 0.0) {
+        return vec3(0.0);
     }
     let d = (end - start) / len;
-    var optical_depth = 0.0;
+    var sum = vec3(0.0);
     for (var i = 0u; i < min(count, 4u); i++) {
         let t = clip_medium(media[i], start, d, len);
-        optical_depth += (media[i].coefficients.x + media[i].coefficients.y) * max(t.y - t.x, 0.0);
+        let sigma_t = media[i].extinction.xyz;
+        let grey = select(0.0, min(sigma_t.x, min(sigma_t.y, sigma_t.z)), tint);
+        sum += (sigma_t - grey) * max(t.y - t.x, 0.0);
     }
-    return exp(-optical_depth);
+    return sum;
 }

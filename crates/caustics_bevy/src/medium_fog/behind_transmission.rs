@@ -22,11 +22,12 @@
 //! the refracted one), and with `ScreenSpaceTransmission::steps` > 1 the stretches
 //! between transmissive layers.
 
-use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, cached_texture, mesh_key, mesh_layout};
+use super::dim::{self, Dim, DimKey, DimPipeline, MediaUniform};
+use crate::irradiance::kept_bind_group::KeptBindGroup;
+use crate::irradiance::{ExtractedMedia, cached_texture, mesh_key, mesh_layout};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
-use bevy::core_pipeline::{Core3dSystems, FullscreenShader, schedule::Core3d};
+use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
 use bevy::ecs::query::ROQueryItem;
 use bevy::ecs::system::{SystemParamItem, lifetimeless::{Read, SRes}};
 use bevy::light::VolumetricFog;
@@ -42,24 +43,21 @@ use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::mesh::RenderMesh;
 use bevy::render::render_asset::RenderAssets;
 use bevy::render::render_phase::{AddRenderCommand, DrawFunctions, PhaseItem, RenderCommand, RenderCommandResult, TrackedRenderPass, ViewSortedRenderPhases};
-use bevy::render::render_resource::{binding_types::*, *};
-use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue, ViewQuery};
+use bevy::render::render_resource::*;
+use bevy::render::renderer::{RenderContext, RenderDevice, ViewQuery};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::texture::{CachedTexture, TextureCache};
-use bevy::render::view::{ExtractedView, ViewDepthTexture, ViewTarget, ViewUniform, ViewUniformOffset, ViewUniforms};
+use bevy::render::view::{ExtractedView, ViewDepthTexture, ViewTarget, ViewUniformOffset, ViewUniforms};
 use bevy::render::{Render, RenderApp, RenderStartup, RenderSystems};
 
 pub(super) fn build(app: &mut App) {
-    bevy::asset::embedded_asset!(app, "behind_transmission.wgsl");
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
     render_app
         .init_resource::<SpecializedMeshPipelines<SurfaceDepthPipeline>>()
-        .init_resource::<SpecializedRenderPipelines<BehindTransmissionPipeline>>()
-        .init_resource::<MediaUniform>()
         .add_render_command::<Transmissive3d, DrawSurfaceDepth>()
-        .add_systems(RenderStartup, init_pipelines.after(bevy::pbr::MeshPipelineSystems))
+        .add_systems(RenderStartup, init_pipeline.after(bevy::pbr::MeshPipelineSystems).after(dim::init_pipeline))
         .add_systems(
             Render,
             (
@@ -77,7 +75,7 @@ pub(super) fn build(app: &mut App) {
 }
 
 /// The depth-only pipeline of a transmissive mesh: Bevy's mesh pipeline layouts, the
-/// vertex stage of `behind_transmission.wgsl`, no fragment stage.
+/// vertex stage of `media.wgsl`, no fragment stage.
 #[derive(Resource, Clone)]
 pub struct SurfaceDepthPipeline {
     mesh_pipeline: MeshPipeline,
@@ -122,83 +120,9 @@ impl SpecializedMeshPipeline for SurfaceDepthPipeline {
     }
 }
 
-/// The fullscreen pass that dims the opaque image behind the surfaces, multiplying it
-/// by the transmittance (`behind_transmission.wgsl`, `dim`).
-#[derive(Resource)]
-pub struct BehindTransmissionPipeline {
-    /// For a single-sampled and a multisampled view depth.
-    layouts: [KeptLayout; 2],
-    shader: Handle<Shader>,
-    fullscreen: FullscreenShader,
+fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipeline>, dim: Res<DimPipeline>) {
+    commands.insert_resource(SurfaceDepthPipeline { mesh_pipeline: mesh_pipeline.clone(), shader: dim.shader() });
 }
-
-/// What the dimming pipeline is specialised on: the view depth's sampling and the
-/// view's image format.
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
-pub struct BehindTransmissionKey {
-    multisampled: bool,
-    format: TextureFormat,
-}
-
-impl SpecializedRenderPipeline for BehindTransmissionPipeline {
-    type Key = BehindTransmissionKey;
-
-    fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
-        let shader_defs = if key.multisampled { vec!["MULTISAMPLED".into()] } else { vec![] };
-        // destination × source: the image times the transmittance.
-        let multiply = BlendComponent { src_factor: BlendFactor::Zero, dst_factor: BlendFactor::Src, operation: BlendOperation::Add };
-        RenderPipelineDescriptor {
-            label: Some("medium_behind_transmission_pipeline".into()),
-            layout: vec![self.layouts[key.multisampled as usize].descriptor.clone()],
-            vertex: self.fullscreen.to_vertex_state(),
-            fragment: Some(FragmentState {
-                shader: self.shader.clone(),
-                shader_defs,
-                entry_point: Some("dim".into()),
-                targets: vec![Some(ColorTargetState {
-                    format: key.format,
-                    blend: Some(BlendState { color: multiply, alpha: BlendComponent::REPLACE }),
-                    write_mask: ColorWrites::COLOR,
-                })],
-            }),
-            ..default()
-        }
-    }
-}
-
-fn init_pipelines(mut commands: Commands, mesh_pipeline: Res<MeshPipeline>, fullscreen: Res<FullscreenShader>, asset_server: Res<AssetServer>) {
-    let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "behind_transmission.wgsl");
-    let layout = |label, depth| {
-        KeptLayout::new(BindGroupLayoutDescriptor::new(
-            label,
-            &BindGroupLayoutEntries::sequential(
-                ShaderStages::FRAGMENT,
-                (uniform_buffer::<ViewUniform>(true), depth, texture_depth_2d(), uniform_buffer::<GpuMedia>(false)),
-            ),
-        ))
-    };
-    commands.insert_resource(SurfaceDepthPipeline { mesh_pipeline: mesh_pipeline.clone(), shader: shader.clone() });
-    commands.insert_resource(BehindTransmissionPipeline {
-        layouts: [
-            layout("medium_behind_transmission_layout", texture_depth_2d()),
-            layout("medium_behind_transmission_layout_multisampled", texture_depth_2d_multisampled()),
-        ],
-        shader,
-        fullscreen: fullscreen.clone(),
-    });
-}
-
-/// The media as `behind_transmission.wgsl` reads them.
-#[derive(Clone, Copy, Default, PartialEq, ShaderType)]
-struct GpuMedia {
-    count: u32,
-    media: [GpuMedium; MAX_MEDIA],
-}
-
-/// Render world: the media's uniform, uploaded when they change and dropped while no
-/// view dims behind transmission.
-#[derive(Resource, Default)]
-struct MediaUniform(UniformBuffer<GpuMedia>);
 
 /// Render world, on a view whose opaque image is dimmed behind its transmissive
 /// surfaces this frame: the pipelines, and what the passes draw into and bind.
@@ -228,8 +152,8 @@ fn queue(
     media: Res<ExtractedMedia>,
     view_key_cache: Res<ViewKeyCache>,
     (mesh_instances, render_meshes): (Res<RenderMeshInstances>, Res<RenderAssets<RenderMesh>>),
-    (surface_pipeline, dim_pipeline): (Res<SurfaceDepthPipeline>, Res<BehindTransmissionPipeline>),
-    (mut surface_pipelines, mut dim_pipelines): (ResMut<SpecializedMeshPipelines<SurfaceDepthPipeline>>, ResMut<SpecializedRenderPipelines<BehindTransmissionPipeline>>),
+    (surface_pipeline, dim_pipeline): (Res<SurfaceDepthPipeline>, Res<DimPipeline>),
+    (mut surface_pipelines, mut dim_pipelines): (ResMut<SpecializedMeshPipelines<SurfaceDepthPipeline>>, ResMut<SpecializedRenderPipelines<DimPipeline>>),
     pipeline_cache: Res<PipelineCache>,
     recorder: Res<PassRecorder>,
 ) {
@@ -257,7 +181,7 @@ fn queue(
             }
         }
         let multisampled = msaa.samples() > 1;
-        let key = BehindTransmissionKey { multisampled, format: target.main_texture_format() };
+        let key = DimKey { dim: Dim::BehindTransmission, multisampled, format: target.main_texture_format() };
         let dim = dim_pipelines.specialize(&pipeline_cache, &dim_pipeline, key);
         recorder.record("medium_behind_transmission");
         match kept {
@@ -273,27 +197,17 @@ fn queue(
     }
 }
 
-/// The surfaces' depth texture of each view with the passes, the dimming pass's bind
-/// group, and the media's uniform.
-#[expect(clippy::too_many_arguments)]
+/// The surfaces' depth texture of each view with the passes, and the dimming pass's
+/// bind group.
 fn prepare_bind_groups(
     mut views: Query<(&ExtractedCamera, &ViewDepthTexture, &mut ViewMediumBehindTransmission)>,
-    media: Res<ExtractedMedia>,
-    mut uniform: ResMut<MediaUniform>,
+    uniform: Res<MediaUniform>,
     view_uniforms: Res<ViewUniforms>,
-    pipeline: Res<BehindTransmissionPipeline>,
+    pipeline: Res<DimPipeline>,
     pipeline_cache: Res<PipelineCache>,
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
-    queue: Res<RenderQueue>,
 ) {
-    if views.is_empty() {
-        uniform.0 = default();
-        return;
-    }
-    let (padded, count) = media.padded();
-    uniform.0.set_label(Some("caustic_media"));
-    write_changed(&mut uniform.0, GpuMedia { count, media: padded }, &device, &queue);
     let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
         return;
     };
@@ -304,13 +218,13 @@ fn prepare_bind_groups(
         };
         let usage = TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING;
         let depth = cached_texture(&mut texture_cache, &device, "caustic_medium_surface_depth", size, CORE_3D_DEPTH_FORMAT, usage);
-        let layout = pipeline.layouts[view.multisampled as usize].get(&pipeline_cache);
-        let bound = [layout.into(), view_buffer.into(), view_depth.view().into(), (&depth.default_view).into(), media_buffer.into()];
+        let layout = pipeline.layout(Dim::BehindTransmission, view.multisampled, &pipeline_cache);
+        let bound = [layout.into(), view_buffer.into(), view_depth.view().into(), media_buffer.into(), (&depth.default_view).into()];
         view.bind_group.get(&bound, || {
             device.create_bind_group(
                 "medium_behind_transmission_bind_group",
                 layout,
-                &BindGroupEntries::sequential((view_binding.clone(), view_depth.view(), &depth.default_view, media_buffer.as_entire_binding())),
+                &BindGroupEntries::sequential((view_binding.clone(), view_depth.view(), media_buffer.as_entire_binding(), &depth.default_view)),
             )
         });
         view.depth = Some(depth);
@@ -369,28 +283,7 @@ fn dim_behind_transmission(
     }
     span.end(&mut pass);
     drop(pass);
-
-    let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
-        label: Some("medium_behind_transmission"),
-        color_attachments: &[Some(RenderPassColorAttachment {
-            view: target.main_texture_view(),
-            depth_slice: None,
-            resolve_target: None,
-            ops: Operations { load: LoadOp::Load, store: StoreOp::Store },
-        })],
-        depth_stencil_attachment: None,
-        timestamp_writes: None,
-        occlusion_query_set: None,
-        multiview_mask: None,
-    });
-    let span = diagnostics.pass_span(&mut pass, "caustics/medium_behind_transmission");
-    if let Some(viewport) = &viewport {
-        pass.set_camera_viewport(viewport);
-    }
-    pass.set_render_pipeline(dim);
-    pass.set_bind_group(0, bind_group, &[view_offset.offset]);
-    pass.draw(0..3, 0..1);
-    span.end(&mut pass);
+    dim::multiply(&mut ctx, target, viewport.as_ref(), "caustics/medium_behind_transmission", dim, bind_group, view_offset.offset);
 }
 
 /// A transmissive mesh's depth: the view's pipeline for its mesh, Bevy's view and mesh

@@ -15,11 +15,15 @@
 //! inside the box (exact for a thin medium, or one the light enters through a
 //! generator, whose light the plugin carries).
 //!
-//! Where a transmissive surface is in front (water seen from above), Bevy's fog ends
-//! its march at the surface and Bevy's transmission shows an undimmed copy of what lies
-//! behind: [`behind_transmission`] dims that copy by the media behind the surface.
+//! Bevy's fog has one transmittance for all channels: it takes σₐ's least channel, and
+//! [`tint`] multiplies in the colour of the rest. Where a transmissive surface is in
+//! front (water seen from above), Bevy's fog ends its march at the surface and Bevy's
+//! transmission shows an undimmed copy of what lies behind: [`behind_transmission`]
+//! dims that copy by the media behind the surface.
 
 mod behind_transmission;
+mod dim;
+mod tint;
 
 use crate::components::{InvalidCausticParams, ParticipatingMedium};
 use bevy::light::{FogVolume, VolumetricFog, VolumetricLight};
@@ -46,28 +50,43 @@ pub(crate) fn build(app: &mut App) {
         PostUpdate,
         (crate::cpu_time::timed(&cpu, keep_fog_volumes), crate::cpu_time::timed(&cpu, give_fog_to_views)).chain().in_set(crate::CausticSystems::ReadScene),
     );
+    dim::build(app);
     behind_transmission::build(app);
+    tint::build(app);
 }
 
-/// What Bevy's fog draws of a medium: density, σₐ, σₛ, g and the light intensity that
-/// cancels Bevy's constant attenuation of the light into the box.
-type FogCoefficients = [f32; 5];
+/// What Bevy's fog draws of a medium: density, σₐ's grey part, σₛ, g, the light
+/// intensity that cancels Bevy's constant attenuation of the light into the box, and
+/// the light tint (linear RGB) that colours the light it scatters.
+type FogCoefficients = [f32; 8];
 
-/// The coefficients of `medium` in a box placed by `transform`.
+/// The coefficients of `medium` in a box placed by `transform`. Bevy's fog has one
+/// transmittance for all channels, so it takes σₐ's least channel; [`tint`] dims by
+/// the rest. Light that Bevy scatters at distance s along the eye ray should reach the
+/// eye dimmed by exp(−σₜ,c s) per channel, but Bevy dims it by exp(−σₜ,min s): the tint
+/// σₜ,min/σₜ,c makes what it gathers along a ray that ends deep in the medium (the
+/// water's haze) exact, ∫ σₛ E e^{−σₜ,c s} ds = σₛ E/σₜ,c, and over-tints the haze
+/// of a short path, which the medium has barely lit.
 fn fog_coefficients(medium: &ParticipatingMedium, transform: &GlobalTransform) -> FogCoefficients {
     let half_diagonal = (transform.affine().matrix3 * Vec3A::splat(0.5)).length();
-    let light_intensity = ((medium.scattering + medium.absorption) * half_diagonal).min(80.0).exp();
-    [1.0, medium.absorption, medium.scattering, medium.asymmetry, light_intensity]
+    let grey = medium.absorption.min_element();
+    let extinction = medium.scattering + medium.absorption;
+    let light_intensity = ((medium.scattering + grey) * half_diagonal).min(80.0).exp();
+    let tint = Vec3::select(extinction.cmpgt(Vec3::ZERO), (medium.scattering + grey) / extinction, Vec3::ONE);
+    [1.0, grey, medium.scattering, medium.asymmetry, light_intensity, tint.x, tint.y, tint.z]
 }
 
 /// The coefficients `fog` draws.
 fn coefficients_of(fog: &FogVolume) -> FogCoefficients {
-    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity]
+    let tint = fog.light_tint.to_linear();
+    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity, tint.red, tint.green, tint.blue]
 }
 
-/// `fog` drawing `coefficients`; its colours and texture stay.
+/// `fog` drawing `coefficients`; its fog colour and texture stay.
 fn set_coefficients(fog: &mut FogVolume, coefficients: FogCoefficients) {
-    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity] = coefficients;
+    let [density, absorption, scattering, asymmetry, light_intensity, red, green, blue] = coefficients;
+    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity] = [density, absorption, scattering, asymmetry, light_intensity];
+    fog.light_tint = Color::linear_rgb(red, green, blue);
 }
 
 /// The media, with their fog volumes and whether they are invalid.

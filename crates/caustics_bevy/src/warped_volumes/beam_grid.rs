@@ -10,7 +10,7 @@ use super::ShaftIntegral;
 use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
-use crate::irradiance::{ExtractedMedia, MAX_MEDIA};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
@@ -41,7 +41,8 @@ pub(super) struct GpuGrid {
 #[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuBeamGrids {
     grids: [GpuGrid; MAX_MEDIA],
-    /// xyz: the hue every volume shares ([`VolumeBuild::hue`]), w: 1 when they do.
+    /// xyz: the hue every volume shares ([`VolumeBuild::hue`]) in every grey medium,
+    /// w: 1 when they do.
     hue: Vec4,
     max_steps: u32,
 }
@@ -63,7 +64,7 @@ pub(super) struct BeamGridBuffers {
     clamped: Option<u32>,
     pub grids: UniformBuffer<GpuBeamGrids>,
     /// The media and their cells the grid was laid out for.
-    layout: Vec<(Mat4, Vec4, UVec4)>,
+    layout: Vec<(GpuMedium, UVec4)>,
     deposit: bool,
     /// The deposit's and the resolve's bind groups, kept while they bind the same.
     kept: [KeptBindGroup; 2],
@@ -189,18 +190,18 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
 
 /// The grids over `media`, `longest` cells along each box's longest side, their
 /// layout (to tell when it changes) and their cells together.
-fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(Mat4, Vec4, UVec4)>, u32) {
+fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(GpuMedium, UVec4)>, u32) {
     let mut gpu = GpuBeamGrids { max_steps, ..default() };
     let mut layout = Vec::new();
     let mut first = 0u32;
     for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {
         let world_from_local = glam::Affine3A::from_mat4(glam::Mat4::from_cols_array(&medium.local_from_world.inverse().to_cols_array()));
-        let coefficients = MediumCoefficients { scattering: 0.0, absorption: 0.0, asymmetry: 0.0 };
+        let coefficients = MediumCoefficients { scattering: 0.0, absorption: glam::Vec3::ZERO, asymmetry: 0.0 };
         let core = MediumBox { world_from_local, coefficients };
         let size = grid_size(&core, longest);
         let (edge, volume) = cell_of(&core, size);
         *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, 0.0, 0.0) };
-        layout.push((medium.local_from_world, medium.coefficients, grid.size));
+        layout.push((*medium, grid.size));
         first += size.x * size.y * size.z;
     }
     (gpu, layout, first)
@@ -247,7 +248,9 @@ pub(super) fn prepare_grids(
         );
     }
     grids.clamped = clamped;
-    gpu.hue = build.hue.map_or(Vec4::ZERO, |h| Vec4::new(h.x, h.y, h.z, 1.0));
+    // A coloured medium dims each channel of a beam by its own σₜ: no hue is shared.
+    let hue = build.hue.filter(|_| media.0.iter().all(GpuMedium::is_grey));
+    gpu.hue = hue.map_or(Vec4::ZERO, |h| Vec4::new(h.x, h.y, h.z, 1.0));
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {

@@ -241,7 +241,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
             let medium = settings.media[m];
             let g = grids.grids[m];
             let units = fixed_units(g, flux);
-            let sigma_t = medium.coefficients.x + medium.coefficients.y;
+            let sigma_t = medium.extinction.xyz;
             let split = deposit_split(v, g.cell.x);
             let cells = vec3<f32>(g.size.xyz);
             for (var k = 0u; k < split * split; k++) {
@@ -262,7 +262,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                         continue;
                     }
                     let beam_length = length(s.ray);
-                    let source = v.color.rgb * (s.plane_irradiance * beam_length * exp(-sigma_t * s.depth * beam_length) * area * layer.d_alpha / g.cell.y * units);
+                    let source = v.color.rgb * exp(-sigma_t * (s.depth * beam_length)) * (s.plane_irradiance * beam_length * area * layer.d_alpha / g.cell.y * units);
                     if any(source != source) || any(abs(source) > vec3(3.0e38)) {
                         continue;
                     }
@@ -383,7 +383,7 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             continue;
         }
         let c = medium.coefficients;
-        let sigma_t = c.x + c.y;
+        let sigma_t = medium.extinction.xyz;
         // `march_steps`: one a cell.
         let steps = u32(clamp(ceil((t.y - t.x) / grids.grids[m].cell.x), 1.0, f32(max(grids.max_steps, 1u))));
         let dt = (t.y - t.x) / f32(steps);
@@ -395,11 +395,11 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
             let along = length(direction);
             var phase = 1.0 / (4.0 * PI);
             if along > 0.0 {
-                let g = clamp(c.z, -0.999, 0.999);
+                let g = clamp(c.y, -0.999, 0.999);
                 let denom = max(1.0 + g * g - 2.0 * g * dot(direction / along, -dir), 1e-12);
                 phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
             }
-            radiance += cell[0] * (c.x * phase * exp(-sigma_t * (s - t.x)) * dt);
+            radiance += cell[0] * exp(-sigma_t * (s - t.x)) * (c.x * phase * dt);
         }
     }
     return exposed(radiance, view.exposure);

@@ -416,13 +416,13 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
 #endif
 
 #ifndef RECEIVER_CENTRE
-// `caustics_core::volumes::mean_attenuation`: the mean of e^{−σt d} over σt d ∈ [m − x, m + x].
-fn mean_attenuation(m: f32, x: f32) -> f32 {
+// `caustics_core::volumes::mean_attenuation`: the mean of e^{−σt d} over σt d ∈ [m − x, m + x],
+// per channel.
+fn mean_attenuation(m: vec3<f32>, x: vec3<f32>) -> vec3<f32> {
     let h = abs(x);
-    if h < 1.0e-3 {
-        return exp(-m) * (1.0 + h * h / 6.0);
-    }
-    return (exp(h - m) - exp(-h - m)) / (2.0 * h);
+    let short = exp(-m) * (1.0 + h * h / 6.0);
+    let long = (exp(h - m) - exp(-h - m)) / (2.0 * max(h, vec3(1.0e-3)));
+    return select(long, short, h < vec3(1.0e-3));
 }
 
 // Real roots of a s² + b s + c (NaN-free: a missing root is returned as 2, outside [−1, 1]).
@@ -503,7 +503,7 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
         cuts[j + 1] = x;
     }
     let c = m.coefficients;
-    let sigma_t = c.x + c.y;
+    let sigma_t = m.extinction.xyz;
     var radiance = vec3(0.0);
     for (var i = 0; i + 1 < n; i++) {
         let a = cuts[i];
@@ -518,12 +518,12 @@ fn scatter(v: CausticVolume, m: Medium, eye: vec3<f32>, dir: vec3<f32>, enter: f
         }
         let beam_length = length(s.ray);
         let beam = s.ray / beam_length;
-        let g = clamp(c.z, -0.999, 0.999);
+        let g = clamp(c.y, -0.999, 0.999);
         let denom = max(1.0 + g * g - 2.0 * g * dot(beam, -dir), 1e-12);
         let phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
         // `mean_attenuation`: the path grows along the piece by (1 + d_α |r|) per unit.
         let attenuation = mean_attenuation(sigma_t * ((t - enter) + s.depth * beam_length), 0.5 * sigma_t * (b - a) * (1.0 + d.y * beam_length));
-        radiance += v.color.rgb * (attenuation * (b - a) * c.x * phase * s.plane_irradiance * beam_length);
+        radiance += v.color.rgb * attenuation * ((b - a) * c.x * phase * s.plane_irradiance * beam_length);
     }
     return radiance;
 }

@@ -241,8 +241,8 @@ impl BeamGrid {
                     continue;
                 };
                 let beam_length = s.ray.length();
-                let attenuated = s.plane_irradiance * beam_length * (-sigma_t * s.depth * beam_length).exp();
-                let source = volume.color * (attenuated * area * d_alpha / cell_volume);
+                let attenuated = s.plane_irradiance * beam_length * (-sigma_t * (s.depth * beam_length)).exp();
+                let source = volume.color * attenuated * (area * d_alpha / cell_volume);
                 if !source.is_finite() {
                     continue;
                 }
@@ -312,7 +312,7 @@ impl BeamGrid {
             let (source, direction) = self.lookup(local_from_world.transform_point3(eye + t * dir));
             let beam = direction.normalize_or_zero();
             let phase = henyey_greenstein(beam.dot(-dir), if beam == Vec3::ZERO { 0.0 } else { c.asymmetry });
-            radiance += source * (c.scattering * phase * (-c.extinction() * (t - enter)).exp() * dt);
+            radiance += source * (-c.extinction() * (t - enter)).exp() * (c.scattering * phase * dt);
         }
         radiance
     }

@@ -102,10 +102,13 @@ pub fn ray_pieces(volume: &CausticVolume, o: Vec3, d: Vec3, start: f32, end: f32
 }
 
 /// The mean of `e^{−σₜ d}` over a piece whose path `d` grows linearly over
-/// `σₜ d ∈ [m − x, m + x]`: `e^{−m} sinh(x)/x`, without overflow.
-pub fn mean_attenuation(m: f32, x: f32) -> f32 {
-    let x = x.abs();
-    if x < 1e-3 { (-m).exp() * (1.0 + x * x / 6.0) } else { ((x - m).exp() - (-x - m).exp()) / (2.0 * x) }
+/// `σₜ d ∈ [m − x, m + x]`: `e^{−m} sinh(x)/x`, without overflow; per channel.
+pub fn mean_attenuation(m: Vec3, x: Vec3) -> Vec3 {
+    let mean = |m: f32, x: f32| {
+        let x = x.abs();
+        if x < 1e-3 { (-m).exp() * (1.0 + x * x / 6.0) } else { ((x - m).exp() - (-x - m).exp()) / (2.0 * x) }
+    };
+    Vec3::new(mean(m.x, x.x), mean(m.y, x.y), mean(m.z, x.z))
 }
 
 /// Real roots of `a s² + b s + c`, robust when `a` vanishes (then the linear root).
@@ -173,7 +176,7 @@ pub fn in_scattered_radiance(
             let phase = henyey_greenstein(beam.dot(-dir), c.asymmetry);
             // The light's path dₑ + dₛ grows along the piece by (1 + d_α |r|) per unit.
             let attenuation = mean_attenuation(sigma_t * (d_e + d_s), 0.5 * sigma_t * (b - a) * (1.0 + d.y * beam_length));
-            radiance += volume.color * (attenuation * (b - a) * c.scattering * phase * e_beam);
+            radiance += volume.color * attenuation * ((b - a) * c.scattering * phase * e_beam);
         }
     }
     radiance
