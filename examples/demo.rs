@@ -145,12 +145,10 @@ fn spawn_pool(world: &mut World) -> EnvironmentMapLight {
     spawn_ladder(world);
 
     let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::srgb(0.8, 0.95, 1.0),
         specular_transmission: 0.92,
-        // Seen through the water, the pool turns blue with depth as real water does.
+        // How far Bevy's transmission shifts what is seen through the surface; the
+        // water's colour is the medium's absorption below.
         thickness: 0.3,
-        attenuation_color: Color::srgb(0.45, 0.8, 0.85),
-        attenuation_distance: 3.0,
         ior: 1.333,
         perceptual_roughness: 0.04,
         reflectance: 0.5,
@@ -165,11 +163,12 @@ fn spawn_pool(world: &mut World) -> EnvironmentMapLight {
         CausticGenerator::refractive(1.333),
         MeshMaterial3d(water),
     ));
-    // The water body: it scatters the focused light into shafts, and Bevy's fog dims
-    // what is seen through it (the underwater view).
+    // The water body: it scatters the focused light into shafts, and dims what is seen
+    // through it, from above and from the underwater view, red first as water does: the
+    // pool turns blue-green with depth.
     world.spawn((
         Name::new("pool water (medium)"),
-        ParticipatingMedium { scattering: 0.4, absorption: 0.05, asymmetry: 0.6 },
+        ParticipatingMedium { scattering: 0.4, absorption: ParticipatingMedium::WATER_ABSORPTION, asymmetry: 0.6 },
         Transform::from_xyz(0.0, -DEPTH / 2.0, 0.0).with_scale(Vec3::new(SIZE, DEPTH, SIZE)),
     ));
 
