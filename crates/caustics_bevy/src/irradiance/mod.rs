@@ -378,11 +378,14 @@ impl<P: 'static> ProjectionContext<'_, '_, P> {
     }
 }
 
+/// Views with caustics work, and the projection pipeline of `P` each had last frame.
+type ProjectionViews<'w, 's, P> = Query<'w, 's, (Entity, &'static Msaa, Option<&'static mut ViewProjectionPipeline<P>>), With<ViewCausticWork>>;
+
 /// Specializes `P`'s projection pipeline for every view with caustics work; scheduled
 /// by each technique with a run condition for when it has something to project.
 pub fn prepare_projection_pipelines<P: SpecializedRenderPipeline<Key = bool> + Resource>(
     mut commands: Commands,
-    mut views: Query<(Entity, &Msaa, Option<&mut ViewProjectionPipeline<P>>), With<ViewCausticWork>>,
+    mut views: ProjectionViews<P>,
     pipelines: Res<P>,
     mut specialized: ResMut<SpecializedRenderPipelines<P>>,
     cache: Res<PipelineCache>,

@@ -139,9 +139,12 @@ impl Plugin for OceanPlugin {
     }
 }
 
+/// Entities with an ocean or the waves of one.
+type Seas = Or<(With<Ocean>, With<OceanWaves>)>;
+
 /// Whether an entity has an ocean or the waves of one: the oceans' systems are left
 /// out of the frame otherwise (one query, where two conditions cost twice).
-fn seas(seas: Query<(), Or<(With<Ocean>, With<OceanWaves>)>>) -> bool {
+fn seas(seas: Query<(), Seas>) -> bool {
     !seas.is_empty()
 }
 
