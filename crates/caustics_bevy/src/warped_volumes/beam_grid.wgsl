@@ -56,23 +56,32 @@ struct GridCorner {
     weight: f32,
 }
 
-// `BeamGrid::corners`: corner `corner` (0 to 7) of the eight cells around a point of
-// the unit cube, and its trilinear weight between cell centres (the outer cells'
-// centres clamp).
-fn grid_corner(g: Grid, local: vec3<f32>, corner: u32) -> GridCorner {
-    return grid_corner_at(g, (local + 0.5) * vec3<f32>(g.size.xyz) - 0.5, corner);
+// The eight cells around a point: the lowest one's grid coordinates and the point's
+// place between their centres, found once for all eight corners.
+struct GridCorners {
+    base: vec3<u32>,
+    f: vec3<f32>,
+}
+
+// `BeamGrid::corners`: the eight cells around a point of the unit cube.
+fn grid_corners(g: Grid, local: vec3<f32>) -> GridCorners {
+    return grid_corners_at(g, (local + 0.5) * vec3<f32>(g.size.xyz) - 0.5);
 }
 
 // `BeamGrid::corners_at`: the same of a point in grid coordinates (cell centres at
-// whole numbers).
-fn grid_corner_at(g: Grid, grid_point: vec3<f32>, corner: u32) -> GridCorner {
+// whole numbers; the outer cells' centres clamp).
+fn grid_corners_at(g: Grid, grid_point: vec3<f32>) -> GridCorners {
     let size = vec3<f32>(g.size.xyz);
     let q = clamp(grid_point, vec3(0.0), size - 1.0);
     let base = max(min(floor(q), size - 2.0), vec3(0.0));
-    let f = q - base;
+    return GridCorners(vec3<u32>(base), q - base);
+}
+
+// Corner `corner` (0 to 7) of `corners` and its trilinear weight between cell centres.
+fn grid_corner(g: Grid, corners: GridCorners, corner: u32) -> GridCorner {
     let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
-    let c = vec3<u32>(base) + o;
-    let w = select(1.0 - f, f, o == vec3(1u));
+    let c = corners.base + o;
+    let w = select(1.0 - corners.f, corners.f, o == vec3(1u));
     return GridCorner(g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x, w.x * w.y * w.z);
 }
 
@@ -206,8 +215,9 @@ fn spread(g: Grid, grid_point: vec3<f32>, source: vec3<f32>, direction: vec3<f32
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
     let light = select(source, vec3(source.x + source.y + source.z, 0.0, 0.0), one_hue);
+    let corners = grid_corners_at(g, grid_point);
     for (var corner = 0u; corner < 8u; corner++) {
-        let c = grid_corner_at(g, grid_point, corner);
+        let c = grid_corner(g, corners, corner);
         if c.weight == 0.0 {
             continue;
         }
@@ -215,7 +225,7 @@ fn spread(g: Grid, grid_point: vec3<f32>, source: vec3<f32>, direction: vec3<f32
             add(c.cell * FIXED_WORDS + 2u * k, c.weight * light[k]);
         }
     }
-    let lowest = grid_corner_at(g, grid_point, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
+    let lowest = grid_corner(g, corners, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
     let d = clamp(direction * DIRECTION_UNITS, vec3(-2.1e9), vec3(2.1e9));
     for (var k = 0u; k < 3u; k++) {
         atomicAdd(&fixed[lowest + k], bitcast<u32>(i32(floor(d[k] + 0.5))));
@@ -351,8 +361,9 @@ const PI: f32 = 3.141592653589793;
 fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
     var source = vec3(0.0);
     var direction = vec3(0.0);
+    let corners = grid_corners(g, local);
     for (var corner = 0u; corner < 8u; corner++) {
-        let c = grid_corner(g, local, corner);
+        let c = grid_corner(g, corners, corner);
         source += c.weight * cells[c.cell * 2u].xyz;
         direction += c.weight * cells[c.cell * 2u + 1u].xyz;
     }
