@@ -10,10 +10,11 @@
 //! 1. draws the view's transmissive meshes depth-only (`caustics/medium_surface_depth`):
 //!    the nearest transmissive surface at each pixel;
 //! 2. multiplies each pixel of the opaque image that has such a surface in front of
-//!    it by exp(−σₜ ℓ), ℓ the eye ray's length inside the media between that surface
-//!    and the opaque point (`caustics/medium_behind_transmission`).
+//!    it by exp(−σₜ ℓ) in each channel, ℓ the eye ray's length inside the media
+//!    between that surface and the opaque point (`caustics/medium_behind_transmission`,
+//!    through [`super::dim`]).
 //!
-//! Bevy's fog then dims the ray in front of the surface, so each stretch of the path
+//! Bevy's fog and [`super::tint`] then dim the ray in front of the surface, so each stretch of the path
 //! is dimmed once, the caustics the composite added included. The surfaces are Bevy's
 //! `Transmissive3d` phase of the view (every material that reads the transmission
 //! texture), drawn with back faces culled: a face that Bevy culls draws nothing over

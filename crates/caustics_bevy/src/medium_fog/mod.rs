@@ -65,8 +65,8 @@ type FogCoefficients = [f32; 8];
 /// the rest. Light that Bevy scatters at distance s along the eye ray should reach the
 /// eye dimmed by exp(−σₜ,c s) per channel, but Bevy dims it by exp(−σₜ,min s): the tint
 /// σₜ,min/σₜ,c makes what it gathers along a ray that ends deep in the medium (the
-/// water's haze) exact, ∫ σₛ E e^{−σₜ,c s} ds = σₛ E/σₜ,c, and over-tints the haze
-/// of a short path, which the medium has barely lit.
+/// water's haze) exact, ∫ σₛ E e^{−σₜ,c s} ds = σₛ E/σₜ,c, and tints the faint haze of
+/// a short path too deeply, by up to that factor as the path goes to nothing.
 fn fog_coefficients(medium: &ParticipatingMedium, transform: &GlobalTransform) -> FogCoefficients {
     let half_diagonal = (transform.affine().matrix3 * Vec3A::splat(0.5)).length();
     let grey = medium.absorption.min_element();
