@@ -159,7 +159,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     assert!(clear.pixels.iter().all(|p| p.x.abs() < 1e-4), "the black floor is not black");
     let medium = ParticipatingMedium { scattering: 0.3, absorption: Vec3::new(0.05, 0.3, 0.9), asymmetry: 0.5 };
     let medium_transform = Transform::from_xyz(0.0, 0.4, 0.0).with_scale(Vec3::new(4.0, 0.8, 4.0));
-    renderer.world_mut().spawn((medium, medium_transform));
+    let medium_entity = renderer.world_mut().spawn((medium, medium_transform)).id();
     // Every pixel integrated, to hold the pass to the twin pixel by pixel (the
     // default integrates one in sixteen, below), first through every volume.
     let exact = WarpedVolumesSettings { shaft_downsample: 1, shaft_integral: ShaftIntegral::Exact, ..default() };
@@ -210,6 +210,23 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("shafts marched through the grid: relative L2 {against_twin:.2e} from its twin, {against_exact:.2e} from the exact integral's");
     assert!(against_twin < 0.01, "GPU and CPU beam grids differ: relative L2 {against_twin}");
     assert!(against_exact < 0.1, "the beam grid is far from the exact integral: relative L2 {against_exact}");
+    // A grey medium, and every volume of one hue: the grid keeps the sum of the
+    // channels, which the march shares out by the hue.
+    let grey = ParticipatingMedium { absorption: Vec3::splat(0.3), ..medium };
+    renderer.world_mut().entity_mut(medium_entity).insert(grey);
+    let grey_image = render(&mut renderer, 3);
+    let mut grey_grid = BeamGrid::new(MediumBox { coefficients: grey.coefficients(), ..medium_box }, marched.shaft_grid);
+    grey_grid.deposit_all(&set.volumes, &settings.core());
+    let grey_twin: Vec<f32> = (0..SIZE * SIZE)
+        .flat_map(|i| {
+            let floor = to_core(world_at(i % SIZE, i / SIZE));
+            grey_grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
+        })
+        .collect();
+    let against_grey_twin = relative_l2(&added(&grey_image), &grey_twin);
+    eprintln!("shafts of one hue in a grey medium: relative L2 {against_grey_twin:.2e} from the twin");
+    assert!(against_grey_twin < 0.01, "GPU and CPU beam grids differ in a grey medium: relative L2 {against_grey_twin}");
+    renderer.world_mut().entity_mut(medium_entity).insert(medium);
     // Dispersive water: a volume a colour channel, each of its own hue, so the grid adds
     // three channels of light where one hue needs one; every channel against the twin.
     let dispersive = CausticGenerator {

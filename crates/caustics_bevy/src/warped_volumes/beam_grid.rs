@@ -47,7 +47,8 @@ pub(super) struct GpuBeamGrids {
     max_steps: u32,
 }
 
-/// Eight words a cell as the march reads it: source and summed direction.
+/// Eight words a cell as the march reads it: source and summed direction (where every
+/// volume shares a hue, the first four only: the direction and the source's sum).
 const CELL_BYTES: u64 = 32;
 
 /// Nine words a cell as the deposit adds to it: the source in 64-bit fixed point, the

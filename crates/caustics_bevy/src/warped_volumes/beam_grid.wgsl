@@ -323,10 +323,6 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
         let g = grids.grids[m];
         let units = fixed_units(g, flux);
         let word = cell * FIXED_WORDS;
-        var source = vec3(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u));
-        if grids.hue.w > 0.0 {
-            source = grids.hue.xyz * source.x;
-        }
         let first = g.size.w;
         let at = cell - first;
         let c = vec3(at % g.size.x, (at / g.size.x) % g.size.y, at / (g.size.x * g.size.y));
@@ -338,7 +334,13 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
                 direction += deposited_direction(first + (b.z * g.size.y + b.y) * g.size.x + b.x);
             }
         }
-        cells[2u * cell] = vec4(source / units, 0.0);
+        // Where every volume shares a hue, one vec4 a cell: the direction and the
+        // source's sum, which `lookup` shares out by the hue.
+        if grids.hue.w > 0.0 {
+            cells[2u * cell] = vec4(direction, from_fixed(word)) / units;
+            continue;
+        }
+        cells[2u * cell] = vec4(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u), 0.0) / units;
         cells[2u * cell + 1u] = vec4(direction / units, 0.0);
     }
 }
@@ -362,6 +364,15 @@ fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
     var source = vec3(0.0);
     var direction = vec3(0.0);
     let corners = grid_corners(g, local);
+    if grids.hue.w > 0.0 {
+        // One vec4 a cell (`resolve`): half the loads.
+        var packed = vec4(0.0);
+        for (var corner = 0u; corner < 8u; corner++) {
+            let c = grid_corner(g, corners, corner);
+            packed += c.weight * cells[c.cell * 2u];
+        }
+        return array(grids.hue.xyz * packed.w, packed.xyz);
+    }
     for (var corner = 0u; corner < 8u; corner++) {
         let c = grid_corner(g, corners, corner);
         source += c.weight * cells[c.cell * 2u].xyz;
