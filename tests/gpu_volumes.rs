@@ -18,7 +18,7 @@ use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
-use caustics_core::volumes::{BeamGrid, Footprint, MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
+use caustics_core::volumes::{BeamGrid, CausticVolume, Footprint, MediumBox, VolumeSet, build_scene_volumes, in_scattered_radiance};
 use support::{caustic_irradiance, exposure, render, render_without_caustics};
 
 const SIZE: u32 = 96;
@@ -197,14 +197,18 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().insert_resource(marched);
     let grid_image = render(&mut renderer, 3);
     save(&grid_image, "gpu_volumes_medium_grid.png");
-    let mut grid = BeamGrid::new(medium_box, marched.shaft_grid);
-    grid.deposit_all(&set.volumes, &settings.core());
-    let grid_twin: Vec<f32> = (0..SIZE * SIZE)
-        .flat_map(|i| {
-            let floor = to_core(world_at(i % SIZE, i / SIZE));
-            grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
-        })
-        .collect();
+    // The marched grid's CPU twin over the image, every pixel's three channels.
+    let marched_twin = |medium_box: MediumBox, volumes: &[CausticVolume]| -> Vec<f32> {
+        let mut grid = BeamGrid::new(medium_box, marched.shaft_grid);
+        grid.deposit_all(volumes, &settings.core());
+        (0..SIZE * SIZE)
+            .flat_map(|i| {
+                let floor = to_core(world_at(i % SIZE, i / SIZE));
+                grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
+            })
+            .collect()
+    };
+    let grid_twin = marched_twin(medium_box, &set.volumes);
     let gpu_grid = added(&grid_image);
     let (against_twin, against_exact) = (relative_l2(&gpu_grid, &grid_twin), relative_l2(&gpu_grid, &cpu));
     eprintln!("shafts marched through the grid: relative L2 {against_twin:.2e} from its twin, {against_exact:.2e} from the exact integral's");
@@ -215,14 +219,7 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     let grey = ParticipatingMedium { absorption: Vec3::splat(0.3), ..medium };
     renderer.world_mut().entity_mut(medium_entity).insert(grey);
     let grey_image = render(&mut renderer, 3);
-    let mut grey_grid = BeamGrid::new(MediumBox { coefficients: grey.coefficients(), ..medium_box }, marched.shaft_grid);
-    grey_grid.deposit_all(&set.volumes, &settings.core());
-    let grey_twin: Vec<f32> = (0..SIZE * SIZE)
-        .flat_map(|i| {
-            let floor = to_core(world_at(i % SIZE, i / SIZE));
-            grey_grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
-        })
-        .collect();
+    let grey_twin = marched_twin(MediumBox { coefficients: grey.coefficients(), ..medium_box }, &set.volumes);
     let against_grey_twin = relative_l2(&added(&grey_image), &grey_twin);
     eprintln!("shafts of one hue in a grey medium: relative L2 {against_grey_twin:.2e} from the twin");
     assert!(against_grey_twin < 0.01, "GPU and CPU beam grids differ in a grey medium: relative L2 {against_grey_twin}");
@@ -237,16 +234,10 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().entity_mut(generator).insert(dispersive.clone());
     let coloured = render(&mut renderer, 3);
     let coloured_set = cpu_volumes(&mesh, dispersive.specular_interaction(), SUN, &settings);
-    let mut coloured_grid = BeamGrid::new(medium_box, marched.shaft_grid);
-    coloured_grid.deposit_all(&coloured_set.volumes, &settings.core());
+    let (coloured_twin, coloured_gpu) = (marched_twin(medium_box, &coloured_set.volumes), added(&coloured));
+    let channel_of = |pixels: &[f32], channel: usize| -> Vec<f32> { pixels.iter().skip(channel).step_by(3).copied().collect() };
     for channel in 0..3 {
-        let twin: Vec<f32> = (0..SIZE * SIZE)
-            .map(|i| {
-                let floor = to_core(world_at(i % SIZE, i / SIZE));
-                coloured_grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps)[channel]
-            })
-            .collect();
-        let gpu: Vec<f32> = coloured.pixels.iter().zip(&clear.pixels).map(|(a, b)| (a[channel] - b[channel]) / exposure()).collect();
+        let (twin, gpu) = (channel_of(&coloured_twin, channel), channel_of(&coloured_gpu, channel));
         let error = relative_l2(&gpu, &twin);
         eprintln!("dispersive shafts, channel {channel}: relative L2 {error:.2e} from the twin");
         assert!(error < 0.01, "dispersive shafts, channel {channel}: relative L2 {error}");
