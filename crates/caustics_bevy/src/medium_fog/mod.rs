@@ -70,7 +70,7 @@ type FogCoefficients = [f32; 8];
 fn fog_coefficients(medium: &ParticipatingMedium, transform: &GlobalTransform) -> FogCoefficients {
     let half_diagonal = (transform.affine().matrix3 * Vec3A::splat(0.5)).length();
     let grey = medium.absorption.min_element();
-    let extinction = medium.scattering + medium.absorption;
+    let extinction = medium.coefficients().extinction();
     let light_intensity = ((medium.scattering + grey) * half_diagonal).min(80.0).exp();
     let tint = Vec3::select(extinction.cmpgt(Vec3::ZERO), (medium.scattering + grey) / extinction, Vec3::ONE);
     [1.0, grey, medium.scattering, medium.asymmetry, light_intensity, tint.x, tint.y, tint.z]

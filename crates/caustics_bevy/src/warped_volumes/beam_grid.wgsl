@@ -361,8 +361,6 @@ const PI: f32 = 3.141592653589793;
 
 // `BeamGrid::lookup`: source (xyz) and summed direction, trilinear between cell centres.
 fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
-    var source = vec3(0.0);
-    var direction = vec3(0.0);
     let corners = grid_corners(g, local);
     if grids.hue.w > 0.0 {
         // One vec4 a cell (`resolve`): half the loads.
@@ -373,6 +371,8 @@ fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
         }
         return array(grids.hue.xyz * packed.w, packed.xyz);
     }
+    var source = vec3(0.0);
+    var direction = vec3(0.0);
     for (var corner = 0u; corner < 8u; corner++) {
         let c = grid_corner(g, corners, corner);
         source += c.weight * cells[c.cell * 2u].xyz;
