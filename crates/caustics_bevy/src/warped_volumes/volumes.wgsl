@@ -60,6 +60,7 @@ const SPLATTED_VOLUMES: u32 = 4u;
 const SPLATTED_PIXELS: u32 = 5u;
 const FIRST_LARGE: u32 = 8u;
 const SPLAT_SCALE: f32 = #{SPLAT_SCALE}.0;
+const SPLAT_LANES: u32 = #{SPLAT_LANES}u;
 
 const PI: f32 = 3.141592653589793;
 
@@ -321,13 +322,14 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
 // Adds volume `v`'s light to `splatted` at the pixels of the box `first`..`last` that
 // its convex shape (`corner`, in pixels) may light: with `settings.footprint_filter`
 // every pixel it touches, with the mean over the pixel's footprint, else those whose
-// centres it covers, with the point sample. Returns the number of pixels shaded.
-fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, last: vec2<i32>) -> u32 {
+// centres it covers, with the point sample; of those, the rows from the `lane`th of
+// `SPLAT_LANES`. Returns the number of pixels shaded.
+fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, last: vec2<i32>, lane: u32) -> u32 {
     let filtered = settings.footprint_filter != 0u;
     let origin = vec2<i32>(view.viewport.xy);
     let width = i32(view.viewport.z);
     var shaded = 0u;
-    for (var y = first.y; y <= last.y; y++) {
+    for (var y = first.y + i32(lane); y <= last.y; y += i32(SPLAT_LANES)) {
         let lit = lit_columns(corner, y, first.x, last.x);
         for (var x = lit.x; x <= lit.y; x++) {
             shaded++;
@@ -343,15 +345,18 @@ fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, la
     return shaded;
 }
 
-// One volume of the surface pass: where its surface bounding shape projects onto at
+// One volume of the surface pass, `SPLAT_LANES` invocations sharing its rows: where its
+// surface bounding shape projects onto at
 // most `settings.splat_pixels` pixels, it lights the pixels the shape may light
 // (`add_light`; the shape is convex, so a row of pixels meets it between the outermost
 // points of its twelve edges over the row). A larger or clipped shape goes to the
 // rasteriser's list, and one off the viewport lights nothing.
 @compute @workgroup_size(64)
 fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let index = id.x + id.y * groups.x * 64u;
-    if index == 0u {
+    let invocation = id.x + id.y * groups.x * 64u;
+    let index = invocation / SPLAT_LANES;
+    let lane = invocation % SPLAT_LANES;
+    if invocation == 0u {
         atomicStore(&large[0], 60u);
     }
     if index >= counters[1] {
@@ -406,12 +411,16 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         faces += abs(ab.x * ac.y - ab.y * ac.x);
     }
     if clipped || 0.25 * faces > f32(settings.splat_pixels) {
-        let slot = atomicAdd(&large[1], 1u);
-        atomicStore(&large[FIRST_LARGE + slot], index);
+        if lane == 0u {
+            let slot = atomicAdd(&large[1], 1u);
+            atomicStore(&large[FIRST_LARGE + slot], index);
+        }
         return;
     }
-    atomicAdd(&large[SPLATTED_PIXELS], add_light(v, corner, first, last));
-    atomicAdd(&large[SPLATTED_VOLUMES], 1u);
+    atomicAdd(&large[SPLATTED_PIXELS], add_light(v, corner, first, last, lane));
+    if lane == 0u {
+        atomicAdd(&large[SPLATTED_VOLUMES], 1u);
+    }
 }
 #endif
 
