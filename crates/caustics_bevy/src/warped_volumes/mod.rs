@@ -18,7 +18,7 @@
 //!    depth prepass, the exact point-in-volume test (§3.3) run and the interpolated
 //!    irradiance (§3.4), times the receiver's cosine from the normal prepass, added to
 //!    the view's caustic irradiance buffer; the composite then shows it on receivers.
-//!    A compute pass (`splat` in `volumes.wgsl`), eight invocations a volume, projects the
+//!    A compute pass (`splat` in `volumes.wgsl`), four invocations a volume, projects the
 //!    shape, skips it off the view and lights the pixels it covers itself where it
 //!    covers at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
 //!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
@@ -83,7 +83,7 @@ pub struct WarpedVolumesSettings {
     pub shaft_steps: u32,
     /// The surface pass lights a volume whose bounding shape projects onto at most
     /// this many pixels (its area, not its box: a thin sliver across the view stays)
-    /// in a compute pass, eight invocations a volume looping over the rows of pixels
+    /// in a compute pass, four invocations a volume looping over the rows of pixels
     /// the shape covers, and rasterises the larger ones (4096, a 64 × 64 square, by default; 0
     /// rasterises every volume). A rasteriser shades a small shape
     /// in whole blocks of pixels (2 × 2 on most GPUs, 4 × 4 on lavapipe), most of them

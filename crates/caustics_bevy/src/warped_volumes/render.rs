@@ -261,9 +261,11 @@ pub(super) struct ViewShaftBindGroup {
 /// 2¹⁸ units of it, 128 volumes at [`crate::irradiance::MAX_EXPOSED_IRRADIANCE`].
 pub(super) const SPLAT_SCALE: u32 = 1 << 14;
 /// Invocations of `splat` a volume, each lighting every `SPLAT_LANES`th row of its
-/// shape: one a volume left most lanes of a SIMD group waiting on the group's largest
-/// shape (1.7–1.9× the time on lavapipe's eight lanes, on the frame bench's ocean).
-pub(super) const SPLAT_LANES: u32 = 8;
+/// shape: with one a volume, most lanes of a SIMD group waited on the group's largest
+/// shape (1.7× the time on the frame bench's ocean at 33² and 65² water vertices, on
+/// lavapipe's eight lanes). More lanes repeat the shape's set-up in each, which costs
+/// more than it saves where most shapes span a few rows (eight: 1.4× the time at 257²).
+pub(super) const SPLAT_LANES: u32 = 4;
 /// [`ViewSurfaceTargets::large`]: the indirect draw's four words, the counts of
 /// [`SurfaceWork`] (`volumes.wgsl`), then from this word on the rasterised volumes.
 pub(super) const FIRST_LARGE: u64 = 8;
