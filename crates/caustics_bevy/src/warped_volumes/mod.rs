@@ -18,9 +18,10 @@
 //!    depth prepass, the exact point-in-volume test (§3.3) run and the interpolated
 //!    irradiance (§3.4), times the receiver's cosine from the normal prepass, added to
 //!    the view's caustic irradiance buffer; the composite then shows it on receivers.
-//!    A compute pass (`splat` in `volumes.wgsl`), four invocations a volume, projects the
+//!    A compute pass (`splat` in `volumes.wgsl`), one invocation a volume, projects the
 //!    shape, skips it off the view and lights the pixels it covers itself where it
-//!    covers at most [`WarpedVolumesSettings::splat_pixels`] (added in fixed point,
+//!    covers at most [`WarpedVolumesSettings::splat_pixels`] (each workgroup shares
+//!    out the rows of its 64 shapes among its invocations; added in fixed point,
 //!    then to the buffer by a fullscreen pass); the larger shapes it lists for the
 //!    rasteriser, which draws each one's outline on the view, grown by a pixel,
 //!    indirectly and shades the pixels the compute pass would, once each (point-sampled, only where the
@@ -83,8 +84,8 @@ pub struct WarpedVolumesSettings {
     pub shaft_steps: u32,
     /// The surface pass lights a volume whose bounding shape projects onto at most
     /// this many pixels (its area, not its box: a thin sliver across the view stays)
-    /// in a compute pass, four invocations a volume looping over the rows of pixels
-    /// the shape covers, and rasterises the larger ones (4096, a 64 × 64 square, by default; 0
+    /// in a compute pass, each workgroup sharing out the rows of pixels its 64 volumes'
+    /// shapes cover, and rasterises the larger ones (4096, a 64 × 64 square, by default; 0
     /// rasterises every volume). A rasteriser shades a small shape
     /// in whole blocks of pixels (2 × 2 on most GPUs, 4 × 4 on lavapipe), most of them
     /// outside it, and a fine generator makes many small shapes.

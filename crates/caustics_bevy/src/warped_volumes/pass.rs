@@ -152,11 +152,11 @@ pub(super) fn surface_pass(
     render_pass.draw(0..3, 0..1);
     span.end(&mut render_pass);
     drop(render_pass);
-    // `SPLAT_LANES` invocations a volume the buffer has room for; those past the build's
-    // count return.
+    // One invocation a volume the buffer has room for; those past the build's count
+    // light nothing.
     encoder.clear_buffer(&targets.splatted, 0, None);
     encoder.clear_buffer(&targets.large, 0, Some(4 * super::render::FIRST_LARGE));
-    let groups = (u64::from(super::render::SPLAT_LANES) * draw.buffers.capacity()).div_ceil(64).max(1);
+    let groups = draw.buffers.capacity().div_ceil(64).max(1);
     let across = groups.min(65535);
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volumes_splat"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volumes_splat");

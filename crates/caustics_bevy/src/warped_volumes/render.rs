@@ -260,12 +260,6 @@ pub(super) struct ViewShaftBindGroup {
 /// Fixed-point units of `splat`'s light per unit of exposed irradiance: a pixel holds
 /// 2¹⁸ units of it, 128 volumes at [`crate::irradiance::MAX_EXPOSED_IRRADIANCE`].
 pub(super) const SPLAT_SCALE: u32 = 1 << 14;
-/// Invocations of `splat` a volume, each lighting every `SPLAT_LANES`th row of its
-/// shape: with one a volume, most lanes of a SIMD group waited on the group's largest
-/// shape (1.7× the time on the frame bench's ocean at 33² and 65² water vertices, on
-/// lavapipe's eight lanes). More lanes repeat the shape's set-up in each, which costs
-/// more than it saves where most shapes span a few rows (eight: 1.4× the time at 257²).
-pub(super) const SPLAT_LANES: u32 = 4;
 /// [`ViewSurfaceTargets::large`]: the indirect draw's four words, the counts of
 /// [`SurfaceWork`] (`volumes.wgsl`), then from this word on the rasterised volumes.
 pub(super) const FIRST_LARGE: u64 = 8;
@@ -468,9 +462,9 @@ fn words(read_only: bool) -> BindingType {
     BindingType::Buffer { ty: BufferBindingType::Storage { read_only }, has_dynamic_offset: false, min_binding_size: None }
 }
 
-/// The shader definitions every variant of `volumes.wgsl` needs.
-fn splat_defs() -> [ShaderDefVal; 2] {
-    [ShaderDefVal::UInt("SPLAT_SCALE".into(), SPLAT_SCALE), ShaderDefVal::UInt("SPLAT_LANES".into(), SPLAT_LANES)]
+/// The shader definition every variant of `volumes.wgsl` needs.
+fn splat_defs() -> [ShaderDefVal; 1] {
+    [ShaderDefVal::UInt("SPLAT_SCALE".into(), SPLAT_SCALE)]
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash)]

@@ -60,7 +60,6 @@ const SPLATTED_VOLUMES: u32 = 4u;
 const SPLATTED_PIXELS: u32 = 5u;
 const FIRST_LARGE: u32 = 8u;
 const SPLAT_SCALE: f32 = #{SPLAT_SCALE}.0;
-const SPLAT_LANES: u32 = #{SPLAT_LANES}u;
 
 const PI: f32 = 3.141592653589793;
 
@@ -319,82 +318,77 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
 #endif
 
 #ifdef SPLAT
-// Adds volume `v`'s light to `splatted` at the pixels of the box `first`..`last` that
-// its convex shape (`corner`, in pixels) may light: with `settings.footprint_filter`
-// every pixel it touches, with the mean over the pixel's footprint, else those whose
-// centres it covers, with the point sample; of those, the rows from the `lane`th of
-// `SPLAT_LANES`. Returns the number of pixels shaded.
-fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, first: vec2<i32>, last: vec2<i32>, lane: u32) -> u32 {
+// Adds volume `v`'s light to `splatted` at the pixels of row `y` of the box
+// `first`..`last` that its convex shape (`corner`, in pixels) may light: with
+// `settings.footprint_filter` every pixel it touches, with the mean over the pixel's
+// footprint, else those whose centres it covers, with the point sample. Returns the
+// number of pixels shaded.
+fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, y: i32, first: i32, last: i32) -> u32 {
     let filtered = settings.footprint_filter != 0u;
     let origin = vec2<i32>(view.viewport.xy);
     let width = i32(view.viewport.z);
-    var shaded = 0u;
-    for (var y = first.y + i32(lane); y <= last.y; y += i32(SPLAT_LANES)) {
-        let lit = lit_columns(corner, y, first.x, last.x);
-        for (var x = lit.x; x <= lit.y; x++) {
-            shaded++;
-            let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
-            let pixel = 3u * u32((y - origin.y) * width + x - origin.x);
-            for (var c = 0u; c < 3u; c++) {
-                if light[c] != 0u {
-                    atomicAdd(&splatted[pixel + c], light[c]);
-                }
+    let lit = lit_columns(corner, y, first, last);
+    for (var x = lit.x; x <= lit.y; x++) {
+        let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
+        let pixel = 3u * u32((y - origin.y) * width + x - origin.x);
+        for (var c = 0u; c < 3u; c++) {
+            if light[c] != 0u {
+                atomicAdd(&splatted[pixel + c], light[c]);
             }
         }
     }
-    return shaded;
+    return u32(max(lit.y - lit.x + 1, 0));
 }
 
-// One volume of the surface pass, `SPLAT_LANES` invocations sharing its rows: where its
-// surface bounding shape projects onto at
-// most `settings.splat_pixels` pixels, it lights the pixels the shape may light
-// (`add_light`; the shape is convex, so a row of pixels meets it between the outermost
-// points of its twelve edges over the row). A larger or clipped shape goes to the
-// rasteriser's list, and one off the viewport lights nothing.
-@compute @workgroup_size(64)
-fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let invocation = id.x + id.y * groups.x * 64u;
-    let index = invocation / SPLAT_LANES;
-    let lane = invocation % SPLAT_LANES;
-    if invocation == 0u {
-        atomicStore(&large[0], 60u);
-    }
+// A volume's shape as `splat` lights it: its corners in pixels and the box of pixels
+// it may light (`rows` 0 where it lights none here).
+struct SplatShape {
+    corner: array<vec2<f32>, 8>,
+    first: vec2<i32>,
+    last: vec2<i32>,
+    rows: u32,
+}
+
+// Volume `index`'s shape: where its surface bounding shape projects onto at most
+// `settings.splat_pixels` pixels, the rows of pixels it may light; a larger or clipped
+// shape goes to the rasteriser's list, and one off the viewport lights nothing.
+fn splat_shape(index: u32) -> SplatShape {
+    var shape: SplatShape;
+    shape.rows = 0u;
     if index >= counters[1] {
-        return;
+        return shape;
     }
     let v = volumes[index];
     // A volume whose rays meet no surface lights none (`SurfaceSlab::EMPTY`).
     if any(v.slab.xyz != vec3(0.0)) && v.slab.w > v.slab_far.x {
-        return;
+        return shape;
     }
     // The corners in pixels of the view's target.
     let origin = view.viewport.xy;
     let size = view.viewport.zw;
-    var corner: array<vec2<f32>, 8>;
     var lo = vec2(3.0e38);
     var hi = vec2(-3.0e38);
     var behind = 0;
     for (var k = 0; k < 8; k++) {
         let seen = view_pixel(v.surface_corners[k].xyz);
         behind += select(1, 0, seen.w != 0.0);
-        corner[k] = seen.xy;
-        lo = min(lo, corner[k]);
-        hi = max(hi, corner[k]);
+        shape.corner[k] = seen.xy;
+        lo = min(lo, seen.xy);
+        hi = max(hi, seen.xy);
     }
     // Wholly behind the eye: nothing to light. Partly: the rasteriser clips it.
     if behind == 8 {
-        return;
+        return shape;
     }
     let clipped = behind > 0;
     // The pixels whose centres (point samples) or squares (footprints) meet the
     // shape's box, within the viewport (clamped first, so that every conversion to an
     // integer is in range).
-    let filtered = settings.footprint_filter != 0u;
-    let reach = select(0.0, 0.5, filtered);
-    let first = max(vec2<i32>(ceil(clamp(lo, origin - 1.0, origin + size + 1.0) - 0.5 - reach)), vec2<i32>(origin));
-    let last = min(vec2<i32>(floor(clamp(hi, origin - 1.0, origin + size + 1.0) - 0.5 + reach)), vec2<i32>(origin + size) - 1);
-    if !clipped && any(last < first) {
-        return;
+    let reach = select(0.0, 0.5, settings.footprint_filter != 0u);
+    shape.first = max(vec2<i32>(ceil(clamp(lo, origin - 1.0, origin + size + 1.0) - 0.5 - reach)), vec2<i32>(origin));
+    shape.last = min(vec2<i32>(floor(clamp(hi, origin - 1.0, origin + size + 1.0) - 0.5 + reach)), vec2<i32>(origin + size) - 1);
+    if !clipped && any(shape.last < shape.first) {
+        return shape;
     }
     // The shape's area in pixels: every point of a convex solid's outline is covered
     // by the projections of exactly two of its faces. A thin sliver across the view
@@ -405,20 +399,60 @@ fn splat(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     );
     var faces = 0.0;
     for (var t = 0; t < 36; t += 3) {
-        let a = corner[triangles[t]];
-        let ab = corner[triangles[t + 1]] - a;
-        let ac = corner[triangles[t + 2]] - a;
+        let a = shape.corner[triangles[t]];
+        let ab = shape.corner[triangles[t + 1]] - a;
+        let ac = shape.corner[triangles[t + 2]] - a;
         faces += abs(ab.x * ac.y - ab.y * ac.x);
     }
     if clipped || 0.25 * faces > f32(settings.splat_pixels) {
-        if lane == 0u {
-            let slot = atomicAdd(&large[1], 1u);
-            atomicStore(&large[FIRST_LARGE + slot], index);
-        }
-        return;
+        let slot = atomicAdd(&large[1], 1u);
+        atomicStore(&large[FIRST_LARGE + slot], index);
+        return shape;
     }
-    atomicAdd(&large[SPLATTED_PIXELS], add_light(v, corner, first, last, lane));
+    shape.rows = u32(shape.last.y - shape.first.y + 1);
+    return shape;
+}
+
+// The workgroup's volumes' shapes, and how many of their rows come before each's.
+var<workgroup> shapes: array<SplatShape, 64>;
+var<workgroup> rows_before: array<u32, 65>;
+
+// The surface pass's small volumes, 64 a workgroup: each invocation finds one volume's
+// shape (`splat_shape`), then the workgroup lights the rows of all of them, every
+// 64th row of the 64 shapes from each invocation's, so that a large shape beside small
+// ones keeps no lanes waiting (the shape's convexity lets a row of pixels meet it
+// between the outermost points of its twelve edges over the row).
+@compute @workgroup_size(64)
+fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let first_volume = (group.x + group.y * groups.x) * 64u;
+    if first_volume + lane == 0u {
+        atomicStore(&large[0], 60u);
+    }
+    let shape = splat_shape(first_volume + lane);
+    shapes[lane] = shape;
+    workgroupBarrier();
     if lane == 0u {
+        var rows = 0u;
+        for (var k = 0u; k < 64u; k++) {
+            rows_before[k] = rows;
+            rows += shapes[k].rows;
+        }
+        rows_before[64] = rows;
+    }
+    workgroupBarrier();
+    let total = rows_before[64];
+    var shaded = 0u;
+    var k = 0u;
+    for (var row = lane; row < total; row += 64u) {
+        // The shape the row belongs to (rows go up, so the search goes on from the last).
+        while rows_before[k + 1u] <= row {
+            k++;
+        }
+        let s = shapes[k];
+        shaded += add_light(volumes[first_volume + k], s.corner, s.first.y + i32(row - rows_before[k]), s.first.x, s.last.x);
+    }
+    atomicAdd(&large[SPLATTED_PIXELS], shaded);
+    if shape.rows > 0u {
         atomicAdd(&large[SPLATTED_VOLUMES], 1u);
     }
 }
