@@ -535,11 +535,12 @@ fn bounding_shape(top: array<vec3<f32>, 3>, rays: array<vec3<f32>, 3>, depth: f3
     return box;
 }
 
-@compute @workgroup_size(64)
-fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
-    let t = id.x;
+// Triangle `t`'s caustic volume, appended to `volumes` where it is kept, and the flux
+// it keeps and drops (`[kept, dropped]`, per channel), which `triangle_volumes` adds up.
+fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
+    let none = array(vec3(0.0), vec3(0.0));
     if t >= job.counts.y {
-        return;
+        return none;
     }
     let tri = vec3(triangles[3u * t], triangles[3u * t + 1u], triangles[3u * t + 2u]);
     var p: array<vec3<f32>, 3>;
@@ -552,7 +553,7 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     let longest = max(max(dot(p[1] - p[0], p[1] - p[0]), dot(p[2] - p[0], p[2] - p[0])), dot(p[2] - p[1], p[2] - p[1]));
     if !valid || dot(edge_cross, edge_cross) <= (1.0e-12 * longest) * longest || !is_finite3(edge_cross) {
         atomicAdd(&counters[DEGENERATE], 1u);
-        return;
+        return none;
     }
     let cross_length = length(edge_cross);
     let geometric = edge_cross / cross_length;
@@ -584,12 +585,11 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
         } else {
             atomicAdd(&counters[UNLIT], 1u);
         }
-        return;
+        return none;
     }
     if tir {
         atomicAdd(&counters[TOTAL_INTERNAL_REFLECTION], 1u);
-        add_flux(DROPPED_FLUX, colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
-        return;
+        return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
     }
     var normal = geometric;
     if dot(unit[0] + unit[1] + unit[2], normal) < 0.0 {
@@ -624,8 +624,7 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
         let f = flattened(frame, p[i], unit[i]);
         if !f.ok {
             atomicAdd(&counters[GRAZING], 1u);
-            add_flux(DROPPED_FLUX, colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
-            return;
+            return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
         }
         v[i] = f.v;
         r[i] = f.r;
@@ -652,8 +651,7 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     depth *= 1.0 + 1.0e-3;
     if !(depth > 0.0) || !(abc.x > 0.0) || !is_finite3(abc) {
         atomicAdd(&counters[DEGENERATE], 1u);
-        add_flux(DROPPED_FLUX, colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
-        return;
+        return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
     }
     // Per-vertex coefficients from the fan around each vertex, flattened into this
     // frame and summed (§3.4, Fig. 5); the triangle's own where it cannot be flattened.
@@ -773,14 +771,39 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>) {
     let slot = atomicAdd(&counters[INSTANCES], 1u);
     if slot >= arrayLength(&volumes) {
         atomicSub(&counters[INSTANCES], 1u);
-        add_flux(DROPPED_FLUX, flux);
-        return;
+        return array(vec3(0.0), flux);
     }
-    add_flux(FLUX, flux);
     if on_slab {
         atomicAdd(&counters[SURFACE_SLABS], 1u);
     } else if out.slab.y == 1.0 {
         atomicAdd(&counters[ESCAPING], 1u);
     }
     volumes[slot] = out;
+    return array(flux, vec3(0.0));
+}
+
+// The workgroup's kept and dropped fluxes, summed in halves.
+var<workgroup> fluxes: array<array<vec3<f32>, 2>, 64>;
+
+// One invocation a triangle (`triangle_volume`); each workgroup adds its triangles'
+// kept and dropped flux to `counters` once, not once a triangle on the same words.
+@compute @workgroup_size(64)
+fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    fluxes[lane] = triangle_volume(id.x);
+    workgroupBarrier();
+    for (var half = 32u; half > 0u; half >>= 1u) {
+        if lane < half {
+            fluxes[lane][0] += fluxes[lane + half][0];
+            fluxes[lane][1] += fluxes[lane + half][1];
+        }
+        workgroupBarrier();
+    }
+    if lane == 0u {
+        if any(fluxes[0][0] != vec3(0.0)) {
+            add_flux(FLUX, fluxes[0][0]);
+        }
+        if any(fluxes[0][1] != vec3(0.0)) {
+            add_flux(DROPPED_FLUX, fluxes[0][1]);
+        }
+    }
 }
