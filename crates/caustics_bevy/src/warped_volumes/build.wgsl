@@ -535,10 +535,16 @@ fn bounding_shape(top: array<vec3<f32>, 3>, rays: array<vec3<f32>, 3>, depth: f3
     return box;
 }
 
-// Triangle `t`'s caustic volume, appended to `volumes` where it is kept, and the flux
-// it keeps and drops (`[kept, dropped]`, per channel), which `triangle_volumes` adds up.
-fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
-    let none = array(vec3(0.0), vec3(0.0));
+// The flux a triangle's volume keeps and the flux it drops, per channel.
+struct TriangleFlux {
+    kept: vec3<f32>,
+    dropped: vec3<f32>,
+}
+
+// Triangle `t`'s caustic volume, appended to `volumes` where it is kept, and its flux,
+// which `triangle_volumes` adds up.
+fn triangle_volume(t: u32) -> TriangleFlux {
+    let none = TriangleFlux(vec3(0.0), vec3(0.0));
     if t >= job.counts.y {
         return none;
     }
@@ -589,7 +595,7 @@ fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
     }
     if tir {
         atomicAdd(&counters[TOTAL_INTERNAL_REFLECTION], 1u);
-        return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+        return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
     }
     var normal = geometric;
     if dot(unit[0] + unit[1] + unit[2], normal) < 0.0 {
@@ -624,7 +630,7 @@ fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
         let f = flattened(frame, p[i], unit[i]);
         if !f.ok {
             atomicAdd(&counters[GRAZING], 1u);
-            return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+            return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
         }
         v[i] = f.v;
         r[i] = f.r;
@@ -651,7 +657,7 @@ fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
     depth *= 1.0 + 1.0e-3;
     if !(depth > 0.0) || !(abc.x > 0.0) || !is_finite3(abc) {
         atomicAdd(&counters[DEGENERATE], 1u);
-        return array(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+        return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
     }
     // Per-vertex coefficients from the fan around each vertex, flattened into this
     // frame and summed (§3.4, Fig. 5); the triangle's own where it cannot be flattened.
@@ -771,7 +777,7 @@ fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
     let slot = atomicAdd(&counters[INSTANCES], 1u);
     if slot >= arrayLength(&volumes) {
         atomicSub(&counters[INSTANCES], 1u);
-        return array(vec3(0.0), flux);
+        return TriangleFlux(vec3(0.0), flux);
     }
     if on_slab {
         atomicAdd(&counters[SURFACE_SLABS], 1u);
@@ -779,11 +785,11 @@ fn triangle_volume(t: u32) -> array<vec3<f32>, 2> {
         atomicAdd(&counters[ESCAPING], 1u);
     }
     volumes[slot] = out;
-    return array(flux, vec3(0.0));
+    return TriangleFlux(flux, vec3(0.0));
 }
 
 // The workgroup's kept and dropped fluxes, summed in halves.
-var<workgroup> fluxes: array<array<vec3<f32>, 2>, 64>;
+var<workgroup> fluxes: array<TriangleFlux, 64>;
 
 // One invocation a triangle (`triangle_volume`); each workgroup adds its triangles'
 // kept and dropped flux to `counters` once, not once a triangle on the same words.
@@ -793,17 +799,17 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local
     workgroupBarrier();
     for (var half = 32u; half > 0u; half >>= 1u) {
         if lane < half {
-            fluxes[lane][0] += fluxes[lane + half][0];
-            fluxes[lane][1] += fluxes[lane + half][1];
+            fluxes[lane].kept += fluxes[lane + half].kept;
+            fluxes[lane].dropped += fluxes[lane + half].dropped;
         }
         workgroupBarrier();
     }
     if lane == 0u {
-        if any(fluxes[0][0] != vec3(0.0)) {
-            add_flux(FLUX, fluxes[0][0]);
+        if any(fluxes[0].kept != vec3(0.0)) {
+            add_flux(FLUX, fluxes[0].kept);
         }
-        if any(fluxes[0][1] != vec3(0.0)) {
-            add_flux(DROPPED_FLUX, fluxes[0][1]);
+        if any(fluxes[0].dropped != vec3(0.0)) {
+            add_flux(DROPPED_FLUX, fluxes[0].dropped);
         }
     }
 }
