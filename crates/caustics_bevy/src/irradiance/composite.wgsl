@@ -10,7 +10,7 @@
 #import bevy_pbr::mesh_functions::{get_world_from_local, mesh_position_local_to_clip}
 #import bevy_pbr::mesh_view_bindings::view
 #import bevy_render::maths::PI
-#import bevy_caustics::receiver::{MAX_EXPOSED_IRRADIANCE, Medium, transmittance, world_at}
+#import bevy_caustics::receiver::{MAX_EXPOSED_IRRADIANCE, Medium, medium_optical_depth, world_at}
 #ifdef DISTANCE_FOG
 #import bevy_pbr::mesh_view_bindings::fog
 #import bevy_pbr::fog::{linear_fog, exponential_fog, exponential_squared_fog, atmospheric_fog}
@@ -98,7 +98,11 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     let albedo = material.base_color.rgb * textureSample(base_color_texture, base_color_sampler, uv).rgb;
     // The eye ray from the near plane (any projection) to the receiver.
     let eye = world_at(view, in.clip_position.xy, 1.0);
-    let seen = transmittance(caustics.media, caustics.medium_count, eye, in.world_position);
+    var optical_depth = vec3(0.0);
+    for (var i = 0u; i < min(caustics.medium_count, 4u); i++) {
+        optical_depth += medium_optical_depth(caustics.media[i], eye, in.world_position, false);
+    }
+    let seen = exp(-optical_depth);
     let radiance = albedo / PI * exposed_irradiance * seen * caustics.intensity;
     return vec4(through_fog(radiance, in.world_position), 0.0);
 }

@@ -7,7 +7,7 @@
 #import bevy_pbr::mesh_functions::{get_world_from_local, mesh_position_local_to_clip}
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_render::view::View
-#import bevy_caustics::receiver::{Medium, optical_depth, world_at}
+#import bevy_caustics::receiver::{Medium, medium_optical_depth, world_at}
 
 struct Media {
     count: u32,
@@ -43,6 +43,16 @@ fn ray_end(frag: vec2<f32>, depth: f32, start: vec3<f32>) -> vec3<f32> {
     return start + normalize(along) * FAR;
 }
 
+// Σ σt ℓ over the view's media along the segment from `start` to `end`
+// (`medium_optical_depth`).
+fn optical_depth(start: vec3<f32>, end: vec3<f32>, tint: bool) -> vec3<f32> {
+    var sum = vec3(0.0);
+    for (var i = 0u; i < min(media.count, 4u); i++) {
+        sum += medium_optical_depth(media.media[i], start, end, tint);
+    }
+    return sum;
+}
+
 @fragment
 fn dim_behind_transmission(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let pixel = vec2<i32>(in.position.xy);
@@ -53,7 +63,7 @@ fn dim_behind_transmission(in: FullscreenVertexOutput) -> @location(0) vec4<f32>
         discard;
     }
     let start = world_at(view, in.position.xy, surface);
-    return vec4(exp(-optical_depth(media.media, media.count, start, ray_end(in.position.xy, opaque, start), false)), 1.0);
+    return vec4(exp(-optical_depth(start, ray_end(in.position.xy, opaque, start), false)), 1.0);
 }
 
 @fragment
@@ -61,5 +71,5 @@ fn tint(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     // From the near plane: a point on the eye ray for any projection.
     let start = world_at(view, in.position.xy, 1.0);
     let depth = textureLoad(view_depth, vec2<i32>(in.position.xy), 0);
-    return vec4(exp(-optical_depth(media.media, media.count, start, ray_end(in.position.xy, depth, start), true)), 1.0);
+    return vec4(exp(-optical_depth(start, ray_end(in.position.xy, depth, start), true)), 1.0);
 }
