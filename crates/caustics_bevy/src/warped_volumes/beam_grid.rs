@@ -51,9 +51,9 @@ pub(super) struct GpuBeamGrids {
 /// volume shares a hue, the first four only: the direction and the source's sum).
 const CELL_BYTES: u64 = 32;
 
-/// Nine words a cell as the deposit adds to it: the source in 64-bit fixed point, the
-/// directions whose lowest corner the cell is in 32-bit.
-const FIXED_CELL_BYTES: u64 = 36;
+/// Six words a cell as the deposit adds to it, in 32-bit fixed point: the source and the
+/// directions whose lowest corner the cell is.
+const FIXED_CELL_BYTES: u64 = 24;
 
 /// Render world: the grids of this frame's media and whether they need a deposit.
 #[derive(Resource, Default)]

@@ -21,34 +21,27 @@ struct Grids {
     max_steps: u32,
 }
 
-// The deposit's nine words a cell: colour · E_beam · e^{−σt dₛ} (rgb), each a signed
-// 64-bit fixed-point number (low word, high word), so that it adds with one integer
-// atomic where a float add needs a compare-exchange loop; then the directions of the
-// samples whose lowest corner the cell is (xyz), each a 32-bit signed integer in
-// `DIRECTION_UNITS` of the light's units. `resolve` turns them into the march's two
-// `vec4<f32>` a cell.
-const FIXED_WORDS: u32 = 9u;
-const DIRECTION_WORD: u32 = 6u;
-
-// A direction word's units: 2⁻¹⁴ of the light's, so that a cell's sum (under 11 · 2⁴⁰
-// light units, `fixed_units`) stays under 2³¹; only the direction of the sum matters.
-const DIRECTION_UNITS: f32 = 6.103515625e-5;
+// The deposit's six words a cell: colour · E_beam · e^{−σt dₛ} (rgb), then the
+// directions of the samples whose lowest corner the cell is, weighted by their light
+// (xyz), each a signed 32-bit fixed-point number (`fixed_units`), so that it adds with
+// one integer atomic where a float add needs a compare-exchange loop. `resolve` turns
+// them into the march's two `vec4<f32>` a cell.
+const FIXED_WORDS: u32 = 6u;
+const DIRECTION_WORD: u32 = 3u;
 
 // `build.wgsl`'s FLUX: the build's kept flux, three words of f32 bits.
 const FLUX: u32 = 9u;
 
-// A 64-bit word's value from its two halves.
-const TWO_32: f32 = 4294967296.0;
-
-// The fixed-point units a cell's value is counted in: 2⁴⁰ units to Φ · edge / V (Φ the
+// The fixed-point units a cell's value is counted in: 2²⁵ units to Φ · edge / V (Φ the
 // build's kept flux, its largest channel, `counters[9..12]`; edge and V a cell's).
-// Where every beam meets one cell it holds under 11 Φ · edge / V (a beam's path
-// through the eight cells around a sample is under 2√3 edges, its power under 3 Φ),
-// 2⁴⁴ units, far under 2⁶³; a cell a million times dimmer than the mean still counts
-// thousands of units.
+// Where every beam meets one cell it holds under 11 Φ · edge / V in a channel (a beam's
+// path through the eight cells around a sample is under 2√3 edges, its power under
+// 3 Φ), so the three channels' sum, which one hue keeps, and the summed direction stay
+// under 33 · 2²⁵ < 2³¹ units. A cell of the mean brightness of a 96² layer that every
+// beam crosses counts about 2¹² units.
 fn fixed_units(g: Grid, flux: vec3<f32>) -> f32 {
     let unit = max(flux.x, max(flux.y, flux.z)) * g.cell.x / g.cell.y;
-    return select(1.0, clamp(1099511627776.0 / unit, 1.0e-30, 1.0e30), unit > 0.0);
+    return select(1.0, clamp(33554432.0 / unit, 1.0e-30, 1.0e30), unit > 0.0);
 }
 
 struct GridCorner {
@@ -96,18 +89,9 @@ fn grid_corner(g: Grid, corners: GridCorners, corner: u32) -> GridCorner {
 const MAX_DEPOSIT_LAYERS: u32 = 1024u;
 const MAX_DEPOSIT_SPLIT: u32 = 64u;
 
-// `value` fixed units (rounded, within ±2⁶²) added to the 64-bit number at `word`: the
-// low word with one atomic add, the high word only when it changes (a carry, or a
-// negative value's high half without one).
+// `value` fixed units, rounded, added to the signed number at `word`.
 fn add(word: u32, value: f32) {
-    let x = clamp(value, -4.6e18, 4.6e18) + 0.5;
-    let high = floor(x / TWO_32);
-    let low = u32(clamp(x - high * TWO_32, 0.0, 4294967295.0));
-    let old = atomicAdd(&fixed[word], low);
-    let carry = bitcast<u32>(i32(high)) + select(0u, 1u, old + low < old);
-    if carry != 0u {
-        atomicAdd(&fixed[word + 1u], carry);
-    }
+    atomicAdd(&fixed[word], bitcast<u32>(i32(floor(clamp(value, -2.1e9, 2.1e9) + 0.5))));
 }
 
 // `deposit_split`: one split for the whole beam, at its wider end.
@@ -222,13 +206,12 @@ fn spread(g: Grid, grid_point: vec3<f32>, source: vec3<f32>, direction: vec3<f32
             continue;
         }
         for (var k = 0u; k < channels; k++) {
-            add(c.cell * FIXED_WORDS + 2u * k, c.weight * light[k]);
+            add(c.cell * FIXED_WORDS + k, c.weight * light[k]);
         }
     }
     let lowest = grid_corner(g, corners, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
-    let d = clamp(direction * DIRECTION_UNITS, vec3(-2.1e9), vec3(2.1e9));
     for (var k = 0u; k < 3u; k++) {
-        atomicAdd(&fixed[lowest + k], bitcast<u32>(i32(floor(d[k] + 0.5))));
+        add(lowest + k, direction[k]);
     }
 }
 
@@ -290,22 +273,15 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
 @group(0) @binding(2) var<storage, read> fixed: array<u32>;
 @group(0) @binding(3) var<storage, read_write> cells: array<vec4<f32>>;
 
-// A signed 64-bit fixed-point number (`add`) as a float, negated whole when negative so
-// that a small negative number keeps its digits.
+// A fixed-point word (`add`) as a float.
 fn from_fixed(word: u32) -> f32 {
-    let low = fixed[word];
-    let high = fixed[word + 1u];
-    let negative = high >= 0x80000000u;
-    let l = select(low, ~low + 1u, negative);
-    let h = select(high, ~high + select(0u, 1u, l == 0u), negative);
-    let m = f32(h) * TWO_32 + f32(l);
-    return select(m, -m, negative);
+    return f32(bitcast<i32>(fixed[word]));
 }
 
-// The directions deposited at a cell's word `DIRECTION_WORD`, in light units.
+// The directions deposited at a cell's word `DIRECTION_WORD`.
 fn deposited_direction(cell: u32) -> vec3<f32> {
     let word = cell * FIXED_WORDS + DIRECTION_WORD;
-    return vec3<f32>(bitcast<vec3<i32>>(vec3(fixed[word], fixed[word + 1u], fixed[word + 2u]))) / DIRECTION_UNITS;
+    return vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u));
 }
 
 // One invocation a cell of every grid: its fixed-point words as the march reads them,
@@ -340,7 +316,7 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
             cells[2u * cell] = vec4(direction, from_fixed(word)) / units;
             continue;
         }
-        cells[2u * cell] = vec4(from_fixed(word), from_fixed(word + 2u), from_fixed(word + 4u), 0.0) / units;
+        cells[2u * cell] = vec4(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u), 0.0) / units;
         cells[2u * cell + 1u] = vec4(direction / units, 0.0);
     }
 }
