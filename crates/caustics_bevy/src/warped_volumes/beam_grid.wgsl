@@ -185,23 +185,26 @@ fn beam_layer(beam: ThinBeam, depth: f32, j: u32) -> BeamLayer {
     out.alpha = 0.5 * (lo + hi);
     out.d_alpha = hi - lo;
     out.grid_point = beam.start + out.alpha * beam.per_alpha;
-    if lo == whole_lo && hi == whole_hi {
-        out.grid_point[beam.axis] = layer;
-    }
+    out.grid_point[beam.axis] = layer;
     return out;
 }
 
-// The deposit's spread (`BeamGrid::deposit`) over the cells around a grid point (those
-// of weight zero left out), in fixed-point units (where every volume shares one hue,
-// only the source's sum, which `resolve` shares out by the hue), and its direction
-// added to the lowest of them.
-fn spread(g: Grid, grid_point: vec3<f32>, source: vec3<f32>, direction: vec3<f32>) {
+// The deposit's spread (`BeamGrid::deposit`) over the cells around a grid point on a
+// layer's middle plane across `axis`: the four of its layer, since the other four weigh
+// nothing (one atomic add a channel each, in fixed-point units; where every volume
+// shares one hue, only the source's sum, which `resolve` shares out by the hue), and
+// its direction added to the lowest of the eight.
+fn spread(g: Grid, grid_point: vec3<f32>, axis: u32, source: vec3<f32>, direction: vec3<f32>) {
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
     let light = select(source, vec3(source.x + source.y + source.z, 0.0, 0.0), one_hue);
     let corners = grid_corners_at(g, grid_point);
-    for (var corner = 0u; corner < 8u; corner++) {
-        let c = grid_corner(g, corners, corner);
+    // The layer's side of the eight along `axis` (its weight there is 0 or 1), and the
+    // two axes across it.
+    let side = select(0u, 1u, corners.f[axis] > 0.5) << axis;
+    let across = vec2((axis + 1u) % 3u, (axis + 2u) % 3u);
+    for (var j = 0u; j < 4u; j++) {
+        let c = grid_corner(g, corners, side | ((j & 1u) << across.x) | ((j >> 1u) << across.y));
         if c.weight == 0.0 {
             continue;
         }
@@ -259,7 +262,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                     if any(source != source) || any(abs(source) > vec3(3.0e38)) {
                         continue;
                     }
-                    spread(g, layer.grid_point, source, s.ray / beam_length * (source.x + source.y + source.z));
+                    spread(g, layer.grid_point, beam.axis, source, s.ray / beam_length * (source.x + source.y + source.z));
                 }
             }
         }

@@ -126,8 +126,10 @@ impl ThinBeam {
     }
 
     /// Layer `j` of [`Self::count`]: the α in the middle of the part of the beam
-    /// inside it, that part's length in α, and its grid point there, on the layer's
-    /// middle plane where the beam crosses the whole layer.
+    /// inside it, that part's length in α, and its grid point there, moved along the
+    /// axis onto the layer's middle plane: across the axis a sample spreads
+    /// trilinearly, along it it is binned whole into its layer (where the beam ends
+    /// inside the layer too), so it lights only the four cells of its layer around it.
     pub fn layer(&self, depth: f32, j: u32) -> Option<(f32, f32, Vec3)> {
         let layer = (self.first + j as i32) as f32;
         let (a0, a1) = ((layer - 0.5 - self.start[self.axis]) / self.per_alpha[self.axis], (layer + 0.5 - self.start[self.axis]) / self.per_alpha[self.axis]);
@@ -138,9 +140,7 @@ impl ThinBeam {
         }
         let alpha = 0.5 * (lo + hi);
         let mut q = self.start + alpha * self.per_alpha;
-        if lo == whole_lo && hi == whole_hi {
-            q[self.axis] = layer;
-        }
+        q[self.axis] = layer;
         Some((alpha, hi - lo, q))
     }
 }
