@@ -1,12 +1,14 @@
 // Caustic volumes built on the GPU: the WGSL twin of `build_generator_volumes` in
 // `caustics_core::volumes`, one job (a generator under one light, in one colour
-// channel) at a time, in three dispatches:
+// channel) at a time, in four dispatches:
 //
 // - `vertex_rays`: each vertex placed in the world, its ray reflected or refracted with
 //   its Fresnel weight, whether an occluder hides it from the light, and where its ray
 //   first meets an occluder (the scene's other surfaces, `bevy_caustics::triangle_bvh`);
 // - `slicing_axis`: the rays' sum, the axis shared by the triangles it fits (one
 //   workgroup);
+// - `vertex_fans`: each vertex's fan coefficients in a frame along that axis, which the
+//   triangles that slice along it share;
 // - `triangle_volumes`: each triangle's caustic volume (frame, flattening, area and fan
 //   coefficients of §3.4, hit planes, the bounding prism of §4.3), appended to the
 //   volumes the passes draw; a dropped triangle (unlit, shadowed, TIR, grazing,
@@ -41,6 +43,7 @@ struct VertexRay {
     incident: vec4<f32>,   // the light's travel direction; w the irradiance (0 in shadow)
     hit: vec4<f32>,        // where the ray first meets an occluder; w 1 when it does
     hit_normal: vec4<f32>, // that surface's geometric normal; w 1 when an occluder hides the vertex
+    fan: vec4<f32>,        // `vertex_fans`: the fan's coefficients at the vertex along the shared axis; w 1 when found
 }
 
 @group(0) @binding(0) var<uniform> job: BuildJob;
@@ -535,6 +538,64 @@ fn bounding_shape(top: array<vec3<f32>, 3>, rays: array<vec3<f32>, 3>, depth: f3
     return box;
 }
 
+// `tracer::orthonormal_basis(y).0`: a unit vector perpendicular to the unit `y`.
+fn perpendicular(y: vec3<f32>) -> vec3<f32> {
+    let sign = select(1.0, -1.0, (bitcast<u32>(y.z) >> 31u) != 0u);
+    let a = -1.0 / (sign + y.z);
+    return vec3(1.0 + sign * y.x * y.x * a, sign * y.x * y.y * a, -sign * y.x);
+}
+
+// The area coefficients of the fan around `vertex`, flattened into frame `f` and
+// summed (§3.4, Fig. 5); w 0 where a triangle of it cannot be flattened.
+fn fan_sum(f: Frame, vertex: u32) -> vec4<f32> {
+    var sum = vec3(0.0);
+    for (var k = fan_starts[vertex]; k < fan_starts[vertex + 1u]; k++) {
+        let t = fan_triangles[k];
+        var fv: array<vec3<f32>, 3>;
+        var fr: array<vec3<f32>, 3>;
+        for (var j = 0u; j < 3u; j++) {
+            let corner = triangles[3u * t + j];
+            let flat = flattened(f, rays[corner].position.xyz, rays[corner].direction.xyz);
+            if !flat.ok {
+                return vec4(0.0);
+            }
+            fv[j] = flat.v;
+            fr[j] = flat.r;
+        }
+        sum += area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]);
+    }
+    return vec4(sum, 1.0);
+}
+
+// `fan_sum` at a vertex in the frame of a triangle that slices along the shared axis
+// `y` (origin `origin`, its z mirrored or not), from the vertex's own (`vertex_fans`):
+// the two frames differ by a turn about y, which keeps areas across it, a height h,
+// which shifts the depth (A(α + h)), and perhaps a mirror, which negates the areas.
+fn shifted_fan(ray: VertexRay, origin: vec3<f32>, y: vec3<f32>, mirrored: bool) -> vec4<f32> {
+    let h = dot(origin - ray.position.xyz, y);
+    let s = ray.fan.xyz;
+    let shifted = vec3(s.x + h * (s.y + h * s.z), s.y + 2.0 * h * s.z, s.z);
+    return vec4(select(shifted, -shifted, mirrored), ray.fan.w);
+}
+
+// Each vertex's fan sum in the frame at the vertex whose y is the shared slicing axis
+// (`perpendicular` its x), once a vertex rather than once for each of the triangles
+// around it that slice along the axis (`shifted_fan`).
+@compute @workgroup_size(64)
+fn vertex_fans(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= job.counts.x {
+        return;
+    }
+    let axis = rays[job.counts.x].direction;
+    var fan = vec4(0.0);
+    if axis.w > 0.0 {
+        let x = perpendicular(axis.xyz);
+        fan = fan_sum(Frame(rays[i].position.xyz, x, axis.xyz, cross(x, axis.xyz)), i);
+    }
+    rays[i].fan = fan;
+}
+
 // The flux a triangle's volume keeps and the flux it drops, per channel.
 struct TriangleFlux {
     kept: vec3<f32>,
@@ -603,11 +664,9 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     }
     // The generator's shared slicing axis where it fits this triangle, else its normal.
     let axis = rays[job.counts.x].direction;
-    var y = normal;
-    if axis.w > 0.0 && dot(unit[0], axis.xyz) >= SHARED_AXIS_MIN_COS && dot(unit[1], axis.xyz) >= SHARED_AXIS_MIN_COS
-        && dot(unit[2], axis.xyz) >= SHARED_AXIS_MIN_COS && dot(normal, axis.xyz) >= SHARED_AXIS_MIN_COS {
-        y = axis.xyz;
-    }
+    let along_axis = axis.w > 0.0 && dot(unit[0], axis.xyz) >= SHARED_AXIS_MIN_COS && dot(unit[1], axis.xyz) >= SHARED_AXIS_MIN_COS
+        && dot(unit[2], axis.xyz) >= SHARED_AXIS_MIN_COS && dot(normal, axis.xyz) >= SHARED_AXIS_MIN_COS;
+    let y = select(normal, axis.xyz, along_axis);
     // The origin is the vertex lowest along y.
     var lowest = 0u;
     for (var i = 1u; i < 3u; i++) {
@@ -618,10 +677,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     let to_next = p[(lowest + 1u) % 3u] - p[lowest];
     var x = try_normalize(to_next - y * dot(to_next, y));
     if all(x == vec3(0.0)) {
-        // `tracer::orthonormal_basis(y).0`.
-        let sign = select(1.0, -1.0, (bitcast<u32>(y.z) >> 31u) != 0u);
-        let a = -1.0 / (sign + y.z);
-        x = vec3(1.0 + sign * y.x * y.x * a, sign * y.x * y.y * a, -sign * y.x);
+        x = perpendicular(y);
     }
     var frame = Frame(p[lowest], x, y, cross(x, y));
     var v: array<vec3<f32>, 3>;
@@ -636,7 +692,8 @@ fn triangle_volume(t: u32) -> TriangleFlux {
         r[i] = f.r;
     }
     var abc = area_coefficients(v[0], v[1], v[2], r[0], r[1], r[2]);
-    if abc.x < 0.0 {
+    let mirrored = abc.x < 0.0;
+    if mirrored {
         // Mirroring z keeps every ray's height.
         frame.z = -frame.z;
         for (var i = 0u; i < 3u; i++) {
@@ -660,28 +717,19 @@ fn triangle_volume(t: u32) -> TriangleFlux {
         return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
     }
     // Per-vertex coefficients from the fan around each vertex, flattened into this
-    // frame and summed (§3.4, Fig. 5); the triangle's own where it cannot be flattened.
+    // frame and summed (§3.4, Fig. 5; the CPU twin flattens every fan in the triangle's
+    // frame, as `fan_sum` does off the shared axis); the triangle's own where it
+    // cannot be flattened.
     var fan = array(abc, abc, abc);
     for (var i = 0u; i < 3u; i++) {
-        var sum = vec3(0.0);
-        var complete = true;
-        for (var k = fan_starts[tri[i]]; k < fan_starts[tri[i] + 1u] && complete; k++) {
-            let f = fan_triangles[k];
-            var fv: array<vec3<f32>, 3>;
-            var fr: array<vec3<f32>, 3>;
-            for (var j = 0u; j < 3u; j++) {
-                let vertex = triangles[3u * f + j];
-                let flat = flattened(frame, rays[vertex].position.xyz, rays[vertex].direction.xyz);
-                complete = complete && flat.ok;
-                fv[j] = flat.v;
-                fr[j] = flat.r;
-            }
-            if complete {
-                sum += area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]);
-            }
+        var sum: vec4<f32>;
+        if along_axis {
+            sum = shifted_fan(rays[tri[i]], frame.origin, y, mirrored);
+        } else {
+            sum = fan_sum(frame, tri[i]);
         }
-        if complete && sum.x > 0.0 && is_finite3(sum) {
-            fan[i] = sum;
+        if sum.w > 0.0 && sum.x > 0.0 && is_finite3(sum.xyz) {
+            fan[i] = sum.xyz;
         }
     }
     var out: CausticVolume;

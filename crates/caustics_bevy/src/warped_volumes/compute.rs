@@ -51,8 +51,8 @@ struct GpuBuildJob {
     vertex: UVec4,
 }
 
-/// `VertexRay` in `build.wgsl`: six `vec4`s.
-const VERTEX_RAY_BYTES: u64 = 6 * 16;
+/// `VertexRay` in `build.wgsl`: seven `vec4`s.
+const VERTEX_RAY_BYTES: u64 = 7 * 16;
 
 /// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
 /// instances, two zeros), five counts, the kept and the dropped flux (f32 bits), the
@@ -224,12 +224,12 @@ impl VolumeBuild {
     }
 }
 
-/// The build's pipelines (vertex rays, slicing axis, triangle volumes) and layout, and
-/// the occluders' refit.
+/// The build's pipelines (vertex rays, slicing axis, vertex fans, triangle volumes) and
+/// layout, and the occluders' refit.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {
     layout: KeptLayout,
-    pipelines: [CachedComputePipelineId; 3],
+    pipelines: [CachedComputePipelineId; 4],
     refit: BvhRefitPipelines,
 }
 
@@ -254,7 +254,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
-    let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "triangle_volumes"]);
+    let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes"]);
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
@@ -461,7 +461,7 @@ pub(super) fn prepare_build(
 }
 
 /// Once per change of the sources (every frame while they move on the GPU): the
-/// counters started again, every job's three dispatches, then a copy of the counters
+/// counters started again, every job's four dispatches, then a copy of the counters
 /// for the main world, at once for new sources.
 pub(super) fn build_volumes(
     mut ctx: RenderContext,
@@ -499,6 +499,8 @@ pub(super) fn build_volumes(
         pass.set_pipeline(kernels[1]);
         pass.dispatch_workgroups(1, 1, 1);
         pass.set_pipeline(kernels[2]);
+        pass.dispatch_workgroups(dispatch.vertices.div_ceil(64), 1, 1);
+        pass.set_pipeline(kernels[3]);
         pass.dispatch_workgroups(dispatch.triangles.div_ceil(64), 1, 1);
     }
     span.end(&mut pass);
