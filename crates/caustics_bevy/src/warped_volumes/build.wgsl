@@ -43,7 +43,7 @@ struct VertexRay {
     incident: vec4<f32>,   // the light's travel direction; w the irradiance (0 in shadow)
     hit: vec4<f32>,        // where the ray first meets an occluder; w 1 when it does
     hit_normal: vec4<f32>, // that surface's geometric normal; w 1 when an occluder hides the vertex
-    fan: vec4<f32>,        // `vertex_fans`: the fan's coefficients at the vertex along the shared axis; w 1 when found
+    fan: vec4<f32>,        // `vertex_fans`, where there is a shared axis: the fan's coefficients along it; w 0 where it cannot be flattened
 }
 
 @group(0) @binding(0) var<uniform> job: BuildJob;
@@ -584,22 +584,25 @@ fn shifted_fan(ray: VertexRay, origin: vec3<f32>, y: vec3<f32>, mirrored: bool) 
 @compute @workgroup_size(64)
 fn vertex_fans(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
-    if i >= job.counts.x {
+    let axis = rays[job.counts.x].direction;
+    // Without a shared axis no triangle reads the fans.
+    if i >= job.counts.x || axis.w == 0.0 {
         return;
     }
-    let axis = rays[job.counts.x].direction;
-    var fan = vec4(0.0);
-    if axis.w > 0.0 {
-        let x = perpendicular(axis.xyz);
-        fan = fan_sum(Frame(rays[i].position.xyz, x, axis.xyz, cross(x, axis.xyz)), i);
-    }
-    rays[i].fan = fan;
+    let x = perpendicular(axis.xyz);
+    rays[i].fan = fan_sum(Frame(rays[i].position.xyz, x, axis.xyz, cross(x, axis.xyz)), i);
 }
 
 // The flux a triangle's volume keeps and the flux it drops, per channel.
 struct TriangleFlux {
     kept: vec3<f32>,
     dropped: vec3<f32>,
+}
+
+// A dropped triangle's flux: its vertices' mean weight over its area (half the length
+// of its edges' cross product).
+fn dropped(colour: vec3<f32>, weight: vec3<f32>, cross_length: f32) -> TriangleFlux {
+    return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
 }
 
 // Triangle `t`'s caustic volume, appended to `volumes` where it is kept, and its flux,
@@ -656,7 +659,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     }
     if tir {
         atomicAdd(&counters[TOTAL_INTERNAL_REFLECTION], 1u);
-        return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+        return dropped(colour, weight, cross_length);
     }
     var normal = geometric;
     if dot(unit[0] + unit[1] + unit[2], normal) < 0.0 {
@@ -686,7 +689,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
         let f = flattened(frame, p[i], unit[i]);
         if !f.ok {
             atomicAdd(&counters[GRAZING], 1u);
-            return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+            return dropped(colour, weight, cross_length);
         }
         v[i] = f.v;
         r[i] = f.r;
@@ -714,7 +717,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     depth *= 1.0 + 1.0e-3;
     if !(depth > 0.0) || !(abc.x > 0.0) || !is_finite3(abc) {
         atomicAdd(&counters[DEGENERATE], 1u);
-        return TriangleFlux(vec3(0.0), colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * cross_length));
+        return dropped(colour, weight, cross_length);
     }
     // Per-vertex coefficients from the fan around each vertex, flattened into this
     // frame and summed (§3.4, Fig. 5; the CPU twin flattens every fan in the triangle's
