@@ -10,11 +10,7 @@ fn main() {
 
 fn setup(mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>, mut materials: ResMut<Assets<StandardMaterial>>) {
     // A floor that shows the caustic light landing on it.
-    commands.spawn((
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(4.0, 4.0))),
-        MeshMaterial3d(materials.add(Color::srgb(0.8, 0.75, 0.6))),
-        CausticReceiver,
-    ));
+    commands.spawn((Mesh3d(meshes.add(Plane3d::default().mesh().size(4.0, 4.0))), MeshMaterial3d(materials.add(Color::srgb(0.8, 0.75, 0.6))), CausticReceiver));
     // A gently curved sheet of glass 1 m up that refracts the sun (IOR 1.5).
     let mut sheet = Plane3d::default().mesh().size(2.0, 2.0).subdivisions(16).build();
     if let Some(bevy::mesh::VertexAttributeValues::Float32x3(positions)) = sheet.attribute_mut(Mesh::ATTRIBUTE_POSITION) {

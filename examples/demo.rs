@@ -73,8 +73,7 @@ const EV100: f32 = 11.5;
 fn main() -> AppExit {
     let frames: u32 = support::option("frames", FRAMES);
     let mut app = App::new();
-    app.add_plugins((support::plugins("demo", "pool", (WIDTH, HEIGHT), frames), CausticsPlugin, Pool))
-        .add_systems(Update, (touch_water, move_sun));
+    app.add_plugins((support::plugins("demo", "pool", (WIDTH, HEIGHT), frames), CausticsPlugin, Pool)).add_systems(Update, (touch_water, move_sun));
     if support::headless() {
         // Frames 50 ms apart.
         app.insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(50)));
@@ -263,12 +262,7 @@ fn spawn_walls(world: &mut World, tiled: &Tiled) {
     for turn in 0..4 {
         let rotation = Quat::from_rotation_y(turn as f32 * FRAC_PI_2);
         let centre = rotation * Vec3::new(0.0, height / 2.0 - DEPTH, -SIZE / 2.0);
-        world.spawn((
-            Mesh3d(wall.clone()),
-            MeshMaterial3d(material.clone()),
-            Transform::from_translation(centre).with_rotation(rotation),
-            CausticReceiver,
-        ));
+        world.spawn((Mesh3d(wall.clone()), MeshMaterial3d(material.clone()), Transform::from_translation(centre).with_rotation(rotation), CausticReceiver));
     }
 }
 
@@ -300,7 +294,9 @@ fn spawn_deck(world: &mut World) {
     let y = COPING - THICK / 2.0;
     let offset = (SIZE + WIDE) / 2.0;
     let (side, end) = (Vec2::new(SIZE + 2.0 * WIDE, WIDE), Vec2::new(WIDE, SIZE));
-    for (size, at) in [(side, Vec3::new(0.0, y, offset)), (side, Vec3::new(0.0, y, -offset)), (end, Vec3::new(offset, y, 0.0)), (end, Vec3::new(-offset, y, 0.0))] {
+    for (size, at) in
+        [(side, Vec3::new(0.0, y, offset)), (side, Vec3::new(0.0, y, -offset)), (end, Vec3::new(offset, y, 0.0)), (end, Vec3::new(-offset, y, 0.0))]
+    {
         let stone = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
             base_color_texture: Some(slabs.clone()),
             uv_transform: Affine2::from_scale(2.0 * size),

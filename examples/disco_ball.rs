@@ -100,14 +100,7 @@ fn spawn_room(world: &mut World, facets: usize) {
     // the ball's outline (0.152 rad from there), so no direct light spills past it.
     let spot = Vec3::new(1.2, 3.4, 1.8);
     world.spawn((
-        SpotLight {
-            intensity: 400_000.0,
-            range: 20.0,
-            outer_angle: 0.15,
-            inner_angle: 0.1,
-            shadow_maps_enabled: true,
-            ..default()
-        },
+        SpotLight { intensity: 400_000.0, range: 20.0, outer_angle: 0.15, inner_angle: 0.1, shadow_maps_enabled: true, ..default() },
         Transform::from_translation(spot).looking_at(BALL_CENTER, Vec3::Y),
     ));
     // A thin haze fills the room: the facets' beams show in it.

@@ -97,14 +97,7 @@ fn spawn_scene(world: &mut World, bunny: &TriMesh) {
 
     // Two lights: a spot from above on the bunny and a low sun across the ring.
     world.spawn((
-        SpotLight {
-            intensity: 4.0e6,
-            range: 30.0,
-            inner_angle: 0.25,
-            outer_angle: 0.4,
-            shadow_maps_enabled: true,
-            ..default()
-        },
+        SpotLight { intensity: 4.0e6, range: 30.0, inner_angle: 0.25, outer_angle: 0.4, shadow_maps_enabled: true, ..default() },
         Transform::from_xyz(-1.2, 3.5, 0.6).looking_at(Vec3::new(-0.5, 0.3, 0.1), Vec3::Y),
     ));
     world.spawn((

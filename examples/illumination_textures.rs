@@ -124,10 +124,8 @@ fn move_ball_and_light(
 
 /// 1–5: 1, 2, 4, 8 or 16 planes; T: the next texture size.
 fn switch_settings(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<IlluminationTexturesSettings>) {
-    let planes = [KeyCode::Digit1, KeyCode::Digit2, KeyCode::Digit3, KeyCode::Digit4, KeyCode::Digit5]
-        .iter()
-        .position(|&k| keys.just_pressed(k))
-        .map(|i| 1 << i);
+    let planes =
+        [KeyCode::Digit1, KeyCode::Digit2, KeyCode::Digit3, KeyCode::Digit4, KeyCode::Digit5].iter().position(|&k| keys.just_pressed(k)).map(|i| 1 << i);
     if let Some(planes) = planes {
         settings.planes = planes;
         info!("illumination textures: {planes} planes");

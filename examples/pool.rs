@@ -25,8 +25,7 @@ const HEIGHT: u32 = 540;
 /// The pool is `SIZE` metres square.
 const SIZE: f32 = 4.0;
 /// Scripted pebbles for the headless run: frame, position on the water (x, z).
-const PEBBLES: [(u32, Vec2); 4] =
-    [(0, Vec2::new(0.8, -0.6)), (4, Vec2::new(-1.1, 0.3)), (8, Vec2::new(0.2, 1.2)), (12, Vec2::new(-0.4, -1.3))];
+const PEBBLES: [(u32, Vec2); 4] = [(0, Vec2::new(0.8, -0.6)), (4, Vec2::new(-1.1, 0.3)), (8, Vec2::new(0.2, 1.2)), (12, Vec2::new(-0.4, -1.3))];
 /// A pebble's wave height at its start (m).
 const PEBBLE: f32 = 0.015;
 /// Frames rendered headless, 50 ms apart.
@@ -85,10 +84,7 @@ fn spawn_pool(world: &mut World, kernel_radius: u32, depth: f32) {
 }
 
 /// The pool's light settings as sliders in the window.
-fn pool_sliders(
-    mut contexts: bevy_caustics::debug_panel::bevy_egui::EguiContexts,
-    mut pools: Query<&mut PoolRipples>,
-) -> Result {
+fn pool_sliders(mut contexts: bevy_caustics::debug_panel::bevy_egui::EguiContexts, mut pools: Query<&mut PoolRipples>) -> Result {
     use bevy_caustics::debug_panel::bevy_egui::egui::{Slider, Window};
     let Ok(mut pool) = pools.single_mut() else { return Ok(()) };
     let mut settings = pool.clone();

@@ -12,8 +12,8 @@ mod support;
 use bevy::camera::Exposure;
 use bevy::light::GlobalAmbientLight;
 use bevy::math::Affine2;
-use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy::prelude::*;
+use bevy_caustics::caustics_core::{glam, mesh::TriMesh};
 use bevy_caustics::prelude::*;
 use bevy_caustics::read_scene::bevy_mesh;
 
@@ -50,10 +50,7 @@ fn ring(world: &mut World, segments: usize) {
     let ring = world.resource_mut::<Assets<Mesh>>().add(ring);
     let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };
     world.spawn((Mesh3d(ring), MeshMaterial3d(metal), mirror));
-    world.spawn((
-        DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() },
-        Transform::default().looking_to(SUN_DIRECTION, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: SUN_LUX, shadow_maps_enabled: true, ..default() }, Transform::default().looking_to(SUN_DIRECTION, Vec3::Y)));
 }
 
 /// Looking down at the ring, the sun behind it, with a sky for the metal to reflect.

@@ -20,9 +20,7 @@ use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::HierarchicalMapsSettings;
 use bevy_caustics::illumination_textures::IlluminationTexturesSettings;
 use bevy_caustics::ocean::Ocean;
-use bevy_caustics::{
-    CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams, ParticipatingMedium,
-};
+use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams, ParticipatingMedium};
 use caustics_core::rng::Pcg32;
 use std::collections::BTreeMap;
 use support::render;
@@ -128,7 +126,8 @@ impl Churn {
                 world.spawn((Mesh3d(mesh), MeshMaterial3d(self.receiver_material.clone()), CausticReceiver)).id()
             }
             3 => {
-                let medium = ParticipatingMedium { scattering: 0.3 * self.uniform(), absorption: Vec3::splat(0.1) * self.uniform(), asymmetry: 0.9 * self.uniform() };
+                let medium =
+                    ParticipatingMedium { scattering: 0.3 * self.uniform(), absorption: Vec3::splat(0.1) * self.uniform(), asymmetry: 0.9 * self.uniform() };
                 world.spawn((medium, Transform::from_scale(Vec3::splat(6.0)))).id()
             }
             4 => self.spawn_light(world, position),
@@ -162,7 +161,10 @@ impl Churn {
                 .id(),
             1 => world.spawn((PointLight { intensity: power, shadow_maps_enabled: true, ..default() }, Transform::from_translation(position))).id(),
             _ => world
-                .spawn((SpotLight { intensity: power, shadow_maps_enabled: true, ..default() }, Transform::from_translation(position).looking_to(direction, Vec3::X)))
+                .spawn((
+                    SpotLight { intensity: power, shadow_maps_enabled: true, ..default() },
+                    Transform::from_translation(position).looking_to(direction, Vec3::X),
+                ))
                 .id(),
         }
     }
@@ -292,7 +294,11 @@ fn five_hundred_frames_of_churn_leave_no_panic_and_no_gpu_memory_behind() {
 
     let world = renderer.world_mut();
     let receiver_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
-    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(0.9, 0.95, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
+    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgba(0.9, 0.95, 1.0, 0.2),
+        alpha_mode: AlphaMode::Blend,
+        ..default()
+    });
     let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { specular_transmission: 0.9, ior: 1.333, ..default() });
     let mut churn = Churn {
         rng: Pcg32::for_photon(13, 0, 0),
@@ -346,7 +352,12 @@ fn five_hundred_frames_of_churn_leave_no_panic_and_no_gpu_memory_behind() {
             dimmed_behind_water += renderer.pass_report().passes.iter().any(|(p, _)| *p == "medium_behind_transmission") as u32;
             let memory = total(&renderer.gpu_memory().expect("an allocator report"));
             most_memory = most_memory.max(memory);
-            eprintln!("frame {frame}: {} entities alive, {:.1} MiB of GPU memory, passes {:?}", churn.alive.len(), memory as f64 / 1048576.0, renderer.pass_report());
+            eprintln!(
+                "frame {frame}: {} entities alive, {:.1} MiB of GPU memory, passes {:?}",
+                churn.alive.len(),
+                memory as f64 / 1048576.0,
+                renderer.pass_report()
+            );
         }
     }
 
@@ -368,11 +379,7 @@ fn five_hundred_frames_of_churn_leave_no_panic_and_no_gpu_memory_behind() {
         memory.iter().filter(|(label, _)| label.starts_with("caustic_")).map(|(l, b)| (l.clone(), *b)).collect()
     };
     let (ours_before, ours_after) = (ours(&baseline), ours(&after));
-    eprintln!(
-        "the plugin's own: {} bytes before the first spawn, {} bytes once everything was despawned",
-        total(&ours_before),
-        total(&ours_after)
-    );
+    eprintln!("the plugin's own: {} bytes before the first spawn, {} bytes once everything was despawned", total(&ours_before), total(&ours_after));
     let labels: std::collections::BTreeSet<&String> = baseline.keys().chain(after.keys()).collect();
     for label in labels {
         let (before, now) = (baseline.get(label).unwrap_or(&0), after.get(label).unwrap_or(&0));

@@ -14,10 +14,7 @@ use bevy::prelude::*;
 use bevy::render::render_resource::{Extent3d, TextureDimension, TextureFormat};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::pixels::irradiance_image;
-use bevy_caustics::{
-    CausticGenerator, CausticReceiver, Caustics, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium,
-    TagCausticsFromMaterials,
-};
+use bevy_caustics::{CausticGenerator, CausticReceiver, Caustics, InjectedIrradiance, InvalidCausticParams, ParticipatingMedium, TagCausticsFromMaterials};
 use std::f32::consts::PI;
 
 const SIZE: u32 = 64;
@@ -47,10 +44,7 @@ fn spawn_view(renderer: &mut HeadlessRenderer, inject: bool) {
         )
     };
     let texture = world.resource_mut::<Assets<Image>>().add(texture);
-    let receiver_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color_texture: Some(texture),
-        ..default()
-    });
+    let receiver_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color_texture: Some(texture), ..default() });
     let plain = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial::default());
     let plane = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(1.0)).mesh());
     let cube = world.resource_mut::<Assets<Mesh>>().add(Cuboid::new(0.4, 0.4, 0.4));

@@ -55,10 +55,7 @@ fn spawn_scene(renderer: &mut HeadlessRenderer) -> Entity {
     world.spawn((Mesh3d(floor), MeshMaterial3d(white.clone()), CausticReceiver, Transform::from_xyz(0.0, -DEPTH, 0.0)));
     let water = CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(IOR) };
     let pool = world.spawn((pool(), water, MeshMaterial3d(white), RenderLayers::layer(1))).id();
-    world.spawn((
-        DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
-        Transform::default().looking_to(SUN, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(SUN, Vec3::Y)));
     world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::new(0.0, -DEPTH, 0.0)));
     pool
 }
@@ -166,7 +163,10 @@ fn convolution_caustics_match_their_cpu_twin_on_a_real_adapter() {
     };
     let lowest = signed.iter().copied().fold(f32::INFINITY, f32::min);
     let error = relative_l2(&narrow, &cpu);
-    eprintln!("n = 1000: the signed sum reaches {lowest:.3} lux; GPU vs CPU twin relative L2 {error:.2e}, lowest GPU pixel {:.3}", narrow.iter().copied().fold(f32::INFINITY, f32::min));
+    eprintln!(
+        "n = 1000: the signed sum reaches {lowest:.3} lux; GPU vs CPU twin relative L2 {error:.2e}, lowest GPU pixel {:.3}",
+        narrow.iter().copied().fold(f32::INFINITY, f32::min)
+    );
     assert!(lowest < 0.0, "the narrow lobe's signed sum stays positive: the case tests nothing");
     assert!(error < 0.01, "narrow lobe: relative L2 {error}");
     assert!(narrow.iter().all(|&e| e > -1e-3 * ILLUMINANCE), "the GPU subtracts light");

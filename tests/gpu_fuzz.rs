@@ -16,8 +16,8 @@ mod support;
 use bevy::prelude::*;
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::reference::spawn_scene_content;
-use bevy_caustics::{CausticPassReport, CausticTechnique};
 use bevy_caustics::{CausticGenerator, CausticReceiver, DropPebble, PoolRipples};
+use bevy_caustics::{CausticPassReport, CausticTechnique};
 use caustics_core::fuzz::{valid_pool, valid_scene};
 use support::render;
 
@@ -44,10 +44,8 @@ fn extreme_scenes_give_finite_caustics_with_every_technique() {
             assert!(bad.is_none(), "{technique:?}, case {index} ({category:?}): a pixel holds {bad:?}");
             ran += usize::from(renderer.world_mut().resource::<CausticPassReport>().views(pass) > 0);
             let world = renderer.world_mut();
-            let spawned: Vec<Entity> = world
-                .query_filtered::<Entity, Or<(With<Mesh3d>, With<DirectionalLight>, With<PointLight>, With<SpotLight>)>>()
-                .iter(world)
-                .collect();
+            let spawned: Vec<Entity> =
+                world.query_filtered::<Entity, Or<(With<Mesh3d>, With<DirectionalLight>, With<PointLight>, With<SpotLight>)>>().iter(world).collect();
             for entity in spawned {
                 world.despawn(entity);
             }
@@ -89,7 +87,10 @@ fn extreme_pools_give_finite_floors(renderer: &mut HeadlessRenderer, camera: Ent
         let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { alpha_mode: AlphaMode::Blend, ..default() });
         let sun = Vec3::from_array(light.sun_direction.to_array());
         world.spawn((Mesh3d(floor), MeshMaterial3d(white), CausticReceiver, Transform::from_xyz(0.0, -light.depth, 0.0)));
-        world.spawn((DirectionalLight { illuminance: light.sun_irradiance, ..default() }, Transform::default().looking_to(sun, if sun.y.abs() > 0.9 { Vec3::X } else { Vec3::Y })));
+        world.spawn((
+            DirectionalLight { illuminance: light.sun_irradiance, ..default() },
+            Transform::default().looking_to(sun, if sun.y.abs() > 0.9 { Vec3::X } else { Vec3::Y }),
+        ));
         world.spawn((pool, MeshMaterial3d(water), CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(light.ior) }));
         render(renderer, 1);
         for &(at, strength) in &case.pebbles {

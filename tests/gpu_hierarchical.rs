@@ -24,13 +24,13 @@ use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::{CausticMapGather, CausticMapPlan, CausticMapsGpu, HierarchicalMapsSettings};
 use bevy_caustics::read_scene::{bevy_mesh, core_light};
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
+use caustics_core::estimate::IrradianceGrid;
 use caustics_core::glam::{Vec2 as V2, Vec3 as V3};
 use caustics_core::hierarchical::hierarchy::{self, GatherEntry, PhotonPyramid};
 use caustics_core::hierarchical::{CausticMap, Photon, PhotonBuffer, PhotonStats, ViewCaustics};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
 use caustics_core::params::SpecularInteraction;
-use caustics_core::estimate::IrradianceGrid;
 use caustics_core::scene::{Generator, Light, Receiver, Scene};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use std::collections::HashSet;
@@ -125,11 +125,8 @@ fn read_words(renderer: &mut HeadlessRenderer, buffer: impl Fn(&CausticMapsGpu) 
 fn gpu_photons(renderer: &mut HeadlessRenderer) -> PhotonBuffer {
     let uv = read_floats(renderer, |g| g.photons().map(|p| p.0));
     let flux = read_floats(renderer, |g| g.photons().map(|p| p.1));
-    let photons = uv
-        .chunks_exact(2)
-        .zip(flux.chunks_exact(2))
-        .map(|(uv, flux)| Photon { uv: V2::new(uv[0], uv[1]), flux: flux[0], solid_angle: flux[1] })
-        .collect();
+    let photons =
+        uv.chunks_exact(2).zip(flux.chunks_exact(2)).map(|(uv, flux)| Photon { uv: V2::new(uv[0], uv[1]), flux: flux[0], solid_angle: flux[1] }).collect();
     PhotonBuffer { resolution: RESOLUTION, photons, stats: PhotonStats::default() }
 }
 
@@ -248,8 +245,13 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
             let cpu_map = map.resolve();
             let gpu_map = read_floats(&mut renderer, |g| g.resolved(0));
             let error = relative_l2(&gpu_map, &cpu_map);
-            eprintln!("{gather:?}, variable splats {variable_splats}: {} entries ({} clusters), {} nodes processed of {}, map vs CPU relative L2 {error:.1e}",
-                entries.len(), stats.clusters, stats.total_processed(), RESOLUTION * RESOLUTION);
+            eprintln!(
+                "{gather:?}, variable splats {variable_splats}: {} entries ({} clusters), {} nodes processed of {}, map vs CPU relative L2 {error:.1e}",
+                entries.len(),
+                stats.clusters,
+                stats.total_processed(),
+                RESOLUTION * RESOLUTION
+            );
             assert!(error < 1e-5, "{gather:?}: the GPU's map against the CPU's splats of its photons: {error}");
             if gather != CausticMapGather::Flat {
                 assert!(stats.total_processed() < (RESOLUTION * RESOLUTION / 2) as u64);
@@ -312,7 +314,10 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
         .transformed(&caustics_core::glam::Affine3A::from_rotation_translation(caustics_core::glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4), V3::Y));
     let diamond = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&diamond_mesh));
     let ball_mesh = renderer.world_mut().get::<Mesh3d>(ball).unwrap().0.clone();
-    renderer.world_mut().entity_mut(ball).insert((Mesh3d(diamond), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(2.42) }));
+    renderer
+        .world_mut()
+        .entity_mut(ball)
+        .insert((Mesh3d(diamond), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(2.42) }));
     finite(&mut renderer, "total internal reflection");
     // The twin sees total internal reflection there, and the GPU drops the same photons.
     let mut scene = cpu_scene(SpecularInteraction::Refract { ior: 2.42, dispersion: None });
@@ -320,20 +325,34 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     let view = renderer.world_mut().resource::<CausticMapPlan>().views[0].view;
     let twin = ViewCaustics::compute(&scene, &scene.lights[0], &view, &settings(&mut renderer).core());
     let gpu_caustic = gpu_photons(&mut renderer).photons.iter().filter(|p| p.is_valid()).count() as f64;
-    eprintln!("diamond: {} photons totally internally reflected on the CPU, {} caustic there, {gpu_caustic} on the GPU", twin.photons.stats.total_internal_reflection, twin.photons.stats.caustic);
+    eprintln!(
+        "diamond: {} photons totally internally reflected on the CPU, {} caustic there, {gpu_caustic} on the GPU",
+        twin.photons.stats.total_internal_reflection, twin.photons.stats.caustic
+    );
     assert!(twin.photons.stats.total_internal_reflection > 100, "{:?}", twin.photons.stats);
     assert!((gpu_caustic / twin.photons.stats.caustic as f64 - 1.0).abs() < 0.02);
     // Photons thrown away from every receiver by a mirror: they leave the map.
     let mirror = TriMesh::quad(V3::Y, V3::X * 0.5, V3::new(0.0, 0.6, -1.0).normalize() * 0.5);
     let mirror = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(bevy_mesh(&mirror));
-    renderer.world_mut().entity_mut(ball).insert((Mesh3d(mirror), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::mirror() }));
+    renderer
+        .world_mut()
+        .entity_mut(ball)
+        .insert((Mesh3d(mirror), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::mirror() }));
     finite(&mut renderer, "photons leaving the map");
     // Not one lands: an empty photon buffer, gathered and splatted to nothing.
     assert!(gpu_photons(&mut renderer).photons.iter().all(|p| !p.is_valid()), "every photon left the map");
     assert_eq!(gpu_gather(&mut renderer).0.len(), 0);
     // The ball again, into a 16² caustic map: thousands of photons per texel, clustered at every level.
-    renderer.world_mut().entity_mut(ball).insert((Mesh3d(ball_mesh.clone()), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) }));
-    renderer.world_mut().insert_resource(HierarchicalMapsSettings { photon_resolution: RESOLUTION, map_resolution: 16, gather: CausticMapGather::ClusterAllLevels, ..HierarchicalMapsSettings::FULL });
+    renderer
+        .world_mut()
+        .entity_mut(ball)
+        .insert((Mesh3d(ball_mesh.clone()), CausticGenerator { technique: CausticTechnique::HierarchicalMaps, ..CausticGenerator::refractive(1.5) }));
+    renderer.world_mut().insert_resource(HierarchicalMapsSettings {
+        photon_resolution: RESOLUTION,
+        map_resolution: 16,
+        gather: CausticMapGather::ClusterAllLevels,
+        ..HierarchicalMapsSettings::FULL
+    });
     finite(&mut renderer, "photons converging on few texels");
     // The light still reaches the floor, as the twin spreads it over 16² texels (a
     // zero-filled map would pass the finiteness check).
@@ -351,7 +370,11 @@ fn caustic_maps_match_their_cpu_twin_on_a_real_adapter() {
     finite(&mut renderer, "a refractor filling the view");
     // The light inside the ball: six cube faces of a point light.
     renderer.world_mut().entity_mut(ball).insert(Mesh3d(ball_mesh.clone()));
-    renderer.world_mut().entity_mut(light).remove::<SpotLight>().insert((PointLight { intensity: 1000.0, shadow_maps_enabled: false, ..default() }, Transform::from_xyz(0.0, 1.0, 0.0)));
+    renderer
+        .world_mut()
+        .entity_mut(light)
+        .remove::<SpotLight>()
+        .insert((PointLight { intensity: 1000.0, shadow_maps_enabled: false, ..default() }, Transform::from_xyz(0.0, 1.0, 0.0)));
     finite(&mut renderer, "a light inside the generator");
     assert_eq!(gpu(&mut renderer).view_count(), 6);
     // 4096² photons: memory bounded and reported. They take 1.4 GB, past the default
@@ -432,10 +455,8 @@ fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
     let target = renderer.render_target();
     let ball_mesh = TriMesh::uv_sphere(V3::new(0.0, 1.6, 0.0), 0.3, 32, 64);
     let mirror_mesh = TriMesh::quad(V3::new(-0.6, 0.6, 0.0), V3::Y * 0.6, V3::Z * 0.6);
-    let sun = (
-        DirectionalLight { illuminance: 2.0, shadow_maps_enabled: false, ..default() },
-        Transform::default().looking_to(Vec3::new(-0.5, -1.0, 0.0), Vec3::Z),
-    );
+    let sun =
+        (DirectionalLight { illuminance: 2.0, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(Vec3::new(-0.5, -1.0, 0.0), Vec3::Z));
     let world = renderer.world_mut();
     world.insert_resource(GlobalAmbientLight { brightness: 0.0, ..default() });
     world.insert_resource(ClearColor(Color::BLACK));
@@ -482,9 +503,8 @@ fn traced_paths_follow_a_balls_light_onto_a_mirror_another_technique_draws() {
     let (both, near) = matches(&twin.photons);
     let (_, near_image_space) = matches(&image_space.photons);
     // Photons the ball sends onto the mirror: they land on the floor by the mirror's base.
-    let reflected = |b: &PhotonBuffer| {
-        b.photons.iter().filter(|p| p.is_valid() && view.uv(V3::new(-0.3, 0.0, 0.0)).is_some_and(|uv| (p.uv.x - uv.x).abs() < 0.1)).count()
-    };
+    let reflected =
+        |b: &PhotonBuffer| b.photons.iter().filter(|p| p.is_valid() && view.uv(V3::new(-0.3, 0.0, 0.0)).is_some_and(|uv| (p.uv.x - uv.x).abs() < 0.1)).count();
     eprintln!(
         "ball onto a mirror: {} GPU photons, {} on the twin, {both} on both, {near} within half a texel ({near_image_space} of the image-space twin's); {} by the mirror on the GPU, {} on the twin",
         valid(&photons),

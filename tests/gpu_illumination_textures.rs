@@ -16,8 +16,8 @@ use bevy::prelude::*;
 use bevy::render::RenderApp;
 use bevy::render::render_resource::TextureFormat;
 use bevy_caustics::headless::HeadlessRenderer;
-use bevy_caustics::pixels::decode_rgba16f;
 use bevy_caustics::illumination_textures::{IlluminationFrames, IlluminationTexturesGpu, IlluminationTexturesSettings, LightTransportTables};
+use bevy_caustics::pixels::decode_rgba16f;
 use bevy_caustics::read_scene::bevy_mesh;
 use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique};
 use caustics_core::glam::{Vec3 as V3, Vec4 as V4};
@@ -97,7 +97,9 @@ fn read_textures(renderer: &mut HeadlessRenderer, index: usize) -> Vec<Vec<V4>> 
     let texture = gpu(renderer).textures(index).expect("the textures are on the GPU").clone();
     let bytes = renderer.read_texture(&texture).unwrap_or_else(|e| panic!("{e}"));
     let texels: Vec<V4> = match texture.format() {
-        TextureFormat::Rgba32Float => bytes.chunks_exact(16).map(|t| V4::from_array(std::array::from_fn(|c| f32::from_le_bytes(t[4 * c..4 * c + 4].try_into().unwrap())))).collect(),
+        TextureFormat::Rgba32Float => {
+            bytes.chunks_exact(16).map(|t| V4::from_array(std::array::from_fn(|c| f32::from_le_bytes(t[4 * c..4 * c + 4].try_into().unwrap())))).collect()
+        }
         _ => decode_rgba16f(&bytes).into_iter().map(|e| V4::from_array(e.to_array())).collect(),
     };
     texels.chunks_exact((texture.width() * texture.height()) as usize).map(<[V4]>::to_vec).collect()
@@ -228,7 +230,9 @@ fn illumination_textures_match_their_cpu_twin_on_a_real_adapter() {
     // floor, every volume's light lands in view.
     renderer.world_mut().entity_mut(light).despawn();
     renderer.world_mut().entity_mut(block).despawn();
-    renderer.world_mut().spawn((DirectionalLight { illuminance: 100.0, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)));
+    renderer
+        .world_mut()
+        .spawn((DirectionalLight { illuminance: 100.0, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)));
     render_textures(&mut renderer, 0);
     let twin = self::twin(&mut renderer);
     let image = renderer.caustic_irradiance(camera).unwrap_or_else(|e| panic!("{e}"));

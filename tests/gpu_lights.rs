@@ -46,7 +46,14 @@ fn an_ior_one_plate_casts_exactly_bevys_direct_light() {
     world.spawn((Mesh3d(floor), MeshMaterial3d(matte.clone()), CausticReceiver));
     let plate = TriMesh::heightfield(97, 3.0, |_, _| 1.0, |_, _| caustics_core::glam::Vec3::Y).unwrap();
     let plate = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&plate));
-    world.spawn((Mesh3d(plate), MeshMaterial3d(matte), CausticGenerator::refractive(1.0), RenderLayers::layer(1), NotShadowCaster, Transform::from_xyz(0.013, 0.0, 0.007)));
+    world.spawn((
+        Mesh3d(plate),
+        MeshMaterial3d(matte),
+        CausticGenerator::refractive(1.0),
+        RenderLayers::layer(1),
+        NotShadowCaster,
+        Transform::from_xyz(0.013, 0.0, 0.007),
+    ));
     world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
 
     let down = Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z);

@@ -14,7 +14,7 @@ use bevy_caustics::convolution::{PoolRipples, PoolSurface};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::HierarchicalMapsSettings;
 use bevy_caustics::illumination_textures::IlluminationTexturesSettings;
-use bevy_caustics::{CausticGenerator, CausticReceiver, CausticTechnique, CausticGpuBudget};
+use bevy_caustics::{CausticGenerator, CausticGpuBudget, CausticReceiver, CausticTechnique};
 use support::{render, render_caustics};
 
 const SIZE: u32 = 32;
@@ -71,7 +71,12 @@ fn requests_beyond_the_gpu_and_the_budget_are_lowered_and_still_render() {
     ] {
         let world = renderer.world_mut();
         let ball = world.resource_mut::<Assets<Mesh>>().add(Sphere::new(0.5).mesh().ico(3).expect("an icosphere"));
-        world.spawn((Mesh3d(ball), MeshMaterial3d(white.clone()), CausticGenerator { technique, ..CausticGenerator::refractive(1.5) }, Transform::from_xyz(0.0, 0.5, 0.0)));
+        world.spawn((
+            Mesh3d(ball),
+            MeshMaterial3d(white.clone()),
+            CausticGenerator { technique, ..CausticGenerator::refractive(1.5) },
+            Transform::from_xyz(0.0, 0.5, 0.0),
+        ));
         check(&mut renderer, camera, what, pass);
         despawn_generators(&mut renderer);
     }
@@ -79,8 +84,13 @@ fn requests_beyond_the_gpu_and_the_budget_are_lowered_and_still_render() {
     let world = renderer.world_mut();
     let asked = PoolRipples { columns: 8192, rows: 8192, cell_size: 4.0 / 8192.0, depth: 1.0, ..default() };
     // Water the camera sees the floor through (blended surfaces stay out of the depth prepass).
-    let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(0.8, 0.9, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
-    let pool = world.spawn((asked, CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(1.333) }, MeshMaterial3d(water))).id();
+    let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgba(0.8, 0.9, 1.0, 0.2),
+        alpha_mode: AlphaMode::Blend,
+        ..default()
+    });
+    let pool =
+        world.spawn((asked, CausticGenerator { technique: CausticTechnique::Convolution, ..CausticGenerator::refractive(1.333) }, MeshMaterial3d(water))).id();
     render(&mut renderer, 1);
     let world = renderer.world_mut();
     let water = world.get::<PoolSurface>(pool).expect("the pool has water").settings().clone();

@@ -60,9 +60,7 @@ fn malformed_files_load_or_fail_cleanly_in_an_app() {
     let mut renderer = HeadlessRenderer::with_asset_root(SIZE, SIZE, &corpus).unwrap_or_else(|e| panic!("{e}"));
     let target = renderer.render_target();
     let camera = renderer.world_mut().spawn((support::top_down_camera(target, 4.0, SIZE, Vec3::ZERO), Msaa::Off)).id();
-    renderer
-        .world_mut()
-        .spawn((DirectionalLight { illuminance: 10_000.0, ..default() }, Transform::default().looking_to(Vec3::new(0.2, -1.0, 0.1), Vec3::X)));
+    renderer.world_mut().spawn((DirectionalLight { illuminance: 10_000.0, ..default() }, Transform::default().looking_to(Vec3::new(0.2, -1.0, 0.1), Vec3::X)));
 
     let mut outcomes = Vec::new();
     for file in &files {
@@ -133,5 +131,11 @@ fn malformed_files_load_or_fail_cleanly_in_an_app() {
         world.get_mut::<Camera>(camera).expect("the camera").is_active = true;
     }
     let failed: Vec<&str> = outcomes.iter().filter_map(|o| if let Ended::Failed(why) = o { Some(why.as_str()) } else { None }).collect();
-    eprintln!("{} files: {} loaded, {} failed to load, each with one line:\n  {}", outcomes.len(), outcomes.len() - failed.len(), failed.len(), failed.join("\n  "));
+    eprintln!(
+        "{} files: {} loaded, {} failed to load, each with one line:\n  {}",
+        outcomes.len(),
+        outcomes.len() - failed.len(),
+        failed.len(),
+        failed.join("\n  ")
+    );
 }

@@ -83,10 +83,21 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
     let white = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::WHITE, unlit: true, ..default() });
     let board = world.spawn((Mesh3d(board), MeshMaterial3d(white), Transform::from_xyz(0.0, 0.0, -3.0))).id();
     let sun = world
-        .spawn((DirectionalLight { illuminance: SUN, shadow_maps_enabled: true, ..default() }, Transform::default().looking_to(Vec3::new(0.0, -1.0, -1.0), Vec3::Y)))
+        .spawn((
+            DirectionalLight { illuminance: SUN, shadow_maps_enabled: true, ..default() },
+            Transform::default().looking_to(Vec3::new(0.0, -1.0, -1.0), Vec3::Y),
+        ))
         .id();
     let camera = world
-        .spawn((Camera3d::default(), target, Caustics::default(), Tonemapping::None, Msaa::Off, Exposure { ev100: EV100 }, Transform::default().looking_to(Vec3::NEG_Z, Vec3::Y)))
+        .spawn((
+            Camera3d::default(),
+            target,
+            Caustics::default(),
+            Tonemapping::None,
+            Msaa::Off,
+            Exposure { ev100: EV100 },
+            Transform::default().looking_to(Vec3::NEG_Z, Vec3::Y),
+        ))
         .id();
     let clear = centre(&render(&mut renderer, 3));
     assert!(clear.x > 0.1, "the board is not seen: {clear}");
@@ -143,7 +154,10 @@ fn bevy_fog_dims_what_lies_behind_a_medium_and_scatters_the_sun_in_it() {
         renderer.world_mut().entity_mut(glass).insert(Transform::from_xyz(0.0, 0.0, z));
         let dimmed = centre(&render(&mut renderer, 3)) / clear;
         eprintln!("through a transmissive sheet at z = {z}: {dimmed}");
-        assert!((dimmed / expected - Vec3::ONE).abs().max_element() < 0.02, "behind a transmissive sheet at z = {z} the board dims to {dimmed}, not {expected}");
+        assert!(
+            (dimmed / expected - Vec3::ONE).abs().max_element() < 0.02,
+            "behind a transmissive sheet at z = {z} the board dims to {dimmed}, not {expected}"
+        );
     }
     // A lightmapped sheet: Bevy binds its mesh with the lightmap's textures, which the
     // depth pass's pipeline lays out too.
@@ -308,7 +322,6 @@ fn shafts_and_bevy_fog_add_up_to_the_tracers_single_scattering(renderer: &mut He
                 sum[0] += direct(o, d);
                 sum[1] += beams_a.in_scattered_radiance(o, end, 0.02).element_sum();
                 sum[2] += beams_b.in_scattered_radiance(o, end, 0.02).element_sum();
-
             }
             sum.map(|s| s / (sub * sub) as f32)
         })

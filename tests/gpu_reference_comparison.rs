@@ -83,7 +83,15 @@ fn the_reference_comparison_measures_every_technique_and_splits_the_view() {
     assert!(noise > 0.0 && noise < 0.5, "noise {noise}");
     for row in &comparison.rows {
         let error = row.error.unwrap_or_else(|| panic!("{:?} has no error", row.technique));
-        eprintln!("{:?}: L2 {:.3}, L1 {:.3} over {} pixels, {:.2} GPU ms; {}", row.technique, error.l2, error.l1, error.pixels, row.work.caustics_ms(), row.drawn.join("; "));
+        eprintln!(
+            "{:?}: L2 {:.3}, L1 {:.3} over {} pixels, {:.2} GPU ms; {}",
+            row.technique,
+            error.l2,
+            error.l1,
+            error.pixels,
+            row.work.caustics_ms(),
+            row.drawn.join("; ")
+        );
         assert!(error.pixels > 500 && error.l2.is_finite() && error.l1.is_finite(), "{:?} against the tracer: {error:?}", row.technique);
         assert!(row.work.caustics_ms() > 0.0, "{:?}: no GPU time for the caustic passes", row.technique);
     }

@@ -39,12 +39,7 @@ fn receivers_seen_at_a_slant_through_a_multisampled_view_get_their_caustics() {
     world.spawn((Mesh3d(block), MeshMaterial3d(white), CausticReceiver, Transform::from_xyz(0.0, TOP - 0.05, 0.0)));
     // Drawn with transmission, the water is not in the depth prepass: the receiver
     // points are the block's.
-    let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        specular_transmission: 0.9,
-        thickness: 0.3,
-        ior: 1.333,
-        ..default()
-    });
+    let water = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { specular_transmission: 0.9, thickness: 0.3, ior: 1.333, ..default() });
     let pool = PoolRipples { columns: 64, rows: 64, cell_size: 4.0 / 64.0, depth: 1.2, ..default() };
     let water = world.spawn((pool, CausticGenerator::refractive(1.333), MeshMaterial3d(water))).id();
     world.spawn((DirectionalLight { illuminance: SUN_LUX, ..default() }, Transform::default().looking_to(SUN, Vec3::Y)));

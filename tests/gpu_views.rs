@@ -93,10 +93,8 @@ fn view_pixels(image: &RenderedImage, x0: u32) -> Vec<f32> {
 /// Caustic radiance over Bevy's direct radiance at the pixels where both are exact, and
 /// the relative L2 difference of `caustic` from `scale ·` the direct light there.
 fn against_direct(caustic: &[f32], direct: &[f32], centre: Vec3, scale: f32) -> (f32, usize) {
-    let (ours, bevy): (Vec<f32>, Vec<f32>) = (0..SIZE * SIZE)
-        .filter(|&i| near_normal(floor_point(centre, i % SIZE, i / SIZE)))
-        .map(|i| (caustic[i as usize], scale * direct[i as usize]))
-        .unzip();
+    let (ours, bevy): (Vec<f32>, Vec<f32>) =
+        (0..SIZE * SIZE).filter(|&i| near_normal(floor_point(centre, i % SIZE, i / SIZE))).map(|i| (caustic[i as usize], scale * direct[i as usize])).unzip();
     (relative_l2(&ours, &bevy), ours.len())
 }
 
@@ -212,9 +210,7 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     let fogged_direct = view_pixels(&render_without_caustics(&mut renderer, 2), 0);
     let fogged_caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &fogged_direct);
     let eye = centre + 5.0 * Vec3::Y;
-    let expected: Vec<f32> = (0..SIZE * SIZE)
-        .map(|i| caustic[i as usize] * (-density * eye.distance(floor_point(centre, i % SIZE, i / SIZE))).exp())
-        .collect();
+    let expected: Vec<f32> = (0..SIZE * SIZE).map(|i| caustic[i as usize] * (-density * eye.distance(floor_point(centre, i % SIZE, i / SIZE))).exp()).collect();
     let error = relative_l2(&fogged_caustic, &expected);
     let unfogged = relative_l2(&fogged_caustic, &caustic);
     eprintln!("exponential fog: caustic against exp(−ρd) of the unfogged one {error:.2e} (unfogged caustic: {unfogged:.2e} off)");
@@ -245,7 +241,9 @@ fn fog_media_and_extended_materials_dim_caustics_as_they_dim_bevys_light() {
     let tinted_caustic = difference(&view_pixels(&render_caustics(&mut renderer, 2), 0), &tinted_direct);
     let (error, pixels) = against_direct(&tinted_caustic, &tinted_direct, centre, 1.0);
     let (bevy_half, _) = against_direct(&tinted_direct, &direct, centre, 0.5);
-    eprintln!("ExtendedMaterial of base ½: caustic against Bevy's direct light {error:.2e} on {pixels} pixels (Bevy's own: {bevy_half:.2e} from half the white floor's)");
+    eprintln!(
+        "ExtendedMaterial of base ½: caustic against Bevy's direct light {error:.2e} on {pixels} pixels (Bevy's own: {bevy_half:.2e} from half the white floor's)"
+    );
     assert!(bevy_half < 5e-3, "Bevy does not light the tinted floor at half: {bevy_half}");
     assert!(error < 5e-3, "ExtendedMaterial receiver: {error} against Bevy's direct light");
 }

@@ -15,11 +15,11 @@ mod support;
 
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::GlobalAmbientLight;
-use bevy::prelude::*;
-use bevy_caustics::headless::HeadlessRenderer;
 use bevy::mesh::VertexAttributeValues;
-use bevy_caustics::read_scene::{bevy_mesh, core_mesh, to_core};
+use bevy::prelude::*;
 use bevy_caustics::convolution::PoolSurface;
+use bevy_caustics::headless::HeadlessRenderer;
+use bevy_caustics::read_scene::{bevy_mesh, core_mesh, to_core};
 use bevy_caustics::warped_volumes::CausticVolumes;
 use bevy_caustics::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, DropPebble, Ocean, PoolRipples};
 use caustics_core::bvh::SceneBvh;
@@ -45,10 +45,7 @@ fn spawn_stage(renderer: &mut HeadlessRenderer) -> Entity {
     let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::new(Vec3::Y, Vec2::splat(2.0)).mesh());
     let material = white(world);
     world.spawn((Mesh3d(floor), MeshMaterial3d(material), CausticReceiver));
-    world.spawn((
-        DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
-        Transform::default().looking_to(SUN, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(SUN, Vec3::Y)));
     // Single-sampled: a pixel's depth is the receiver at its centre, where the CPU looks.
     world.spawn((support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO), Msaa::Off)).id()
 }
@@ -235,7 +232,12 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     let stone = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(Cuboid::new(0.25, 0.12, 0.2));
     let material = white(renderer.world_mut());
     for (x, z) in [(-0.4, 0.3), (0.35, -0.2), (0.1, 0.55)] {
-        renderer.world_mut().spawn((Mesh3d(stone.clone()), MeshMaterial3d(material.clone()), CausticReceiver, Transform::from_xyz(x, 0.06, z).with_rotation(Quat::from_rotation_y(x))));
+        renderer.world_mut().spawn((
+            Mesh3d(stone.clone()),
+            MeshMaterial3d(material.clone()),
+            CausticReceiver,
+            Transform::from_xyz(x, 0.06, z).with_rotation(Quat::from_rotation_y(x)),
+        ));
     }
     let pool = renderer
         .world_mut()
@@ -273,12 +275,19 @@ fn caustic_volumes_built_on_the_gpu_match_the_cpu_build_frame_by_frame() {
     }
     let inverted = renderer.world_mut().resource_mut::<Assets<Mesh>>().add(inverted);
     let inside = CausticGenerator { double_sided: true, ..CausticGenerator::refractive(1.5) };
-    let glass = renderer.world_mut().spawn((Mesh3d(inverted.clone()), CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..inside }, RenderLayers::layer(1))).id();
+    let glass = renderer
+        .world_mut()
+        .spawn((Mesh3d(inverted.clone()), CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..inside }, RenderLayers::layer(1)))
+        .id();
     let mut light = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
     *light.single_mut(renderer.world_mut()).unwrap() = Transform::default().looking_to(Vec3::new(1.43, -1.0, 0.0), Vec3::Y);
     let stats = assert_same_volumes(&mut renderer, &[glass], "inverted glass");
     assert!(stats.total_internal_reflection > 50 && stats.dropped_flux.x > 0.0, "{stats:?}");
-    renderer.world_mut().entity_mut(glass).insert(CausticGenerator { technique: CausticTechnique::WarpedVolumes, double_sided: true, ..CausticGenerator::mirror() });
+    renderer.world_mut().entity_mut(glass).insert(CausticGenerator {
+        technique: CausticTechnique::WarpedVolumes,
+        double_sided: true,
+        ..CausticGenerator::mirror()
+    });
     let mut light = renderer.world_mut().query_filtered::<&mut Transform, With<DirectionalLight>>();
     *light.single_mut(renderer.world_mut()).unwrap() = Transform::default().looking_to(Vec3::new(57.0, -1.0, 0.0), Vec3::Y);
     let stats = assert_same_volumes(&mut renderer, &[glass], "grazing mirror");

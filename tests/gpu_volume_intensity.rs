@@ -29,12 +29,8 @@ const CENTRE: Vec3 = Vec3::new(0.4, 0.0, 0.0);
 const SUN: Vec3 = Vec3::new(1.0, -0.45, 0.0);
 const ILLUMINANCE: f32 = 10.0;
 /// The panels: segments around the ring and the volumes' intensity.
-const PANELS: [(usize, VolumeIntensity); 4] = [
-    (64, VolumeIntensity::Constant),
-    (1024, VolumeIntensity::Constant),
-    (64, VolumeIntensity::Interpolated),
-    (64, VolumeIntensity::Conserving),
-];
+const PANELS: [(usize, VolumeIntensity); 4] =
+    [(64, VolumeIntensity::Constant), (1024, VolumeIntensity::Constant), (64, VolumeIntensity::Interpolated), (64, VolumeIntensity::Conserving)];
 
 #[test]
 fn the_conserving_interpolation_keeps_the_flux_and_nears_the_fine_ring() {
@@ -46,10 +42,7 @@ fn the_conserving_interpolation_keeps_the_flux_and_nears_the_fine_ring() {
     // whole floor.
     let mirror = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::mirror() };
     let ring = world.spawn((MeshMaterial3d(white), mirror, RenderLayers::layer(1))).id();
-    world.spawn((
-        DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
-        Transform::default().looking_to(SUN, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(SUN, Vec3::Y)));
     world.spawn(support::top_down_camera(target, VIEW, SIZE, CENTRE));
 
     let mut panels = Vec::new();

@@ -9,9 +9,9 @@ mod support;
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
 use bevy_caustics::headless::{HeadlessRenderer, RenderedImage};
+use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
 use bevy_caustics::read_scene::{bevy_mesh, to_core};
 use bevy_caustics::warped_volumes::{CausticVolumes, ShaftIntegral, WarpedVolumesSettings};
-use bevy_caustics::irradiance::MAX_EXPOSED_IRRADIANCE;
 use bevy_caustics::{CausticGenerator, CausticTechnique, Caustics, GeneratorInteraction, ParticipatingMedium};
 use caustics_core::mesh::TriMesh;
 use caustics_core::metrics::relative_l2;
@@ -46,10 +46,7 @@ fn spawn_scene(renderer: &mut HeadlessRenderer, generator_mesh: &TriMesh, genera
     let white = support::white_floor_in_the_dark(world);
     let water = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(generator_mesh));
     let generator = world.spawn((Mesh3d(water), MeshMaterial3d(white), generator, RenderLayers::layer(1))).id();
-    world.spawn((
-        DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() },
-        Transform::default().looking_to(sun, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: ILLUMINANCE, shadow_maps_enabled: false, ..default() }, Transform::default().looking_to(sun, Vec3::Y)));
     world.spawn(support::top_down_camera(target, VIEW, SIZE, Vec3::ZERO));
     generator
 }
@@ -182,7 +179,9 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
             in_scattered_radiance(&set.volumes, eye, floor, &medium_box, &settings.core()).to_array()
         })
         .collect();
-    let added = |image: &RenderedImage| -> Vec<f32> { image.pixels.iter().zip(&clear.pixels).flat_map(|(a, b)| ((*a - *b).truncate() / exposure()).to_array()).collect() };
+    let added = |image: &RenderedImage| -> Vec<f32> {
+        image.pixels.iter().zip(&clear.pixels).flat_map(|(a, b)| ((*a - *b).truncate() / exposure()).to_array()).collect()
+    };
     let gpu = added(&foggy);
     let scattered = cpu.iter().sum::<f32>() / cpu.len() as f32;
     let error = relative_l2(&gpu, &cpu);
@@ -282,10 +281,15 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     // twin's does.
     let down = caustics_core::glam::Vec3::NEG_Y;
     let lens_focusing_at = |focus: caustics_core::glam::Vec3| {
-        TriMesh::heightfield(17, 1.0, |_, _| 1.0, |x, z| {
-            let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
-            (down - 1.5 * to_focus).normalize()
-        })
+        TriMesh::heightfield(
+            17,
+            1.0,
+            |_, _| 1.0,
+            |x, z| {
+                let to_focus = (focus - caustics_core::glam::Vec3::new(x, 1.0, z)).normalize();
+                (down - 1.5 * to_focus).normalize()
+            },
+        )
         .unwrap()
     };
     let glass = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
@@ -322,7 +326,10 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
         let (g, t) = (brightest(&stored), brightest(&twin));
         let apart = (g % SIZE).abs_diff(t % SIZE).max((g / SIZE).abs_diff(t / SIZE));
         let peak = twin[t as usize] / ILLUMINANCE;
-        eprintln!("focus 5 cm under the floor: peak {peak:.0}× the sun; the buffer holds {:.4} of the twin's light; brightest pixels {apart} apart", gpu_flux / twin_flux);
+        eprintln!(
+            "focus 5 cm under the floor: peak {peak:.0}× the sun; the buffer holds {:.4} of the twin's light; brightest pixels {apart} apart",
+            gpu_flux / twin_flux
+        );
         assert!(peak > 100.0, "the spot is not focused: {peak}×");
         assert!((gpu_flux / twin_flux - 1.0).abs() < 0.01, "focus: light {gpu_flux} against the twin's {twin_flux}");
         assert!(apart <= 1, "focus: the brightest pixel is {apart} pixels from the twin's");
@@ -367,10 +374,8 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
             assert!((mean(&image) - fixed).abs() > 0.1 * fixed, "auto exposure changed nothing: it did not run");
         }
         let stored: Vec<f32> = renderer.caustic_irradiance(camera).unwrap().iter().map(|e| e.x).collect();
-        let twin: Vec<f32> = cpu_twin(&lens, SpecularInteraction::Refract { ior: 1.5, dispersion: None }, Vec3::NEG_Y, &settings)
-            .iter()
-            .map(|e| e * scale)
-            .collect();
+        let twin: Vec<f32> =
+            cpu_twin(&lens, SpecularInteraction::Refract { ior: 1.5, dispersion: None }, Vec3::NEG_Y, &settings).iter().map(|e| e * scale).collect();
         assert!(image.pixels.iter().all(|p| p.is_finite()) && stored.iter().all(|e| e.is_finite()), "100 000 lux, {exposure_name}: a value is not finite");
         let peak = twin.iter().copied().fold(0.0, f32::max);
         if depth > 0.5 {
@@ -390,7 +395,10 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
                 .collect();
             let held = inside.iter().map(|&i| stored[i]).fold(f32::INFINITY, f32::min);
             let most = stored.iter().copied().fold(0.0, f32::max);
-            eprintln!("100 000 lux, 56-fold, {exposure_name}: peak {peak:.3e} lux; the buffer holds {held:.4e} to {most:.4e} inside the spot ({} pixels)", inside.len());
+            eprintln!(
+                "100 000 lux, 56-fold, {exposure_name}: peak {peak:.3e} lux; the buffer holds {held:.4e} to {most:.4e} inside the spot ({} pixels)",
+                inside.len()
+            );
             assert!(!inside.is_empty() && held >= 0.99 * cap, "past the cap the buffer holds the cap: {held} of {cap}");
             assert!(most <= 1.001 * cap, "the buffer holds {most} lux, past the cap {cap}");
         }

@@ -62,11 +62,10 @@ pub fn out_path(name: &str) -> PathBuf {
 /// `<out stem>-000.png`, …
 pub fn plugins(name: &'static str, title: &str, (width, height): (u32, u32), frames: u32) -> PluginGroupBuilder {
     if !headless() {
-        let window = Window {
-            title: format!("bevy_caustics — {title}"),
-            resolution: WindowResolution::new(width, height).with_scale_factor_override(1.0),
-            ..default()
-        };
+        let window =
+            Window {
+                title: format!("bevy_caustics — {title}"), resolution: WindowResolution::new(width, height).with_scale_factor_override(1.0), ..default()
+            };
         return DefaultPlugins.set(WindowPlugin { primary_window: Some(window), ..default() }).add(bevy_caustics::debug_panel::CausticsDebugPanelPlugin);
     }
     DefaultPlugins

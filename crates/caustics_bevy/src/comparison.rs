@@ -25,16 +25,16 @@
 use crate::gpu_work::{FrameWork, newest_pass_work};
 #[cfg(feature = "headless")]
 use crate::headless::HeadlessRenderer;
-use crate::pixels::{decode_rgba16f, irradiance_image, unpad_rows};
 use crate::irradiance::reference_view::{CaptureCausticIrradiance, ReferenceSplit, capture_image};
+use crate::pixels::{decode_rgba16f, irradiance_image, unpad_rows};
 use crate::reference::{TracedView, ViewError, frame_of_world, pinhole, trace_view, view_error};
 use crate::{CausticGenerator, CausticPassReport, CausticTechnique};
-use caustics_core::metrics::relative_l2;
-use caustics_core::view::SceneView;
 use bevy::camera::Exposure;
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
 use bevy::render::gpu_readback::{Readback, ReadbackComplete};
+use caustics_core::metrics::relative_l2;
+use caustics_core::view::SceneView;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;

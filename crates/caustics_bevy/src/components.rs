@@ -100,21 +100,16 @@ impl CausticGenerator {
 
     /// A one-sided refracting surface of index `ior`, without dispersion.
     pub fn refractive(ior: f32) -> Self {
-        Self {
-            interaction: GeneratorInteraction::Refract { ior, dispersion: None },
-            technique: CausticTechnique::Auto,
-            double_sided: false,
-        }
+        Self { interaction: GeneratorInteraction::Refract { ior, dispersion: None }, technique: CausticTechnique::Auto, double_sided: false }
     }
 
     /// The interaction as the core algorithms see it.
     pub fn specular_interaction(&self) -> SpecularInteraction {
         match self.interaction {
             GeneratorInteraction::Reflect => SpecularInteraction::Reflect,
-            GeneratorInteraction::Refract { ior, dispersion } => SpecularInteraction::Refract {
-                ior,
-                dispersion: dispersion.map(|d| CauchyDispersion { a: d.x, b: d.y }),
-            },
+            GeneratorInteraction::Refract { ior, dispersion } => {
+                SpecularInteraction::Refract { ior, dispersion: dispersion.map(|d| CauchyDispersion { a: d.x, b: d.y }) }
+            }
         }
     }
 }
@@ -192,8 +187,7 @@ pub fn validate_caustic_params(
     mut removed_media: RemovedComponents<ParticipatingMedium>,
     params: Query<(Option<&CausticGenerator>, Option<&ParticipatingMedium>, Option<&InvalidCausticParams>)>,
 ) {
-    let candidates: bevy::platform::collections::HashSet<Entity> =
-        changed.iter().chain(removed_generators.read()).chain(removed_media.read()).collect();
+    let candidates: bevy::platform::collections::HashSet<Entity> = changed.iter().chain(removed_generators.read()).chain(removed_media.read()).collect();
     for entity in candidates {
         let Ok((generator, medium, marker)) = params.get(entity) else { continue };
         let error = generator

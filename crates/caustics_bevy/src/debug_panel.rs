@@ -8,9 +8,9 @@
 //! view), and every invalid entity with its reason. Behind the `egui` cargo feature.
 
 use crate::comparison::{ComparisonState, ReferenceComparison, ReferenceComparisonRequest};
-use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, Caustics, InvalidCausticParams, ParticipatingMedium};
 use crate::gpu_work::{FrameWork, PassWork, newest_pass_work, pass_time_history};
 use crate::technique::CausticTechniqueChoice;
+use crate::{CausticGenerator, CausticPassReport, CausticReceiver, CausticTechnique, Caustics, InvalidCausticParams, ParticipatingMedium};
 use bevy::diagnostic::DiagnosticsStore;
 use bevy::prelude::*;
 use bevy::render::diagnostic::RenderDiagnosticsPlugin;
@@ -80,13 +80,11 @@ fn panel(
             ui.horizontal(|ui| {
                 ui.label(label(entity));
                 ui.add_enabled_ui(!running, |ui| {
-                    egui::ComboBox::from_id_salt(entity)
-                        .selected_text(asked.label())
-                        .show_ui(ui, |ui| {
-                            for t in CausticTechnique::ALL {
-                                ui.selectable_value(&mut technique, t, t.label());
-                            }
-                        });
+                    egui::ComboBox::from_id_salt(entity).selected_text(asked.label()).show_ui(ui, |ui| {
+                        for t in CausticTechnique::ALL {
+                            ui.selectable_value(&mut technique, t, t.label());
+                        }
+                    });
                 });
             });
             let drawn = choice.map_or_else(|| "no technique (see below)".to_string(), |c| c.to_string());
@@ -193,8 +191,11 @@ fn comparison_section(
                             ui.label("–");
                         }
                     }
-                    ui.label(format!("{:.2}", row.work.caustics_ms()))
-                        .on_hover_text(format!("{:.2} M fragments; Bevy's main pass {:.2} M", row.work.caustics_fragments() / 1e6, row.work.main_pass.fragments.unwrap_or(0.0) / 1e6));
+                    ui.label(format!("{:.2}", row.work.caustics_ms())).on_hover_text(format!(
+                        "{:.2} M fragments; Bevy's main pass {:.2} M",
+                        row.work.caustics_fragments() / 1e6,
+                        row.work.main_pass.fragments.unwrap_or(0.0) / 1e6
+                    ));
                     ui.end_row();
                 }
             });
@@ -202,9 +203,9 @@ fn comparison_section(
                 ui.label(format!("the reference's own noise: {noise:.3} (relative L2)"));
             }
             ui.checkbox(&mut comparison.split, "split view: technique left, reference right");
-            let button = ui.button("Save frame").on_hover_text(format!(
-                "writes the traced frame to {SAVED_FRAME}; `caustics bench --scenes '' --scene {SAVED_FRAME}` measures it again"
-            ));
+            let button = ui
+                .button("Save frame")
+                .on_hover_text(format!("writes the traced frame to {SAVED_FRAME}; `caustics bench --scenes '' --scene {SAVED_FRAME}` measures it again"));
             if button.clicked() {
                 *saved = Some(match comparison.save_frame(std::path::Path::new(SAVED_FRAME)) {
                     Ok(()) => format!("saved to {SAVED_FRAME}"),

@@ -101,8 +101,7 @@ pub fn newest_pass_work(store: &DiagnosticsStore) -> Vec<PassWork> {
 /// Every pass's GPU time (ms) over the frames Bevy keeps, oldest first, for the spans
 /// in the newest frame: each frame's spans of one name added up.
 pub fn pass_time_history(store: &DiagnosticsStore, span: &str) -> Vec<f64> {
-    let Some(d) = store.iter().find(|d| d.path().as_str().strip_prefix("render/").and_then(|p| p.strip_suffix("/elapsed_gpu")) == Some(span))
-    else {
+    let Some(d) = store.iter().find(|d| d.path().as_str().strip_prefix("render/").and_then(|p| p.strip_suffix("/elapsed_gpu")) == Some(span)) else {
         return Vec::new();
     };
     let mut history: Vec<(bevy::platform::time::Instant, f64)> = Vec::new();

@@ -84,8 +84,8 @@ pub fn probe_adapter() -> Result<Adapter, HeadlessError> {
         backends: wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all()),
         ..wgpu::InstanceDescriptor::new_without_display_handle()
     });
-    let adapter = bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        .map_err(|e| HeadlessError::NoAdapter(e.to_string()))?;
+    let adapter =
+        bevy::tasks::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default())).map_err(|e| HeadlessError::NoAdapter(e.to_string()))?;
     let info = adapter.get_info();
     Ok(Adapter { name: format!("{} ({:?})", info.name, info.backend), queries: adapter.features() & MEASURING_FEATURES })
 }

@@ -17,9 +17,9 @@
 #[cfg(feature = "reference")]
 pub mod comparison;
 pub mod components;
-pub mod cpu_time;
 #[cfg(feature = "convolution")]
 pub mod convolution;
+pub mod cpu_time;
 #[cfg(feature = "egui")]
 pub mod debug_panel;
 pub mod gltf_tagging;
@@ -50,18 +50,15 @@ pub mod technique;
 #[cfg(feature = "warped-volumes")]
 pub mod warped_volumes;
 
-pub use components::{
-    CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams,
-    ParticipatingMedium,
-};
+pub use components::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InvalidCausticParams, ParticipatingMedium};
+#[cfg(feature = "convolution")]
+pub use convolution::{DropPebble, PoolImpulses, PoolRipples};
+pub use cpu_time::CausticCpuTime;
 pub use gltf_tagging::TagCausticsFromMaterials;
 pub use gpu_budget::CausticGpuBudget;
 pub use irradiance::{CAUSTIC_IRRADIANCE_FORMAT, CausticReceiverMaterialPlugin, InjectedIrradiance};
-#[cfg(feature = "convolution")]
-pub use convolution::{DropPebble, PoolImpulses, PoolRipples};
 #[cfg(feature = "ocean")]
 pub use ocean::Ocean;
-pub use cpu_time::CausticCpuTime;
 pub use quality::{CausticQuality, QualityPreset};
 pub use report::CausticPassReport;
 pub use technique::{AvailableCausticTechniques, CausticTechniqueChoice};
@@ -136,8 +133,6 @@ impl Plugin for CausticsPlugin {
 pub mod prelude {
     #[cfg(feature = "ocean")]
     pub use crate::Ocean;
-    #[cfg(feature = "convolution")]
-    pub use crate::{DropPebble, PoolRipples};
     #[cfg(feature = "hierarchical-maps")]
     pub use crate::hierarchical_maps::{CausticMapGather, HierarchicalMapsSettings};
     #[cfg(feature = "illumination-textures")]
@@ -145,9 +140,10 @@ pub mod prelude {
     #[cfg(feature = "warped-volumes")]
     pub use crate::warped_volumes::{ShaftIntegral, VolumeIntensity, WarpedVolumesSettings};
     pub use crate::{
-        AvailableCausticTechniques, CausticGenerator, CausticPassReport, CausticQuality, CausticReceiver,
-        CausticReceiverMaterialPlugin, CausticTechnique, QualityPreset,
-        CausticTechniqueChoice, CausticGpuBudget, CausticsPlugin, Caustics,
-        GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, TagCausticsFromMaterials,
+        AvailableCausticTechniques, CausticGenerator, CausticGpuBudget, CausticPassReport, CausticQuality, CausticReceiver, CausticReceiverMaterialPlugin,
+        CausticTechnique, CausticTechniqueChoice, Caustics, CausticsPlugin, GeneratorInteraction, InjectedIrradiance, ParticipatingMedium, QualityPreset,
+        TagCausticsFromMaterials,
     };
+    #[cfg(feature = "convolution")]
+    pub use crate::{DropPebble, PoolRipples};
 }

@@ -14,10 +14,7 @@ pub fn unpad_rows(bytes: &[u8], packed: usize) -> Vec<u8> {
 
 /// Rgba16Float bytes to linear RGBA.
 pub fn decode_rgba16f(bytes: &[u8]) -> Vec<Vec4> {
-    bytes
-        .chunks_exact(8)
-        .map(|p| Vec4::from_array(std::array::from_fn(|c| f16_to_f32(u16::from_le_bytes([p[2 * c], p[2 * c + 1]])))))
-        .collect()
+    bytes.chunks_exact(8).map(|p| Vec4::from_array(std::array::from_fn(|c| f16_to_f32(u16::from_le_bytes([p[2 * c], p[2 * c + 1]]))))).collect()
 }
 
 /// IEEE 754 half to single precision.
@@ -37,11 +34,5 @@ pub fn f16_to_f32(h: u16) -> f32 {
 /// ready to use as [`crate::InjectedIrradiance`].
 pub fn irradiance_image(width: u32, height: u32, values: &[Vec3]) -> Image {
     let data = values.iter().flat_map(|v| [v.x, v.y, v.z, 1.0]).flat_map(f32::to_le_bytes).collect();
-    Image::new(
-        Extent3d { width, height, depth_or_array_layers: 1 },
-        TextureDimension::D2,
-        data,
-        TextureFormat::Rgba32Float,
-        RenderAssetUsages::RENDER_WORLD,
-    )
+    Image::new(Extent3d { width, height, depth_or_array_layers: 1 }, TextureDimension::D2, data, TextureFormat::Rgba32Float, RenderAssetUsages::RENDER_WORLD)
 }

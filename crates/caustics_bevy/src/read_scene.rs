@@ -26,13 +26,8 @@ pub fn to_core(v: Vec3) -> glam::Vec3 {
 }
 
 /// What the techniques read of a light: its kind, placement and visibility.
-pub type LightComponents = (
-    Option<&'static DirectionalLight>,
-    Option<&'static PointLight>,
-    Option<&'static SpotLight>,
-    &'static GlobalTransform,
-    &'static InheritedVisibility,
-);
+pub type LightComponents =
+    (Option<&'static DirectionalLight>, Option<&'static PointLight>, Option<&'static SpotLight>, &'static GlobalTransform, &'static InheritedVisibility);
 
 /// What the techniques read of a mesh entity: its mesh, placement, visibility and bounds.
 pub type MeshComponents = (&'static Mesh3d, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static Aabb>);
@@ -53,29 +48,12 @@ pub type AnyLight = Or<(With<DirectionalLight>, With<PointLight>, With<SpotLight
 /// The visible lights that cast caustics, as the core crate's: a light that fails
 /// [`Light::validate`] (a zero or non-finite direction or power) casts none.
 pub fn core_lights(lights: &Query<LightComponents, AnyLight>) -> Vec<Light> {
-    lights
-        .iter()
-        .filter(|(.., visible)| visible.get())
-        .filter_map(|(d, p, s, t, _)| core_light(d, p, s, t))
-        .filter(|l| l.validate().is_ok())
-        .collect()
+    lights.iter().filter(|(.., visible)| visible.get()).filter_map(|(d, p, s, t, _)| core_light(d, p, s, t)).filter(|l| l.validate().is_ok()).collect()
 }
 
-type LightChanged = Or<(
-    Changed<GlobalTransform>,
-    Changed<DirectionalLight>,
-    Changed<PointLight>,
-    Changed<SpotLight>,
-    Changed<InheritedVisibility>,
-)>;
-type OccluderChanged = Or<(
-    Changed<GlobalTransform>,
-    Changed<Aabb>,
-    Changed<Mesh3d>,
-    Changed<InheritedVisibility>,
-    Added<CausticReceiver>,
-    Added<bevy::light::NotShadowCaster>,
-)>;
+type LightChanged = Or<(Changed<GlobalTransform>, Changed<DirectionalLight>, Changed<PointLight>, Changed<SpotLight>, Changed<InheritedVisibility>)>;
+type OccluderChanged =
+    Or<(Changed<GlobalTransform>, Changed<Aabb>, Changed<Mesh3d>, Changed<InheritedVisibility>, Added<CausticReceiver>, Added<bevy::light::NotShadowCaster>)>;
 /// A generator moved, changed, got a new mesh, choice or visibility, or began to move
 /// on the GPU.
 pub(crate) type GeneratorChanged = Or<(
@@ -98,7 +76,8 @@ pub struct SceneChanges<'w, 's> {
     generator_bounds: Query<'w, 's, (), (With<CausticGenerator>, Changed<Aabb>)>,
     occluders: Query<'w, 's, (), (With<Mesh3d>, Without<CausticGenerator>, OccluderChanged)>,
     lights: Query<'w, 's, (), (AnyLight, LightChanged)>,
-    removed_generators: (RemovedComponents<'w, 's, CausticTechniqueChoice>, RemovedComponents<'w, 's, InvalidCausticParams>, RemovedComponents<'w, 's, MovesOnGpu>),
+    removed_generators:
+        (RemovedComponents<'w, 's, CausticTechniqueChoice>, RemovedComponents<'w, 's, InvalidCausticParams>, RemovedComponents<'w, 's, MovesOnGpu>),
     removed_occluders: (RemovedComponents<'w, 's, Mesh3d>, RemovedComponents<'w, 's, CausticReceiver>, RemovedComponents<'w, 's, bevy::light::NotShadowCaster>),
     removed_lights: (RemovedComponents<'w, 's, DirectionalLight>, RemovedComponents<'w, 's, PointLight>, RemovedComponents<'w, 's, SpotLight>),
 }
@@ -158,12 +137,7 @@ pub fn facing(transform: &GlobalTransform) -> Vec3 {
 /// A Bevy light placed by `transform` as the core crate's light, with a point or spot
 /// light's `range`. Bevy's point and spot intensities are luminous power (lm); the core
 /// wants intensity per steradian, Φ/4π (Bevy's own convention, spots included).
-pub fn core_light(
-    directional: Option<&DirectionalLight>,
-    point: Option<&PointLight>,
-    spot: Option<&SpotLight>,
-    transform: &GlobalTransform,
-) -> Option<Light> {
+pub fn core_light(directional: Option<&DirectionalLight>, point: Option<&PointLight>, spot: Option<&SpotLight>, transform: &GlobalTransform) -> Option<Light> {
     let color = |c: Color| {
         let c = c.to_linear();
         caustics_core::glam::Vec3::new(c.red, c.green, c.blue)
@@ -172,24 +146,10 @@ pub fn core_light(
     // A light without a direction (a zero scale) fails `Light::validate`, which says so.
     let forward = to_core(facing(transform));
     Some(match (directional, point, spot) {
-        (Some(d), ..) => Light {
-            kind: LightKind::Directional { direction: forward, irradiance: d.illuminance },
-            color: color(d.color),
-            range: f32::INFINITY,
-        },
-        (_, Some(p), _) => Light {
-            kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) },
-            color: color(p.color),
-            range: p.range,
-        },
+        (Some(d), ..) => Light { kind: LightKind::Directional { direction: forward, irradiance: d.illuminance }, color: color(d.color), range: f32::INFINITY },
+        (_, Some(p), _) => Light { kind: LightKind::Point { position, intensity: p.intensity / (4.0 * PI) }, color: color(p.color), range: p.range },
         (_, _, Some(s)) => Light {
-            kind: LightKind::Spot {
-                position,
-                direction: forward,
-                intensity: s.intensity / (4.0 * PI),
-                inner_angle: s.inner_angle,
-                outer_angle: s.outer_angle,
-            },
+            kind: LightKind::Spot { position, direction: forward, intensity: s.intensity / (4.0 * PI), inner_angle: s.inner_angle, outer_angle: s.outer_angle },
             color: color(s.color),
             range: s.range,
         },

@@ -3,7 +3,9 @@
 //! sees, ready for [`crate::InjectedIrradiance`]. The demo and `caustics render
 //! --renderer bevy` show reference caustics through the plugin's own composite this way.
 
-use crate::read_scene::{AnyLight, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, bevy_mesh, core_light, core_mesh, to_core, to_core_affine};
+use crate::read_scene::{
+    AnyLight, LightComponents, MeshComponents, OccluderComponents, bevy_mesh, blocks_caustic_light, core_light, core_mesh, to_core, to_core_affine,
+};
 use crate::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, GeneratorInteraction, InjectedIrradiance, ParticipatingMedium};
 use bevy::camera::{Exposure, RenderTarget};
 use bevy::prelude::*;
@@ -89,17 +91,19 @@ pub fn scene_from_world(world: &mut World) -> WorldScene {
     let moving = moving_meshes(world);
     let meshes = world.resource::<Assets<Mesh>>();
     let materials = world.resource::<Assets<StandardMaterial>>();
-    let mut core = |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match moving.get(&entity).or_else(|| meshes.get(&mesh.0)).map(|m| core_mesh(m, transform)) {
-        Some(Ok(mesh)) => Some(mesh),
-        Some(Err(e)) => {
-            skipped.push(format!("{entity}: {e}"));
-            None
-        }
-        None => {
-            skipped.push(format!("{entity}: its mesh is not loaded"));
-            None
-        }
-    };
+    let mut core =
+        |entity: Entity, mesh: &Mesh3d, transform: &GlobalTransform| match moving.get(&entity).or_else(|| meshes.get(&mesh.0)).map(|m| core_mesh(m, transform))
+        {
+            Some(Ok(mesh)) => Some(mesh),
+            Some(Err(e)) => {
+                skipped.push(format!("{entity}: {e}"));
+                None
+            }
+            None => {
+                skipped.push(format!("{entity}: its mesh is not loaded"));
+                None
+            }
+        };
     let mut generator_entities = Vec::new();
     for (entity, generator, (mesh, transform, visible, _)) in generators.iter(world) {
         if let Some(mesh) = visible.get().then(|| core(entity, mesh, transform)).flatten() {
@@ -282,14 +286,7 @@ pub fn pinhole(transform: &Transform, fov_y: f32, width: u32, height: u32) -> Pi
 /// receivers from `shown` on only block light ([`spawn_scene_content`]). Ambient
 /// light is switched off, and exposure set so that `typical` lux on a white receiver
 /// comes out at mid grey.
-pub fn spawn_scene(
-    world: &mut World,
-    (scene, shown): (&Scene, usize),
-    camera: &PinholeCamera,
-    target: RenderTarget,
-    injected: Option<&[Vec3]>,
-    typical: f32,
-) {
+pub fn spawn_scene(world: &mut World, (scene, shown): (&Scene, usize), camera: &PinholeCamera, target: RenderTarget, injected: Option<&[Vec3]>, typical: f32) {
     let injected = injected.map(|irradiance| {
         let image = crate::pixels::irradiance_image(camera.width, camera.height, irradiance);
         world.resource_mut::<Assets<Image>>().add(image)
@@ -314,13 +311,7 @@ fn generator_of(generator: &caustics_core::scene::Generator) -> (StandardMateria
     let (material, component) = match generator.interaction {
         SpecularInteraction::Reflect => (StandardMaterial { metallic: 1.0, perceptual_roughness: 0.02, ..default() }, CausticGenerator::mirror()),
         SpecularInteraction::Refract { ior, dispersion } => (
-            StandardMaterial {
-                base_color: Color::srgba(0.9, 0.95, 1.0, 0.2),
-                alpha_mode: AlphaMode::Blend,
-                perceptual_roughness: 0.02,
-                ior,
-                ..default()
-            },
+            StandardMaterial { base_color: Color::srgba(0.9, 0.95, 1.0, 0.2), alpha_mode: AlphaMode::Blend, perceptual_roughness: 0.02, ior, ..default() },
             CausticGenerator {
                 interaction: GeneratorInteraction::Refract { ior, dispersion: dispersion.map(|d| Vec2::new(d.a, d.b)) },
                 ..CausticGenerator::refractive(ior)
@@ -353,10 +344,7 @@ pub fn spawn_scene_view(world: &mut World, view: &SceneView, target: RenderTarge
     }
     for medium in &view.media {
         let c = medium.coefficients;
-        world.spawn((
-            ParticipatingMedium { scattering: c.scattering, absorption: c.absorption, asymmetry: c.asymmetry },
-            transform_of(&medium.transform),
-        ));
+        world.spawn((ParticipatingMedium { scattering: c.scattering, absorption: c.absorption, asymmetry: c.asymmetry }, transform_of(&medium.transform)));
     }
 }
 
@@ -377,9 +365,11 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, shown: usize, techn
     for (index, receiver) in scene.receivers.iter().enumerate() {
         let mesh = world.resource_mut::<Assets<Mesh>>().add(bevy_mesh(&receiver.mesh));
         let a = receiver.albedo;
-        let material = world
-            .resource_mut::<Assets<StandardMaterial>>()
-            .add(StandardMaterial { base_color: Color::linear_rgb(a.x, a.y, a.z), perceptual_roughness: 0.9, ..default() });
+        let material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+            base_color: Color::linear_rgb(a.x, a.y, a.z),
+            perceptual_roughness: 0.9,
+            ..default()
+        });
         let mut entity = world.spawn((Mesh3d(mesh), MeshMaterial3d(material)));
         if index < shown {
             entity.insert(CausticReceiver);
@@ -414,15 +404,7 @@ pub fn spawn_scene_content(world: &mut World, scene: &Scene, shown: usize, techn
                 Transform::from_translation(to_bevy(position)),
             )),
             LightKind::Spot { position, direction, intensity, inner_angle, outer_angle } => world.spawn((
-                SpotLight {
-                    intensity: 4.0 * PI * intensity,
-                    color,
-                    range,
-                    inner_angle,
-                    outer_angle,
-                    shadow_maps_enabled: true,
-                    ..default()
-                },
+                SpotLight { intensity: 4.0 * PI * intensity, color, range, inner_angle, outer_angle, shadow_maps_enabled: true, ..default() },
                 Transform::from_translation(to_bevy(position)).looking_to(to_bevy(direction), Vec3::Y),
             )),
         };
@@ -453,7 +435,11 @@ mod tests {
         place(&mut world, Cuboid::new(1.0, 0.2, 4.0).mesh().build(), Vec3::new(-1.0, 0.1, 0.0), true);
         place(&mut world, Plane3d::new(Vec3::Y, Vec2::splat(9.0)).mesh().build(), Vec3::Y * 0.05, false).insert(CausticReceiver);
         place(&mut world, Sphere::new(0.3).mesh().ico(3).expect("an icosphere"), Vec3::new(1.0, 0.8, 0.0), true).insert(CausticGenerator::refractive(1.5));
-        world.spawn((DirectionalLight { illuminance: 1000.0, ..default() }, GlobalTransform::from(Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)), InheritedVisibility::VISIBLE));
+        world.spawn((
+            DirectionalLight { illuminance: 1000.0, ..default() },
+            GlobalTransform::from(Transform::default().looking_to(Vec3::NEG_Y, Vec3::Z)),
+            InheritedVisibility::VISIBLE,
+        ));
 
         let WorldScene { scene, shown, skipped, .. } = scene_from_world(&mut world);
         assert!(skipped.is_empty(), "{skipped:?}");

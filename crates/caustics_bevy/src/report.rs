@@ -72,13 +72,14 @@ pub(crate) fn build(app: &mut App) {
         .add_systems(
             PostUpdate,
             crate::cpu_time::timed(&cpu, report_choices)
-                .run_if(crate::cpu_time::timed(&cpu, any_match_filter::<Changed<CausticTechniqueChoice>>.or_else(any_component_removed::<CausticTechniqueChoice>)))
+                .run_if(crate::cpu_time::timed(
+                    &cpu,
+                    any_match_filter::<Changed<CausticTechniqueChoice>>.or_else(any_component_removed::<CausticTechniqueChoice>),
+                ))
                 .in_set(crate::CausticSystems::ReadScene),
         );
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
-        render_app
-            .insert_resource(recorder)
-            .add_systems(Render, (|r: Res<PassRecorder>| r.publish()).in_set(RenderSystems::Cleanup));
+        render_app.insert_resource(recorder).add_systems(Render, (|r: Res<PassRecorder>| r.publish()).in_set(RenderSystems::Cleanup));
     }
 }
 

@@ -153,10 +153,8 @@ pub struct NeverPresent;
 /// Generators whose choice may differ from last frame's: changed as the techniques
 /// read them ([`GeneratorChanged`]), given new bounds, found invalid, made a pool or an
 /// ocean.
-type ChangedGenerators = (
-    With<CausticGenerator>,
-    Or<(GeneratorChanged, Changed<Aabb>, Changed<InvalidCausticParams>, Changed<PoolMarker>, Changed<OceanMarker>)>,
-);
+type ChangedGenerators =
+    (With<CausticGenerator>, Or<(GeneratorChanged, Changed<Aabb>, Changed<InvalidCausticParams>, Changed<PoolMarker>, Changed<OceanMarker>)>);
 
 /// Media that may have moved a generator in or out of one.
 type ChangedMedia = (With<ParticipatingMedium>, Or<(Changed<ParticipatingMedium>, Changed<GlobalTransform>, Changed<InheritedVisibility>)>);
@@ -188,8 +186,7 @@ fn choices_may_change(
 }
 
 /// The valid participating media, for whether a generator lies in one.
-type Media<'w, 's> =
-    Query<'w, 's, (&'static GlobalTransform, &'static InheritedVisibility), (With<ParticipatingMedium>, Without<InvalidCausticParams>)>;
+type Media<'w, 's> = Query<'w, 's, (&'static GlobalTransform, &'static InheritedVisibility), (With<ParticipatingMedium>, Without<InvalidCausticParams>)>;
 
 /// Gives every valid generator a [`CausticTechniqueChoice`], updated when what it reads
 /// changes (closedness is kept per mesh asset until the asset changes); warns once per
@@ -219,11 +216,8 @@ pub fn choose_techniques(
         }
     }
     // Unit cubes of the media, as world bounds.
-    let media: Vec<(Vec3, Vec3)> = media
-        .iter()
-        .filter(|(_, visible)| visible.get())
-        .map(|(t, _)| world_aabb(t, &Aabb::from_min_max(Vec3::splat(-0.5), Vec3::splat(0.5))))
-        .collect();
+    let media: Vec<(Vec3, Vec3)> =
+        media.iter().filter(|(_, visible)| visible.get()).map(|(t, _)| world_aabb(t, &Aabb::from_min_max(Vec3::splat(-0.5), Vec3::splat(0.5)))).collect();
     let mut facts = Vec::new();
     for (entity, generator, mesh3d, transform, aabb, invalid, pool, ocean, current) in &generators {
         if invalid {

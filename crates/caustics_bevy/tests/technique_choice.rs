@@ -4,11 +4,11 @@
 //! generator warns once, names what it asked for and falls back to `Auto`'s choice —
 //! and the lights whose RectLight or RenderLayers the caustics do not follow say so.
 
-use bevy::log::tracing_subscriber::{self, Layer, layer::Context, prelude::*};
 use bevy::camera::primitives::MeshAabb;
-use bevy::prelude::*;
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::RectLight;
+use bevy::log::tracing_subscriber::{self, Layer, layer::Context, prelude::*};
+use bevy::prelude::*;
 use caustics_bevy::components::validate_caustic_params;
 use caustics_bevy::irradiance::{CausticReceiverMaterialPlugin, warn_receivers_with_unread_material};
 use caustics_bevy::lights::warn_unsupported_lights;

@@ -5,22 +5,21 @@
 //! convolution form of Trendall & Stewart 2000 against their direct integral (eq. 2).
 
 use crate::plot::{Series, plot_error_vs_time};
+use crate::render::{GpuTimes, Method};
 use crate::{prepare_output, progress};
+use caustics_bevy::CausticQuality;
 use caustics_core::convolution::{
-    Boundary, ConvolutionCaustics, ConvolutionSettings, Heightfield, LobeAxis, MAX_EXPONENT, convolution_irradiance,
-    direct_irradiance,
+    Boundary, ConvolutionCaustics, ConvolutionSettings, Heightfield, LobeAxis, MAX_EXPONENT, convolution_irradiance, direct_irradiance,
 };
 use caustics_core::estimate::{GridRegion, IrradianceGrid};
 use caustics_core::glam::{Vec2, Vec3};
 use caustics_core::metrics::{relative_l1, relative_l2};
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{LightKind, Scene};
-use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose};
 use caustics_core::scenes::{BenchScene, wave_pool};
+use caustics_core::technique::{GeneratorFacts, GeneratorShape, Technique, choose};
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::volumes::{Footprint, IntensityMode, VolumeSettings, build_drawn_volumes};
-use crate::render::{GpuTimes, Method};
-use caustics_bevy::CausticQuality;
 use clap::Args;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -257,9 +256,7 @@ impl BenchMethod for WarpedVolumes {
 fn tessellated(name: &str, scene: &BenchScene, cells: usize) -> Result<BenchScene, String> {
     match cells {
         0 => Ok(scene.clone()),
-        n => crate::scenes::tessellated(name, n)
-            .map(|t| BenchScene { region: scene.region, ..t })
-            .ok_or_else(|| format!("{name}: no tessellation {n}")),
+        n => crate::scenes::tessellated(name, n).map(|t| BenchScene { region: scene.region, ..t }).ok_or_else(|| format!("{name}: no tessellation {n}")),
     }
 }
 
@@ -271,13 +268,7 @@ pub fn volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: Intensi
 }
 
 /// [`volumes_irradiance`] from the generators `drawn(index)` picks; the others shadow them.
-fn drawn_volumes_irradiance(
-    scene: &Scene,
-    region: &GridRegion,
-    intensity: IntensityMode,
-    samples: usize,
-    drawn: impl Fn(usize) -> bool,
-) -> (Vec<f32>, u64) {
+fn drawn_volumes_irradiance(scene: &Scene, region: &GridRegion, intensity: IntensityMode, samples: usize, drawn: impl Fn(usize) -> bool) -> (Vec<f32>, u64) {
     let settings = VolumeSettings { intensity, ..VolumeSettings::default() };
     let set = build_drawn_volumes(scene, &settings, drawn);
     // The floor faces up (the region's `edge_u × edge_v` may point either way).
@@ -338,7 +329,8 @@ impl BenchMethod for Auto {
         techniques.dedup();
         for technique in techniques {
             let drawn = |i: usize| choices[i] == technique;
-            let group = Scene { generators: own.scene.generators.iter().enumerate().filter(|(i, _)| drawn(*i)).map(|(_, g)| g.clone()).collect(), ..own.scene.clone() };
+            let group =
+                Scene { generators: own.scene.generators.iter().enumerate().filter(|(i, _)| drawn(*i)).map(|(_, g)| g.clone()).collect(), ..own.scene.clone() };
             let (image, done) = match technique {
                 Technique::WarpedVolumes => drawn_volumes_irradiance(&own.scene, &scene.region, IntensityMode::Conserving, samples, drawn),
                 // The maps draw the light their generators meet first and follow it
@@ -409,14 +401,11 @@ pub struct Convolution {
 }
 
 /// The convolution form expanded about the refracted sun, and about the vertical (the paper's).
-pub const CONVOLUTION_METHODS: [Convolution; 2] = [
-    Convolution { name: "convolution", lobe_axis: LobeAxis::RefractedSun },
-    Convolution { name: "convolution-paper", lobe_axis: LobeAxis::Vertical },
-];
+pub const CONVOLUTION_METHODS: [Convolution; 2] =
+    [Convolution { name: "convolution", lobe_axis: LobeAxis::RefractedSun }, Convolution { name: "convolution-paper", lobe_axis: LobeAxis::Vertical }];
 
 /// `(texels along a side of the pool's water, kernel radius r)`, cheapest first.
-pub const CONVOLUTION_GRIDS: [(usize, usize); 8] =
-    [(128, 4), (128, 8), (128, 16), (256, 8), (256, 16), (256, 32), (512, 16), (512, 32)];
+pub const CONVOLUTION_GRIDS: [(usize, usize); 8] = [(128, 4), (128, 8), (128, 16), (256, 8), (256, 16), (256, 32), (512, 16), (512, 32)];
 
 /// The Gaussian lobe `a` and the cosine power `n = 2a` of "scattering on".
 const SCATTERING_ON: (f32, f32) = (50.0, 100.0);
@@ -441,8 +430,7 @@ impl BenchMethod for Convolution {
         let water = PoolWater::new(scene, texels)?;
         let cell = water.heightfield.cell_size();
         let exponent = (9.0 * (water.settings.depth / (radius as f32 * cell)).powi(2)).min(MAX_EXPONENT);
-        let settings =
-            ConvolutionSettings { scattering: 0.5 * exponent, exponent, kernel_radius: radius, lobe_axis: self.lobe_axis, ..water.settings };
+        let settings = ConvolutionSettings { scattering: 0.5 * exponent, exponent, kernel_radius: radius, lobe_axis: self.lobe_axis, ..water.settings };
         let mut caustics = ConvolutionCaustics::new(&settings, texels, texels, cell).map_err(|e| e.to_string())?;
         let floor = caustics.irradiance(&water.heightfield).map_err(|e| e.to_string())?;
         Ok((water.on_region(&floor, &scene.region), (texels * texels) as u64))
@@ -487,9 +475,7 @@ impl PoolWater {
         let ([generator], [light]) = (scene.scene.generators.as_slice(), scene.scene.lights.as_slice()) else {
             return Err("convolution: the scene must have one water surface and one light".into());
         };
-        let (SpecularInteraction::Refract { ior, .. }, LightKind::Directional { direction, irradiance }) =
-            (generator.interaction, light.kind)
-        else {
+        let (SpecularInteraction::Refract { ior, .. }, LightKind::Directional { direction, irradiance }) = (generator.interaction, light.kind) else {
             return Err("convolution: the water must refract and the light must be directional".into());
         };
         let positions = generator.mesh.positions();
@@ -500,8 +486,7 @@ impl PoolWater {
         let stride = (side - 1) / texels;
         let vertex = |column: usize, row: usize| positions[(row * stride + stride / 2) * side + column * stride + stride / 2];
         let floor = scene.region.origin.y;
-        let above_floor: Vec<f32> =
-            (0..texels).flat_map(|row| (0..texels).map(move |column| (column, row))).map(|(c, r)| vertex(c, r).y - floor).collect();
+        let above_floor: Vec<f32> = (0..texels).flat_map(|row| (0..texels).map(move |column| (column, row))).map(|(c, r)| vertex(c, r).y - floor).collect();
         let depth = (above_floor.iter().map(|&h| h as f64).sum::<f64>() / above_floor.len() as f64) as f32;
         let (first, last) = (positions[0], positions[side * side - 1]);
         let cell = (last.x - first.x) / texels as f32;
@@ -594,9 +579,7 @@ fn convolution_vs_direct(scene: &BenchScene) -> Result<String, String> {
         let (paper, refracted) = (paper?, refracted?);
         let mean = direct.iter().map(|&e| e as f64).sum::<f64>() / direct.len() as f64;
         let contrast = relative_l2(&vec![mean as f32; direct.len()], &direct);
-        let max_slope = (0..texels * texels)
-            .map(|i| heightfield.slope(i % texels, i / texels, settings.boundary).length())
-            .fold(0.0, f64::max);
+        let max_slope = (0..texels * texels).map(|i| heightfield.slope(i % texels, i / texels, settings.boundary).length()).fold(0.0, f64::max);
         writeln!(
             md,
             "| {varied} | {exponent} | {depth:.2} | {max_slope:.2} | {sun_degrees:.1} | {kernel_radius} | {contrast:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
@@ -608,12 +591,7 @@ fn convolution_vs_direct(scene: &BenchScene) -> Result<String, String> {
 }
 
 /// Traces `photons` per light into the scene's grid, BVH build included.
-fn trace_grid(
-    scene: &BenchScene,
-    photons: u64,
-    seed: u64,
-    progress: &(dyn Fn(u64, u64) + Sync),
-) -> Result<(Vec<f32>, u64), String> {
+fn trace_grid(scene: &BenchScene, photons: u64, seed: u64, progress: &(dyn Fn(u64, u64) + Sync)) -> Result<(Vec<f32>, u64), String> {
     let tracer = PhotonTracer::new(&scene.scene).map_err(|e| e.to_string())?;
     let mut grid = IrradianceGrid::new(scene.region);
     let settings = TraceSettings { photons_per_light: photons, seed, ..Default::default() };
@@ -624,7 +602,13 @@ fn trace_grid(
 pub fn run(args: BenchArgs) -> Result<(), String> {
     if args.frames {
         let scenes = |scene: &str| args.frame_scenes.is_empty() || args.frame_scenes.iter().any(|s| s == scene);
-        let bench = crate::frames::FrameBench { sizes: args.quick.then_some(2), budget_s: args.frame_budget, view: args.frame_size, shafts: args.shafts, splat_pixels: args.splat_pixels };
+        let bench = crate::frames::FrameBench {
+            sizes: args.quick.then_some(2),
+            budget_s: args.frame_budget,
+            view: args.frame_size,
+            shafts: args.shafts,
+            splat_pixels: args.splat_pixels,
+        };
         return crate::frames::run(&args.out, |t, scene| args.runs(t) && scenes(scene), &bench);
     }
     let mut methods: Vec<&dyn BenchMethod> = vec![&ReferenceTracer];
@@ -638,8 +622,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
     let mut rows = Vec::new();
     let mut scenes = Vec::new();
     for name in args.scenes.iter().filter(|n| !n.is_empty()) {
-        let own = crate::scenes::built_in(name)
-            .ok_or_else(|| format!("unknown scene {name:?} (built-in: {})", crate::scenes::BUILT_IN.join(", ")))?;
+        let own = crate::scenes::built_in(name).ok_or_else(|| format!("unknown scene {name:?} (built-in: {})", crate::scenes::BUILT_IN.join(", ")))?;
         // The truth is the smooth surface: the reference traces a far finer generator
         // than any method here uses (the scene's own tessellation for the sphere).
         let fine = match name.as_str() {
@@ -700,16 +683,7 @@ pub fn run(args: BenchArgs) -> Result<(), String> {
                     }
                     _ => None,
                 };
-                rows.push(Measurement {
-                    scene: name.clone(),
-                    method: method.name().into(),
-                    quality: label,
-                    work,
-                    seconds,
-                    gpu,
-                    error,
-                    error_vs_limit,
-                });
+                rows.push(Measurement { scene: name.clone(), method: method.name().into(), quality: label, work, seconds, gpu, error, error_vs_limit });
             }
         }
         // Caustic maps run on the scene's own tessellation, measured on its region.
@@ -781,11 +755,7 @@ fn photon_throughput(photons: u64) -> Result<f64, String> {
     let start = Instant::now();
     tracer.trace(&settings, &mut grid, &progress("throughput"));
     let rate = photons as f64 / start.elapsed().as_secs_f64();
-    eprintln!(
-        "reference tracer: {:.2} M photons/s on {} threads (128×128 heightfield over a floor)",
-        rate / 1e6,
-        rayon::current_num_threads()
-    );
+    eprintln!("reference tracer: {:.2} M photons/s on {} threads (128×128 heightfield over a floor)", rate / 1e6, rayon::current_num_threads());
     Ok(rate)
 }
 
@@ -805,18 +775,14 @@ fn gpu_cells(r: &Measurement) -> [String; 3] {
     match &r.gpu {
         None => ["CPU only".into(), String::new(), String::new()],
         Some(GpuColumns { adapter, times: None }) => [format!("{adapter}: no timestamp queries"), String::new(), String::new()],
-        Some(GpuColumns { adapter, times: Some(t) }) => {
-            [adapter.clone(), format!("{:.3}", t.technique_ms), format!("{:.3}", t.timed_passes_ms)]
-        }
+        Some(GpuColumns { adapter, times: Some(t) }) => [adapter.clone(), format!("{:.3}", t.technique_ms), format!("{:.3}", t.timed_passes_ms)],
     }
 }
 
 /// Writes the tables and plots; `notes` go at the end of `bench.md`.
 fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, notes: &str) -> Result<(), String> {
     let csv_path = prepare_output(&dir.join("bench.csv"))?;
-    let limit = |r: &Measurement, sep: &str| {
-        r.error_vs_limit.map_or(sep.to_string(), |e| format!("{:.4}{sep}{:.4}", e.l2, e.l1))
-    };
+    let limit = |r: &Measurement, sep: &str| r.error_vs_limit.map_or(sep.to_string(), |e| format!("{:.4}{sep}{:.4}", e.l2, e.l1));
     let mut csv = String::from(
         "scene,method,quality,work,cpu_twin_seconds,relative_l2,relative_l1,relative_l2_vs_limit,relative_l1_vs_limit,\
          gpu_adapter,gpu_technique_ms,gpu_timed_passes_ms\n",
@@ -825,14 +791,8 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, n
         let (scene, method, quality, work, seconds, error) = (&r.scene, &r.method, &r.quality, r.work, r.seconds, r.error);
         let [adapter, technique, passes] = gpu_cells(r);
         let adapter = adapter.replace('"', "\"\"");
-        writeln!(
-            csv,
-            "{scene},{method},{quality},{work},{seconds:.6},{:.6},{:.6},{},\"{adapter}\",{technique},{passes}",
-            error.l2,
-            error.l1,
-            limit(r, ",")
-        )
-        .unwrap();
+        writeln!(csv, "{scene},{method},{quality},{work},{seconds:.6},{:.6},{:.6},{},\"{adapter}\",{technique},{passes}", error.l2, error.l1, limit(r, ","))
+            .unwrap();
     }
     std::fs::write(&csv_path, csv).map_err(|e| format!("cannot write {}: {e}", csv_path.display()))?;
 
@@ -868,8 +828,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, n
     for r in rows {
         let key = format!("{} / {}", r.scene, r.method);
         if !series.iter().any(|(_, s)| s.label == key) {
-            let group: Vec<&Measurement> =
-                rows.iter().filter(|m| m.scene == r.scene && m.method == r.method).collect();
+            let group: Vec<&Measurement> = rows.iter().filter(|m| m.scene == r.scene && m.method == r.method).collect();
             if r.method == ReferenceTracer.name() {
                 writeln!(md, "Convergence of {key}: error ∝ photons^{:.2}.  ", convergence_slope(&group)).unwrap();
             }
@@ -879,8 +838,7 @@ fn write_outputs(dir: &std::path::Path, rows: &[Measurement], throughput: f64, n
     }
     md.push_str(&paper_claim(rows));
     md.push_str(notes);
-    writeln!(md, "\nReference tracer throughput: {:.2} M photons/s on {} threads.", throughput / 1e6, rayon::current_num_threads())
-        .unwrap();
+    writeln!(md, "\nReference tracer throughput: {:.2} M photons/s on {} threads.", throughput / 1e6, rayon::current_num_threads()).unwrap();
     let md_path = dir.join("bench.md");
     std::fs::write(&md_path, md).map_err(|e| format!("cannot write {}: {e}", md_path.display()))?;
     let mut scenes: Vec<&String> = series.iter().map(|(scene, _)| scene).collect();
@@ -903,22 +861,14 @@ fn paper_claim(rows: &[Measurement]) -> String {
     let Some(fine) = find("volumes-constant", "1024") else {
         return String::new();
     };
-    let mut md = String::from(
-        "\nThe paper's claim (§5), on the ring: interpolated intensity at 64 segments against constant intensity at 1024.\n\n",
-    );
+    let mut md = String::from("\nThe paper's claim (§5), on the ring: interpolated intensity at 64 segments against constant intensity at 1024.\n\n");
     for method in ["volumes", "volumes-paper"] {
         let Some(coarse) = find(method, "64") else { continue };
         let verdict = |a: f32, b: f32| if a <= 1.05 * b && coarse.seconds < fine.seconds { "holds" } else { "does not hold" };
         let compare = |against: &str, a: Option<Errors>, b: Option<Errors>| match (a, b) {
-            (Some(a), Some(b)) => format!(
-                "against {against}: L2 {:.4} vs {:.4} ({}), L1 {:.4} vs {:.4} ({})",
-                a.l2,
-                b.l2,
-                verdict(a.l2, b.l2),
-                a.l1,
-                b.l1,
-                verdict(a.l1, b.l1)
-            ),
+            (Some(a), Some(b)) => {
+                format!("against {against}: L2 {:.4} vs {:.4} ({}), L1 {:.4} vs {:.4} ({})", a.l2, b.l2, verdict(a.l2, b.l2), a.l1, b.l1, verdict(a.l1, b.l1))
+            }
             _ => format!("against {against}: not measured"),
         };
         writeln!(

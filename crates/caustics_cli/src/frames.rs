@@ -75,11 +75,25 @@ const FAMILIES: [Family; 8] = [
     Family { technique: "volumes", scene: "ocean", unit: "water vertices", sizes: &[32, 64, 128, 256, 512], spawn: ocean, pass: "volumes" },
     Family { technique: "volumes", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_volumes, pass: "volumes" },
     Family { technique: "volumes", scene: "rippled pool", unit: "water vertices", sizes: &[32, 64, 128, 256], spawn: rippled_pool, pass: "volumes" },
-    Family { technique: "volumes", scene: "moving occluder", unit: "occluder triangles", sizes: &[32, 64, 128, 256, 512], spawn: moving_occluder, pass: "volumes" },
+    Family {
+        technique: "volumes",
+        scene: "moving occluder",
+        unit: "occluder triangles",
+        sizes: &[32, 64, 128, 256, 512],
+        spawn: moving_occluder,
+        pass: "volumes",
+    },
     Family { technique: "maps", scene: "ring", unit: "mirror triangles", sizes: &RING_SIZES, spawn: ring_maps, pass: "caustic map projection" },
     Family { technique: "maps", scene: "glass ball", unit: "photons", sizes: &[256, 512, 1024, 2048, 4096], spawn: ball_maps, pass: "caustic map projection" },
     Family { technique: "convolution", scene: "pool", unit: "pool texels", sizes: &[128, 256, 512, 1024], spawn: pool, pass: "pool floor" },
-    Family { technique: "textures", scene: "glass ball", unit: "plane texels", sizes: &[128, 256, 512, 1024], spawn: ball_textures, pass: "illumination textures projection" },
+    Family {
+        technique: "textures",
+        scene: "glass ball",
+        unit: "plane texels",
+        sizes: &[128, 256, 512, 1024],
+        spawn: ball_textures,
+        pass: "illumination textures projection",
+    },
 ];
 
 /// The ring's segments around (with a quarter as many rows up): 1 k to 100 k triangles.
@@ -453,10 +467,7 @@ fn stage(world: &mut World, target: RenderTarget, direction: Vec3, (eye, at): (V
     let floor = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(12.0, 12.0));
     let sand = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { perceptual_roughness: 0.95, ..default() });
     world.spawn((Mesh3d(floor), MeshMaterial3d(sand), CausticReceiver));
-    world.spawn((
-        DirectionalLight { illuminance: 30_000.0, shadow_maps_enabled: true, ..default() },
-        Transform::default().looking_to(direction, Vec3::Y),
-    ));
+    world.spawn((DirectionalLight { illuminance: 30_000.0, shadow_maps_enabled: true, ..default() }, Transform::default().looking_to(direction, Vec3::Y)));
     world.spawn((Camera3d::default(), Caustics::default(), target, Exposure { ev100: 12.0 }, Transform::from_translation(eye).looking_at(at, Vec3::Y)));
 }
 
@@ -517,8 +528,18 @@ fn ring_maps(world: &mut World, target: RenderTarget, segments: u32) -> u64 {
 fn ball(world: &mut World, target: RenderTarget, technique: CausticTechnique) {
     stage(world, target, Vec3::new(0.2, -1.0, 0.1), (Vec3::new(0.0, 2.4, 2.6), Vec3::new(0.0, 0.2, 0.0)));
     let mesh = world.resource_mut::<Assets<Mesh>>().add(Sphere::new(0.5).mesh().ico(4).unwrap_or_else(|_| Sphere::new(0.5).mesh().build()));
-    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(1.0, 1.0, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
-    world.spawn((Mesh3d(mesh), MeshMaterial3d(glass), CausticGenerator { technique, ..CausticGenerator::refractive(1.5) }, Transform::from_xyz(0.0, 1.0, 0.0), Turning));
+    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgba(1.0, 1.0, 1.0, 0.2),
+        alpha_mode: AlphaMode::Blend,
+        ..default()
+    });
+    world.spawn((
+        Mesh3d(mesh),
+        MeshMaterial3d(glass),
+        CausticGenerator { technique, ..CausticGenerator::refractive(1.5) },
+        Transform::from_xyz(0.0, 1.0, 0.0),
+        Turning,
+    ));
 }
 
 /// Two glass balls under the caustic volumes beside a sphere of `sectors` around and
@@ -527,7 +548,11 @@ fn ball(world: &mut World, target: RenderTarget, technique: CausticTechnique) {
 fn moving_occluder(world: &mut World, target: RenderTarget, sectors: u32) -> u64 {
     stage(world, target, Vec3::new(0.2, -1.0, 0.1), (Vec3::new(0.0, 2.4, 3.2), Vec3::new(0.0, 0.3, 0.0)));
     let ball = world.resource_mut::<Assets<Mesh>>().add(Sphere::new(0.35).mesh().ico(3).unwrap_or_else(|_| Sphere::new(0.35).mesh().build()));
-    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial { base_color: Color::srgba(1.0, 1.0, 1.0, 0.2), alpha_mode: AlphaMode::Blend, ..default() });
+    let glass = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgba(1.0, 1.0, 1.0, 0.2),
+        alpha_mode: AlphaMode::Blend,
+        ..default()
+    });
     for x in [-0.6, 0.6] {
         let generator = CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.5) };
         world.spawn((Mesh3d(ball.clone()), MeshMaterial3d(glass.clone()), generator, Transform::from_xyz(x, 1.0, 0.0)));

@@ -3,7 +3,7 @@
 //! the largest energy ratio and the largest peak of memory. A failing case prints its
 //! seed and index, which reproduce it alone (`--seed S --first I --cases 1`).
 
-use caustics_core::fuzz::{CATEGORIES, Category, CaseResult, ENERGY_TOLERANCE, MEMORY_BOUND, Verdict, run_case};
+use caustics_core::fuzz::{CATEGORIES, CaseResult, Category, ENERGY_TOLERANCE, MEMORY_BOUND, Verdict, run_case};
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -51,12 +51,9 @@ pub fn run(args: FuzzArgs) -> Result<(), String> {
         .collect();
     let seconds = start.elapsed().as_secs_f64();
     print!("{}", report(&results, seconds));
-    let failed: Vec<String> = results.iter().filter(|r| matches!(r.verdict, Verdict::Failed(_))).map(|r| format!("--seed {} --first {} --cases 1", r.seed, r.index)).collect();
-    if failed.is_empty() {
-        Ok(())
-    } else {
-        Err(format!("{} of {} cases failed; rerun one with {}", failed.len(), results.len(), failed[0]))
-    }
+    let failed: Vec<String> =
+        results.iter().filter(|r| matches!(r.verdict, Verdict::Failed(_))).map(|r| format!("--seed {} --first {} --cases 1", r.seed, r.index)).collect();
+    if failed.is_empty() { Ok(()) } else { Err(format!("{} of {} cases failed; rerun one with {}", failed.len(), results.len(), failed[0])) }
 }
 
 /// The table: one line per category, then the totals.
@@ -75,10 +72,21 @@ fn report(results: &[CaseResult], seconds: f64) -> String {
             Verdict::Failed(_) => tally.failed += 1,
         }
     }
-    let mut out = String::from("| category | cases | passed | refused (clear error) | failed | largest energy ratio | peak memory |\n|---|---:|---:|---:|---:|---:|---:|\n");
+    let mut out = String::from(
+        "| category | cases | passed | refused (clear error) | failed | largest energy ratio | peak memory |\n|---|---:|---:|---:|---:|---:|---:|\n",
+    );
     let mut total = Tally::default();
     for (category, t) in &tallies {
-        let _ = writeln!(out, "| {category:?} | {} | {} | {} | {} | {:.4} | {:.1} MiB |", t.cases, t.passed, t.refused, t.failed, t.energy_ratio, t.peak_bytes as f64 / 1048576.0);
+        let _ = writeln!(
+            out,
+            "| {category:?} | {} | {} | {} | {} | {:.4} | {:.1} MiB |",
+            t.cases,
+            t.passed,
+            t.refused,
+            t.failed,
+            t.energy_ratio,
+            t.peak_bytes as f64 / 1048576.0
+        );
         total.cases += t.cases;
         total.passed += t.passed;
         total.refused += t.refused;

@@ -36,11 +36,7 @@ pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
     let mut app = App::new();
     app.add_plugins(
         DefaultPlugins
-            .set(AssetPlugin {
-                file_path: dir.display().to_string(),
-                unapproved_path_mode: UnapprovedPathMode::Deny,
-                ..default()
-            })
+            .set(AssetPlugin { file_path: dir.display().to_string(), unapproved_path_mode: UnapprovedPathMode::Deny, ..default() })
             .set(WindowPlugin { primary_window: None, exit_condition: ExitCondition::DontExit, ..default() })
             // Loading needs no GPU: no backend, no render world.
             .set(RenderPlugin { render_creation: WgpuSettings { backends: None, ..default() }.into(), ..default() })
@@ -49,10 +45,7 @@ pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
     );
     app.finish();
     app.cleanup();
-    let handle = app
-        .world()
-        .resource::<AssetServer>()
-        .load::<WorldAsset>(GltfAssetLabel::Scene(0).from_asset(file.to_string_lossy().into_owned()));
+    let handle = app.world().resource::<AssetServer>().load::<WorldAsset>(GltfAssetLabel::Scene(0).from_asset(file.to_string_lossy().into_owned()));
     for _ in 0..MAX_UPDATES {
         app.update();
         let server = app.world().resource::<AssetServer>();
@@ -64,9 +57,7 @@ pub fn load(path: &Path, cells: usize) -> Result<LoadedScene, String> {
         if server.is_loaded_with_dependencies(&handle) {
             let world = app.world_mut();
             // The glTF scene is a world of its own: read it in place, no spawning.
-            let mut scene_world = std::mem::take(
-                &mut world.resource_mut::<Assets<WorldAsset>>().get_mut(&handle).ok_or("scene asset vanished")?.world,
-            );
+            let mut scene_world = std::mem::take(&mut world.resource_mut::<Assets<WorldAsset>>().get_mut(&handle).ok_or("scene asset vanished")?.world);
             return convert(&mut scene_world, world, &name, cells);
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
@@ -125,17 +116,10 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
             return Err(format!("{name}: {label}: its mesh or material did not load"));
         };
         let mesh = core_mesh(mesh, transform).map_err(|e| format!("{name}: {label}: {e}"))?;
-        let role = role_from_material(
-            material.specular_transmission,
-            material.ior,
-            material.metallic,
-            material.perceptual_roughness,
-        )
-        .map_err(|e| format!("{name}: {label}: {e}"))?;
+        let role = role_from_material(material.specular_transmission, material.ior, material.metallic, material.perceptual_roughness)
+            .map_err(|e| format!("{name}: {label}: {e}"))?;
         match role {
-            SurfaceRole::Generator(interaction) => {
-                scene.generators.push(Generator { mesh, interaction, double_sided: material.double_sided })
-            }
+            SurfaceRole::Generator(interaction) => scene.generators.push(Generator { mesh, interaction, double_sided: material.double_sided }),
             SurfaceRole::Receiver => {
                 let c = material.base_color.to_linear();
                 scene.receivers.push(Receiver { mesh, albedo: glam::Vec3::new(c.red, c.green, c.blue) });
@@ -160,12 +144,12 @@ fn convert(world: &mut World, app: &World, name: &str, cells: usize) -> Result<L
         _ => None,
     });
     let camera = camera.map(|(t, p)| PinholeCamera {
-            position: to_core(t.translation()),
-            look_at: to_core(t.translation() + caustics_bevy::read_scene::facing(&t)),
-            up: to_core(Vec3::from(t.affine().matrix3 * bevy::math::Vec3A::Y).normalize_or(Vec3::Y)),
-            fov_y: p.fov,
-            width: 0,
-            height: 0,
+        position: to_core(t.translation()),
+        look_at: to_core(t.translation() + caustics_bevy::read_scene::facing(&t)),
+        up: to_core(Vec3::from(t.affine().matrix3 * bevy::math::Vec3A::Y).normalize_or(Vec3::Y)),
+        fov_y: p.fov,
+        width: 0,
+        height: 0,
     });
     Ok(LoadedScene { bench: BenchScene { name: name.to_string(), scene, region }, camera })
 }

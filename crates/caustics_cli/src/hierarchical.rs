@@ -8,16 +8,16 @@
 //! splats and resolve.
 
 use crate::bench::{Errors, Measurement, cell_means, cell_sample_points, gpu_columns};
-use crate::render::Method;
 use crate::plot::{Axes, Series, plot_log_log};
+use crate::render::Method;
+use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
+use caustics_core::glam::Vec3;
 use caustics_core::hierarchical::caustic_map::{self, CausticMap};
 use caustics_core::hierarchical::hierarchy;
 use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial,
-    PhotonPaths, Splats, StageTimes, gather_into, light_intensity, trace_buffers,
+    CausticMapSettings, Clustering, Gather, LevelOverflow, LightMaps, LightView, PhotonBuffer, PhotonMaterial, PhotonPaths, Splats, StageTimes, gather_into,
+    light_intensity, trace_buffers,
 };
-use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
-use caustics_core::glam::Vec3;
 use caustics_core::scene::{Light, Scene};
 use caustics_core::scenes::BenchScene;
 use std::fmt::Write as _;
@@ -62,7 +62,14 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 /// branches (`maps-traced`, past the paper).
 pub const VARIANTS: [Variant; 7] = [
     Variant { name: "maps-flat", gather: Gather::Flat, splats: FIXED, paths: PhotonPaths::ImageSpace, fresnel_branches: 0, gpu: Some(Method::MapsFlat) },
-    Variant { name: "maps-hierarchical", gather: Gather::Hierarchical { clustering: Clustering::Off }, splats: FIXED, paths: PhotonPaths::ImageSpace, fresnel_branches: 0, gpu: None },
+    Variant {
+        name: "maps-hierarchical",
+        gather: Gather::Hierarchical { clustering: Clustering::Off },
+        splats: FIXED,
+        paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
+        gpu: None,
+    },
     Variant {
         name: "maps-combine-last",
         gather: Gather::Hierarchical { clustering: Clustering::LastLevel },
@@ -250,12 +257,7 @@ pub fn irradiance(scene: &BenchScene, settings: &CausticMapSettings, samples: us
 
 /// [`irradiance`] from the generators `drawn(index)` picks; the others still shadow,
 /// reflect and refract the photons that reach them along traced paths.
-pub fn drawn_irradiance(
-    scene: &BenchScene,
-    settings: &CausticMapSettings,
-    samples: usize,
-    drawn: &dyn Fn(usize) -> bool,
-) -> Result<(Vec<f32>, u64), String> {
+pub fn drawn_irradiance(scene: &BenchScene, settings: &CausticMapSettings, samples: usize, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<f32>, u64), String> {
     let up = up(scene);
     let points: Vec<(Vec3, Vec3)> = cell_sample_points(&scene.region, samples).into_iter().map(|p| (p, up)).collect();
     let (irradiance, processed) = drawn_irradiance_at(scene, settings, &points, drawn)?;
@@ -287,12 +289,8 @@ fn drawn_irradiance_at(
 /// maps and the photon trace took.
 fn trace_light_views(scene: &Scene, settings: &CausticMapSettings, drawn: &dyn Fn(usize) -> bool) -> Result<(Vec<Traced>, f64, f64), String> {
     let generators = scene.generator_bounds().ok_or("caustic maps: the scene has no generators")?;
-    let receivers = scene
-        .receivers
-        .iter()
-        .map(|r| r.mesh.bounds())
-        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
-        .ok_or("caustic maps: the scene has no receivers")?;
+    let receivers =
+        scene.receivers.iter().map(|r| r.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).ok_or("caustic maps: the scene has no receivers")?;
     let materials = PhotonMaterial::of_generators(&scene.generators, drawn);
     let clock = Instant::now();
     let lit: Vec<(&Light, LightView)> =
@@ -377,7 +375,20 @@ fn stage_table(scene: &str, stages: &[StageRow]) -> String {
         writeln!(
             md,
             "| {}² | {} | {} | {} | {} | {} | {:.3} | {:.3} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
-            r.photons, r.variant, r.valid, r.processed, r.splats, r.clustered, r.maps, r.tracing, r.pyramid, r.gather, r.splat, r.capped, r.errors.l2, r.errors.l1
+            r.photons,
+            r.variant,
+            r.valid,
+            r.processed,
+            r.splats,
+            r.clustered,
+            r.maps,
+            r.tracing,
+            r.pyramid,
+            r.gather,
+            r.splat,
+            r.capped,
+            r.errors.l2,
+            r.errors.l1
         )
         .unwrap();
     }

@@ -41,7 +41,8 @@ fn at_points(scene: &Scene, tables: &[LightTransportTable], settings: &Illuminat
     let mut e = vec![0.0f32; points.len()];
     for (generator, table) in scene.generators.iter().zip(tables) {
         for light in &scene.lights {
-            let frame = IlluminationTextures::frame(table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, settings).map(IlluminationTextures::drawn);
+            let frame =
+                IlluminationTextures::frame(table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, settings).map(IlluminationTextures::drawn);
             let Some(frame) = frame else { continue };
             for (e, &(p, n)) in e.iter_mut().zip(points) {
                 *e += frame.irradiance_at(p, n, Cosine::Receiver).element_sum() / 3.0;
@@ -97,8 +98,7 @@ impl SurfacePoints {
 /// The bench's rows for illumination textures, and a note for `bench.md`.
 pub fn bench_scenes(quick: bool, cpu_only: bool, rows: &mut Vec<Measurement>) -> Result<String, String> {
     let photons: u64 = if quick { 1 << 20 } else { 1 << 24 };
-    let sweep: &[(u32, u32)] =
-        if quick { &[(1, 256), (4, 256)] } else { &[(1, 512), (2, 512), (4, 512), (8, 512), (16, 512), (4, 128), (4, 256), (4, 1024)] };
+    let sweep: &[(u32, u32)] = if quick { &[(1, 256), (4, 256)] } else { &[(1, 512), (2, 512), (4, 512), (8, 512), (16, 512), (4, 128), (4, 256), (4, 1024)] };
     let mut md = String::from(
         "\nIllumination textures (CPU twin) against the tracer, on the glass sphere's flat floor and on a glass ball \
          over the Stanford bunny (`ball_bunny`, a curved receiver): every photon binned by the cell it lands over, \
@@ -116,7 +116,14 @@ pub fn bench_scenes(quick: bool, cpu_only: bool, rows: &mut Vec<Measurement>) ->
         let surface = SurfacePoints::new(&bench.region, &bench.scene, if quick { 4 } else { 16 });
         let (tables, build_seconds) = tables(&bench.scene, &format!("{name}: light transport table"))?;
         for t in &tables {
-            writeln!(md, "| {name} | {}² directions | {} | {:.1} | {build_seconds:.2} |", t.build_settings().grid.side(), t.stats.entries, t.bytes() as f64 / 1e6).unwrap();
+            writeln!(
+                md,
+                "| {name} | {}² directions | {} | {:.1} | {build_seconds:.2} |",
+                t.build_settings().grid.side(),
+                t.stats.entries,
+                t.bytes() as f64 / 1e6
+            )
+            .unwrap();
         }
         for &(planes, size) in sweep {
             let settings = IlluminationSettings { planes, texture_size: size };
@@ -132,11 +139,21 @@ pub fn bench_scenes(quick: bool, cpu_only: bool, rows: &mut Vec<Measurement>) ->
             rows.push(Measurement { scene: name.clone(), method: "textures".into(), quality, work, seconds, gpu, error, error_vs_limit: None });
         }
         let clock = Instant::now();
-        let maps = crate::hierarchical::irradiance_at(&bench, &crate::hierarchical::VARIANTS[4].settings(1024, crate::hierarchical::MAP_RESOLUTION), &surface.points)?;
+        let maps =
+            crate::hierarchical::irradiance_at(&bench, &crate::hierarchical::VARIANTS[4].settings(1024, crate::hierarchical::MAP_RESOLUTION), &surface.points)?;
         let seconds = clock.elapsed().as_secs_f64();
         let error = Errors::between(&surface.cells(&maps.0), &truth);
         eprintln!("{name:>8} {:>16} {:>10}: {seconds:8.3} s, relative L2 {:.4}", "maps (surface)", "1024", error.l2);
-        rows.push(Measurement { scene: name, method: "maps-surface".into(), quality: "1024".into(), work: maps.1, seconds, gpu: None, error, error_vs_limit: None });
+        rows.push(Measurement {
+            scene: name,
+            method: "maps-surface".into(),
+            quality: "1024".into(),
+            work: maps.1,
+            seconds,
+            gpu: None,
+            error,
+            error_vs_limit: None,
+        });
     }
     Ok(md)
 }

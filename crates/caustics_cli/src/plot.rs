@@ -20,8 +20,7 @@ pub struct Axes {
 }
 
 /// The main bench figure.
-pub const ERROR_VS_TIME: Axes =
-    Axes { caption: "Caustic irradiance error against run time", x: "run time (s)", y: "relative L2 vs reference" };
+pub const ERROR_VS_TIME: Axes = Axes { caption: "Caustic irradiance error against run time", x: "run time (s)", y: "relative L2 vs reference" };
 
 pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String> {
     plot_log_log(path, &ERROR_VS_TIME, series)
@@ -30,17 +29,9 @@ pub fn plot_error_vs_time(path: &Path, series: &[&Series]) -> Result<(), String>
 /// Draws `series` on log–log axes into a 900 × 600 PNG.
 pub fn plot_log_log(path: &Path, axes: &Axes, series: &[&Series]) -> Result<(), String> {
     // ab_glyph needs one font; egui's default font is small, free and ships as a crate.
-    register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| "the plot font is not a valid TrueType font".to_string())?;
+    register_font("sans-serif", FontStyle::Normal, epaint_default_fonts::UBUNTU_LIGHT).map_err(|_| "the plot font is not a valid TrueType font".to_string())?;
     let err = |e: &dyn std::fmt::Display| format!("cannot draw {}: {e}", path.display());
-    let all = series
-        .iter()
-        .flat_map(|s| s.points.iter())
-        .filter(|p| p.0 > 0.0 && p.1 > 0.0);
+    let all = series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0 > 0.0 && p.1 > 0.0);
     let (mut t0, mut t1, mut e0, mut e1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(t, e) in all {
         (t0, t1, e0, e1) = (t0.min(t), t1.max(t), e0.min(e), e1.max(e));
@@ -72,18 +63,11 @@ pub fn plot_log_log(path: &Path, axes: &Axes, series: &[&Series]) -> Result<(), 
         for (i, s) in series.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
-                .draw_series(LineSeries::new(
-                    s.points.iter().copied(),
-                    color.stroke_width(2),
-                ))
+                .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
                 .map_err(|e| err(&e))?
                 .label(&s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
-                });
-            chart
-                .draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                .map_err(|e| err(&e))?;
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            chart.draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled()))).map_err(|e| err(&e))?;
         }
         chart
             .configure_series_labels()
@@ -106,30 +90,18 @@ pub fn plot_log_log(path: &Path, axes: &Axes, series: &[&Series]) -> Result<(), 
 fn log_axis(lo: f64, hi: f64) -> WithKeyPoints<LogCoord<f64>> {
     let digits = |ms: &[f64]| -> Vec<f64> {
         let decades = lo.log10().floor() as i32..=hi.log10().ceil() as i32;
-        decades
-            .flat_map(|k| ms.iter().map(move |m| m * 10f64.powi(k)))
-            .filter(|v| (lo..=hi).contains(v))
-            .collect()
+        decades.flat_map(|k| ms.iter().map(move |m| m * 10f64.powi(k))).filter(|v| (lo..=hi).contains(v)).collect()
     };
     let all = digits(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
     let labelled = digits(&[1.0, 2.0, 5.0]);
-    let labelled = if labelled.len() >= 3 {
-        labelled
-    } else {
-        all.clone()
-    };
-    (lo..hi)
-        .log_scale()
-        .with_key_points(labelled)
-        .with_light_points(all)
+    let labelled = if labelled.len() >= 3 { labelled } else { all.clone() };
+    (lo..hi).log_scale().with_key_points(labelled).with_light_points(all)
 }
 
 /// A tick label to three significant digits: a log axis's ticks are sums of binary
 /// fractions (`0.30000000000000004`).
 fn tick(value: f64) -> String {
-    format!("{:.2e}", value)
-        .parse::<f64>()
-        .map_or_else(|_| value.to_string(), |v| v.to_string())
+    format!("{:.2e}", value).parse::<f64>().map_or_else(|_| value.to_string(), |v| v.to_string())
 }
 
 #[cfg(test)]

@@ -3,19 +3,19 @@
 use crate::bench::{Auto, BenchMethod, CONVOLUTION_GRIDS, CONVOLUTION_METHODS, SUPERSAMPLE, volumes_irradiance};
 use crate::images::{percentile_white, write_exr, write_png};
 use crate::scenes::{LoadedScene, default_camera, open};
-use caustics_bevy::CausticQuality;
 use crate::{prepare_output, progress};
-use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
-use caustics_core::tracer::{PhotonTracer, TraceSettings};
+use caustics_bevy::CausticQuality;
+use caustics_bevy::CausticTechnique;
 use caustics_bevy::headless::HeadlessRenderer;
 use caustics_bevy::hierarchical_maps::HierarchicalMapsSettings;
 use caustics_bevy::reference::{exposure_for, spawn_scene_content};
 use caustics_bevy::warped_volumes::{VolumeIntensity, WarpedVolumesSettings};
-use caustics_bevy::CausticTechnique;
 use caustics_core::estimate::GridRegion;
-use caustics_core::scenes::BenchScene;
+use caustics_core::estimate::{IrradianceGrid, PhotonList, PhotonMap};
 use caustics_core::glam::Vec3;
 use caustics_core::scene::LightKind;
+use caustics_core::scenes::BenchScene;
+use caustics_core::tracer::{PhotonTracer, TraceSettings};
 use caustics_core::view::render_view;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -124,11 +124,10 @@ pub struct RenderArgs {
 }
 
 fn parse_region(s: &str) -> Result<(f32, f32, f32, Option<f32>), String> {
-    let values: Vec<f32> = s.split(',').map(|v| v.trim().parse::<f32>().map_err(|_| format!("region {s:?}: {v:?} is not a number"))).collect::<Result<_, _>>()?;
+    let values: Vec<f32> =
+        s.split(',').map(|v| v.trim().parse::<f32>().map_err(|_| format!("region {s:?}: {v:?} is not a number"))).collect::<Result<_, _>>()?;
     match values[..] {
-        [x0, z0, size] | [x0, z0, size, _] if size > 0.0 && values.iter().all(|v| v.is_finite()) => {
-            Ok((x0, z0, size, values.get(3).copied()))
-        }
+        [x0, z0, size] | [x0, z0, size, _] if size > 0.0 && values.iter().all(|v| v.is_finite()) => Ok((x0, z0, size, values.get(3).copied())),
         _ => Err(format!("region {s:?} is not X0,Z0,SIZE[,Y] with a positive SIZE")),
     }
 }
@@ -174,7 +173,9 @@ pub fn run(args: RenderArgs) -> Result<(), String> {
                 eprintln!("shading {width}×{height} (kernel radius {:.4} m)", map.radius());
                 (render_view(&tracer, &bench.scene, &camera, &map).radiance, width, height)
             }
-            (Renderer::Cpu, _) => return Err(format!("the CPU renderer draws the reference only: --method {method:?} needs --renderer bevy or --irradiance-plane")),
+            (Renderer::Cpu, _) => {
+                return Err(format!("the CPU renderer draws the reference only: --method {method:?} needs --renderer bevy or --irradiance-plane"));
+            }
             (Renderer::Bevy, _) => (render_with_bevy(&tracer, &settings, &bench, &camera, method)?, width, height),
         }
     };
@@ -292,8 +293,7 @@ pub fn gpu_run(method: Method, bench: &BenchScene, maps: Option<(u32, u32)>, qua
             Tonemapping::None,
             exposure_for(typical_irradiance(&bench.scene, centre)),
             Projection::from(OrthographicProjection { scale: size / pixels as f32, ..OrthographicProjection::default_3d() }),
-            Transform::from_translation(to_bevy(centre) + CAMERA_LIFT * bevy::math::Vec3::Y)
-                .looking_at(to_bevy(centre), bevy::math::Vec3::NEG_Z),
+            Transform::from_translation(to_bevy(centre) + CAMERA_LIFT * bevy::math::Vec3::Y).looking_at(to_bevy(centre), bevy::math::Vec3::NEG_Z),
         ))
         .id();
     // Frames until every technique has built its work (the volumes build
@@ -348,9 +348,7 @@ pub fn typical_irradiance(scene: &caustics_core::scene::Scene, at: Vec3) -> f32 
         .iter()
         .map(|light| match light.kind {
             LightKind::Directional { irradiance, .. } => irradiance,
-            LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
-                intensity / (position - at).length_squared().max(1e-6)
-            }
+            LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => intensity / (position - at).length_squared().max(1e-6),
         })
         .sum()
 }
@@ -402,4 +400,3 @@ fn kernel_radius(photons: &PhotonList, region: &caustics_core::estimate::GridReg
     let area = region.edge_u.cross(region.edge_v).length();
     (64.0 * area / (std::f32::consts::PI * in_region as f32)).sqrt()
 }
-

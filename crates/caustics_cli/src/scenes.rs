@@ -3,15 +3,12 @@
 //! loader and the plugin's automatic tagging.
 
 use caustics_core::estimate::GridRegion;
-use caustics_core::glam::Vec3;
 use caustics_core::glam::Affine3A;
+use caustics_core::glam::Vec3;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind};
-use caustics_core::scenes::{
-    BenchScene, POOL_WAVES, SceneDescription, boxed_pool, glass_sphere, metal_ring, roofed_pool, wave_heightfield,
-    wave_pool,
-};
+use caustics_core::scenes::{BenchScene, POOL_WAVES, SceneDescription, boxed_pool, glass_sphere, metal_ring, roofed_pool, wave_heightfield, wave_pool};
 use caustics_core::view::{PinholeCamera, SceneView};
 use std::path::Path;
 
@@ -51,12 +48,11 @@ pub fn tessellated(name: &str, cells: usize) -> Option<BenchScene> {
 /// pool's sun: open and closed refractors side by side.
 fn ball_beside_pool(cells: usize) -> BenchScene {
     let mut bench = wave_pool(cells + 1, 128);
-    bench.scene.generators[0].mesh = wave_heightfield(cells + 1, 2.0, 0.8, &POOL_WAVES)
-        .transformed(&Affine3A::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
-    bench.scene.generators.push(Generator::new(
-        TriMesh::uv_sphere(Vec3::new(0.55, 0.45, 0.0), 0.3, 32, 64),
-        SpecularInteraction::Refract { ior: 1.5, dispersion: None },
-    ));
+    bench.scene.generators[0].mesh = wave_heightfield(cells + 1, 2.0, 0.8, &POOL_WAVES).transformed(&Affine3A::from_translation(Vec3::new(-1.0, 0.0, 0.0)));
+    bench
+        .scene
+        .generators
+        .push(Generator::new(TriMesh::uv_sphere(Vec3::new(0.55, 0.45, 0.0), 0.3, 32, 64), SpecularInteraction::Refract { ior: 1.5, dispersion: None }));
     bench.name = "ball_pool".into();
     bench
 }

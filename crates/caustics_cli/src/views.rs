@@ -9,13 +9,13 @@
 
 use crate::images::{percentile_white, write_exr, write_png};
 use crate::prepare_output;
-use caustics_core::glam::Vec3 as Rgb;
 use crate::render::typical_irradiance;
+use bevy::prelude::{Camera3d, Entity, Time, Virtual, With};
 use caustics_bevy::comparison::{ReferenceComparison, compare_headless};
 use caustics_bevy::headless::HeadlessRenderer;
 use caustics_bevy::reference::{ViewError, spawn_scene_view};
+use caustics_core::glam::Vec3 as Rgb;
 use caustics_core::view::SceneView;
-use bevy::prelude::{Camera3d, Entity, Time, Virtual, With};
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -105,18 +105,10 @@ pub fn write(dir: &Path, rows: &[ViewRow]) -> Result<(), String> {
     for r in rows {
         let (pixels, l2, l1) = r.error.map_or((0, f32::NAN, f32::NAN), |e| (e.pixels, e.l2, e.l1));
         let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
-        writeln!(
-            csv,
-            "{},{},{},{pixels},{l2:.6},{l1:.6},{:.6},{},{:.3}",
-            quote(&r.scene),
-            r.technique,
-            quote(&r.drawn),
-            r.noise,
-            quote(&r.adapter),
-            r.gpu_ms
-        )
-        .unwrap();
-        writeln!(md, "| {} | {} | {} | {pixels} | {l2:.4} | {l1:.4} | {:.4} | {} | {:.3} |", r.scene, r.technique, r.drawn, r.noise, r.adapter, r.gpu_ms).unwrap();
+        writeln!(csv, "{},{},{},{pixels},{l2:.6},{l1:.6},{:.6},{},{:.3}", quote(&r.scene), r.technique, quote(&r.drawn), r.noise, quote(&r.adapter), r.gpu_ms)
+            .unwrap();
+        writeln!(md, "| {} | {} | {} | {pixels} | {l2:.4} | {l1:.4} | {:.4} | {} | {:.3} |", r.scene, r.technique, r.drawn, r.noise, r.adapter, r.gpu_ms)
+            .unwrap();
     }
     for (name, text) in [("views.csv", csv), ("views.md", md)] {
         let path = prepare_output(&dir.join(name))?;

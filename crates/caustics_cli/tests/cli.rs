@@ -53,8 +53,17 @@ fn render_writes_png_and_exr_of_the_irradiance_plane() {
     let dir = out_dir("render");
     let (png, exr) = (dir.join("pool.png"), dir.join("pool.exr"));
     let out = caustics(&[
-        "render", "pool", "--irradiance-plane", "--size", "64x64", "--photons", "200000",
-        "--out", png.to_str().unwrap(), "--exr", exr.to_str().unwrap(),
+        "render",
+        "pool",
+        "--irradiance-plane",
+        "--size",
+        "64x64",
+        "--photons",
+        "200000",
+        "--out",
+        png.to_str().unwrap(),
+        "--exr",
+        exr.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let img = image::open(&png).unwrap();
@@ -89,8 +98,7 @@ fn bench_writes_csv_table_and_plot() {
     let (method, l2) = (column("method"), column("relative_l2"));
     // Monte Carlo: the tracer's own rows, 4× the photons a step, halve the error a step
     // (1/√N); 0.75 leaves room for the noise of the reference itself.
-    let errors: Vec<f64> =
-        lines.filter(|r| r.split(',').nth(method) == Some("reference")).map(|r| r.split(',').nth(l2).unwrap().parse().unwrap()).collect();
+    let errors: Vec<f64> = lines.filter(|r| r.split(',').nth(method) == Some("reference")).map(|r| r.split(',').nth(l2).unwrap().parse().unwrap()).collect();
     assert!(errors.len() >= 3, "{csv}");
     assert!(errors.windows(2).all(|w| w[1] < 0.75 * w[0]), "the tracer's error does not fall as 1/√N: {errors:?}");
     assert!(std::fs::read_to_string(dir.join("bench.md")).unwrap().contains("| sphere | reference |"));
@@ -191,8 +199,17 @@ fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
     let dir = out_dir("gltf");
     let exr = dir.join("plane.exr");
     let out = caustics(&[
-        "render", scene.to_str().unwrap(), "--irradiance-plane", "--size", "32x32", "--photons", "300000",
-        "--out", dir.join("plane.png").to_str().unwrap(), "--exr", exr.to_str().unwrap(),
+        "render",
+        scene.to_str().unwrap(),
+        "--irradiance-plane",
+        "--size",
+        "32x32",
+        "--photons",
+        "300000",
+        "--out",
+        dir.join("plane.png").to_str().unwrap(),
+        "--exr",
+        exr.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     // The water (transmission 1, IOR 1.333) refracts the 1-lux sun onto the floor: the
@@ -211,10 +228,7 @@ fn gltf_scenes_load_through_bevy_and_are_tagged_by_material() {
 fn bevy_renders_the_view_with_reference_caustics_through_the_plugin() {
     let dir = out_dir("bevy_view");
     let png = dir.join("sphere.png");
-    let out = caustics(&[
-        "render", "sphere", "--renderer", "bevy", "--size", "96x72", "--photons", "400000",
-        "--out", png.to_str().unwrap(),
-    ]);
+    let out = caustics(&["render", "sphere", "--renderer", "bevy", "--size", "96x72", "--photons", "400000", "--out", png.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let img = image::open(&png).unwrap().into_luma8();
     let mut values: Vec<u8> = img.pixels().map(|p| p.0[0]).collect();
@@ -300,9 +314,8 @@ fn check_method_plane(dir: &std::path::Path, scene: &str, method: &str, truth: &
         // with a cell's margin) that the tracer leaves dark with their neighbours.
         let centre = |i: usize| -1.0 + (i as f64 + 0.5) / 32.0;
         let on_box = |r: usize, c: usize| (-0.35..0.25).contains(&centre(r)) && (-0.35..0.25).contains(&centre(c));
-        let dark = |r: usize, c: usize| {
-            (r.saturating_sub(1)..=(r + 1).min(63)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(63)).all(|cc| truth[rr * 64 + cc] == 0.0))
-        };
+        let dark =
+            |r: usize, c: usize| (r.saturating_sub(1)..=(r + 1).min(63)).all(|rr| (c.saturating_sub(1)..=(c + 1).min(63)).all(|cc| truth[rr * 64 + cc] == 0.0));
         let shadow: Vec<usize> = (0..64 * 64).filter(|&i| !on_box(i / 64, i % 64) && dark(i / 64, i % 64)).collect();
         assert!(shadow.len() >= 10, "the box's caustic shadow: {} cells", shadow.len());
         let lit = shadow.iter().map(|&i| gpu[i]).fold(0.0, f64::max);
@@ -353,7 +366,12 @@ fn write_gltf(dir: &std::path::Path, name: &str, meshes: &[(&str, Quads, &str)],
         views.push(format!(r#"{{"buffer": 0, "byteOffset": {}, "byteLength": {}}}"#, bin.len(), 4 * quads.indices.len()));
         bin.extend(quads.indices.iter().flat_map(|i| i.to_le_bytes()));
         nodes.push(format!(r#"{{"name": "{node}", "mesh": {k}}}"#));
-        primitives.push(format!(r#"{{"primitives": [{{"attributes": {{"POSITION": {}, "NORMAL": {}}}, "indices": {}, "material": {k}}}]}}"#, 3 * k, 3 * k + 1, 3 * k + 2));
+        primitives.push(format!(
+            r#"{{"primitives": [{{"attributes": {{"POSITION": {}, "NORMAL": {}}}, "indices": {}, "material": {k}}}]}}"#,
+            3 * k,
+            3 * k + 1,
+            3 * k + 2
+        ));
         materials.push(material.to_string());
     }
     let rotation = Quat::from_rotation_arc(Vec3::NEG_Z, sun.normalize());
@@ -455,9 +473,8 @@ fn a_one_sided_mirror_is_dark_from_behind_and_a_double_sided_one_is_not() {
         // Wound so that its normal (v × u) faces away from the sun.
         let sheet = Quads::default().quad(Vec3::new(0.5, 1.0, 0.0), v, u);
         assert!(sheet.normals[0].dot(sun) > 0.0);
-        let metal = format!(
-            r#"{{"name": "mirror", "doubleSided": {double_sided}, "pbrMetallicRoughness": {{"metallicFactor": 1.0, "roughnessFactor": 0.0}}}}"#
-        );
+        let metal =
+            format!(r#"{{"name": "mirror", "doubleSided": {double_sided}, "pbrMetallicRoughness": {{"metallicFactor": 1.0, "roughnessFactor": 0.0}}}}"#);
         let name = format!("mirror_double_sided_{double_sided}");
         let scene = write_gltf(&dir, &name, &[("mirror", sheet, &metal), ("floor", Quads::floor(), STONE)], sun);
         let plane = |method: &str| {
@@ -474,7 +491,10 @@ fn a_one_sided_mirror_is_dark_from_behind_and_a_double_sided_one_is_not() {
             let gpu = plane(method);
             if double_sided {
                 let error = relative_l2(&gpu, &truth);
-                eprintln!("double-sided mirror from behind, {method}: GPU vs reference relative L2 {error:.3}, flux {:.3} of the reference's", total(&gpu) / total(&truth));
+                eprintln!(
+                    "double-sided mirror from behind, {method}: GPU vs reference relative L2 {error:.3}, flux {:.3} of the reference's",
+                    total(&gpu) / total(&truth)
+                );
                 assert!(error < 0.5 && (total(&gpu) / total(&truth) - 1.0).abs() < 0.1, "{method}: L2 {error}");
             } else {
                 assert_eq!(total(&gpu), 0.0, "{method}: a one-sided mirror reflects from its back");

@@ -14,13 +14,13 @@
 
 use bevy::camera::Exposure;
 use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
 use caustics_bevy::comparison::{ReferenceComparison, compare_headless};
 use caustics_bevy::headless::HeadlessRenderer;
-use bevy::time::TimeUpdateStrategy;
 use caustics_bevy::{CausticGenerator, CausticReceiver, CausticTechnique, Caustics, DropPebble, ParticipatingMedium, PoolRipples};
-use std::time::Duration;
 use caustics_core::metrics::relative_l2;
 use std::process::Command;
+use std::time::Duration;
 
 const WIDTH: u32 = 96;
 const HEIGHT: u32 = 72;
@@ -89,11 +89,7 @@ fn spawn_game_scene(renderer: &mut HeadlessRenderer) -> Entity {
     ));
     world.spawn((Mesh3d(ball), CausticGenerator::refractive(1.5), Transform::from_xyz(0.6, 0.6, 0.1)));
     // Tilted towards the wall, so that its reflection lands there.
-    world.spawn((
-        Mesh3d(mirror),
-        CausticGenerator::mirror(),
-        Transform::from_xyz(1.0, 0.4, -0.6).with_rotation(Quat::from_rotation_x(-0.5)),
-    ));
+    world.spawn((Mesh3d(mirror), CausticGenerator::mirror(), Transform::from_xyz(1.0, 0.4, -0.6).with_rotation(Quat::from_rotation_x(-0.5))));
     world.spawn((
         DirectionalLight { illuminance: 20_000.0, shadow_maps_enabled: true, ..default() },
         Transform::default().looking_to(Vec3::new(0.25, -1.0, -0.35), Vec3::Y),

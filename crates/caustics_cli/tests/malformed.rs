@@ -60,9 +60,9 @@ fn every_malformed_file_is_one_clear_line_or_a_warning() {
             "fails" | "renders" | "warns" => None,
             other => panic!("expected.tsv: unknown outcome {other:?}"),
         };
-        let problem = problem.or_else(|| (!stderr.contains(message)).then(|| format!("no {message:?}"))).or_else(|| {
-            (stderr.contains("panicked") || stderr.contains("backtrace")).then(|| "a panic".to_string())
-        });
+        let problem = problem
+            .or_else(|| (!stderr.contains(message)).then(|| format!("no {message:?}")))
+            .or_else(|| (stderr.contains("panicked") || stderr.contains("backtrace")).then(|| "a panic".to_string()));
         if let Some(problem) = problem {
             wrong.push(format!("{name} ({outcome}): {problem}; stderr: {}", stderr.trim()));
         }

@@ -139,12 +139,7 @@ impl SceneBvh {
         let ray = Ray::new(o, d, tmin, tmax);
         let mut hit = RayHit::none();
         let mut best_uv = (0.0, 0.0);
-        let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| match self.triangles[id].intersect(
-            o,
-            d,
-            r.tmin,
-            r.tmax,
-        ) {
+        let found = self.bvh.ray_traverse(ray, &mut hit, |r, id| match self.triangles[id].intersect(o, d, r.tmin, r.tmax) {
             Some((t, u, v)) => {
                 best_uv = (u, v);
                 t
@@ -160,13 +155,7 @@ impl SceneBvh {
         let tri = &self.triangles[id];
         let n = tri.e1.cross(tri.e2);
         let (surface, triangle) = self.owners[id];
-        Some(Hit {
-            t: hit.t,
-            surface,
-            triangle,
-            uv: Vec2::new(best_uv.0, best_uv.1),
-            geometric_normal: Vec3::new(n.x, n.y, n.z).normalize_or(Vec3::Y),
-        })
+        Some(Hit { t: hit.t, surface, triangle, uv: Vec2::new(best_uv.0, best_uv.1), geometric_normal: Vec3::new(n.x, n.y, n.z).normalize_or(Vec3::Y) })
     }
 }
 

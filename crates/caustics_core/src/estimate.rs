@@ -43,9 +43,7 @@ impl GridRegion {
 
     /// The world position of the centre of cell `(row, col)`.
     pub fn cell_center(&self, row: usize, col: usize) -> Vec3 {
-        self.origin
-            + self.edge_u * ((col as f32 + 0.5) / self.nu as f32)
-            + self.edge_v * ((row as f32 + 0.5) / self.nv as f32)
+        self.origin + self.edge_u * ((col as f32 + 0.5) / self.nu as f32) + self.edge_v * ((row as f32 + 0.5) / self.nv as f32)
     }
 
     /// Row-major cell index of a point on (within `tolerance` of) the plane.

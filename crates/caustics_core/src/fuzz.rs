@@ -105,7 +105,9 @@ impl Category {
     pub fn handling(self) -> &'static str {
         match self {
             Category::DegenerateMesh => "zero-area triangles are dropped and counted (volumes: degenerate), slivers kept; fans and BVHs accept duplicates",
-            Category::NonFinite => "TriMesh::new refuses a non-finite position, a zero or non-finite normal, an index past the vertices, naming it, and a coordinate past 1e12 m; subnormal triangles are dropped as degenerate",
+            Category::NonFinite => {
+                "TriMesh::new refuses a non-finite position, a zero or non-finite normal, an index past the vertices, naming it, and a coordinate past 1e12 m; subnormal triangles are dropped as degenerate"
+            }
             Category::ExtremeScale => "tolerances scale with the scene (the tracer's offset, the maps' views, the volumes' planes)",
             Category::Ior => "below 1, NaN or infinite: refused (ImpossibleIor); 1 casts no pattern; large ones stay finite",
             Category::Dispersion => "a Cauchy model with n < 1 in the visible range or non-finite terms is refused",
@@ -229,7 +231,9 @@ pub fn run_case(seed: u64, index: u64) -> CaseResult {
     };
     let peak_bytes = CountingAllocator::peak_since(start);
     let verdict = match verdict {
-        Verdict::Passed { .. } if peak_bytes > MEMORY_BOUND => Verdict::Failed(format!("held {} MiB at its peak, past the {} MiB bound", peak_bytes >> 20, MEMORY_BOUND >> 20)),
+        Verdict::Passed { .. } if peak_bytes > MEMORY_BOUND => {
+            Verdict::Failed(format!("held {} MiB at its peak, past the {} MiB bound", peak_bytes >> 20, MEMORY_BOUND >> 20))
+        }
         v => v,
     };
     CaseResult { seed, index, category, verdict, peak_bytes }
@@ -363,7 +367,8 @@ impl RawMesh {
 fn scene_case(category: Category, draw: &mut Draw) -> Result<(Scene, u64), String> {
     let sun = Vec3::new(draw.range(-0.4, 0.4), -1.0, draw.range(-0.4, 0.4)).normalize();
     let mut lights = vec![Light::white(LightKind::Directional { direction: sun, irradiance: draw.range(0.1, 10.0) })];
-    let mut interaction = if draw.chance(0.3) { SpecularInteraction::Reflect } else { SpecularInteraction::Refract { ior: draw.range(1.1, 2.4), dispersion: None } };
+    let mut interaction =
+        if draw.chance(0.3) { SpecularInteraction::Reflect } else { SpecularInteraction::Refract { ior: draw.range(1.1, 2.4), dispersion: None } };
     let floor = TriMesh::quad(Vec3::ZERO, Vec3::X * 2.0, Vec3::Z * 2.0);
     let mut receivers = vec![Receiver { mesh: floor, albedo: Vec3::ONE }];
     let mut photons = 1 << 12;
@@ -446,11 +451,7 @@ fn scene_case(category: Category, draw: &mut Draw) -> Result<(Scene, u64), Strin
         }
         Category::Pool => unreachable!("pools are not scenes"),
     }
-    let generators = if raw.triangles.is_empty() {
-        Vec::new()
-    } else {
-        vec![Generator { double_sided, ..Generator::new(raw.build()?, interaction) }]
-    };
+    let generators = if raw.triangles.is_empty() { Vec::new() } else { vec![Generator { double_sided, ..Generator::new(raw.build()?, interaction) }] };
     let scene = Scene { lights, generators, receivers };
     scene.validate().map_err(|e| e.to_string())?;
     Ok((scene, photons))
@@ -577,7 +578,8 @@ fn check_scene(scene: &Scene, photons: u64) -> Result<f64, String> {
         finite_all("volumes", "the irradiance on a receiver", e.to_array())?;
     }
 
-    let maps = CausticMapSettings { photon_resolution: 32, map_resolution: 32, paths: PhotonPaths::Traced, fresnel_branches: 1, ..CausticMapSettings::default() };
+    let maps =
+        CausticMapSettings { photon_resolution: 32, map_resolution: 32, paths: PhotonPaths::Traced, fresnel_branches: 1, ..CausticMapSettings::default() };
     for view in scene_caustics(scene, &maps) {
         finite_all("caustic maps", "the resolved map", view.resolved.iter().copied())?;
         let traced = (maps.photon_resolution as f64).powi(2) * maps.photon_buffers() as f64;
@@ -594,7 +596,9 @@ fn check_scene(scene: &Scene, photons: u64) -> Result<f64, String> {
         let Ok(table) = LightTransportTable::build(&generator.mesh, build, &|_, _| {}) else { continue };
         for light in &scene.lights {
             let settings = IlluminationSettings { planes: 2, texture_size: 16 };
-            let Some(textures) = IlluminationTextures::frame(&table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, &settings) else { continue };
+            let Some(textures) = IlluminationTextures::frame(&table, &generator.mesh, &Affine3A::IDENTITY, light, &scene.receivers, &settings) else {
+                continue;
+            };
             let textures = textures.drawn();
             for plane in &textures.planes {
                 finite_all("illumination textures", "a texture", plane.texture.iter().flat_map(|t| [t.w, t.x.abs(), t.y.abs(), t.z.abs()]))?;

@@ -77,11 +77,7 @@ fn weld_positions(positions: &[Vec3], weld: f32) -> Vec<u32> {
         .map(|&p| {
             let key = (p / cell).floor().as_dvec3().to_array().map(|c| c as i64);
             let near = (-1..=1).flat_map(|dx| (-1..=1).flat_map(move |dy| (-1..=1).map(move |dz| [key[0] + dx, key[1] + dy, key[2] + dz])));
-            let found = near
-                .filter_map(|k| grid.get(&k))
-                .flatten()
-                .copied()
-                .find(|&id| representatives[id as usize].distance(p) <= weld);
+            let found = near.filter_map(|k| grid.get(&k)).flatten().copied().find(|&id| representatives[id as usize].distance(p) <= weld);
             found.unwrap_or_else(|| {
                 let id = representatives.len() as u32;
                 representatives.push(p);
@@ -124,11 +120,7 @@ impl TriMesh {
     /// Builds a mesh, checking every index, position and normal. Normals are
     /// normalised (unit ones kept as they are); zero, NaN or infinite normals are an error, and so are positions
     /// past [`MAX_COORDINATE`].
-    pub fn new(
-        positions: Vec<Vec3>,
-        normals: Vec<Vec3>,
-        triangles: Vec<[u32; 3]>,
-    ) -> Result<Self, MeshError> {
+    pub fn new(positions: Vec<Vec3>, normals: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Result<Self, MeshError> {
         if triangles.is_empty() {
             return Err(MeshError::Empty);
         }
@@ -257,20 +249,14 @@ impl TriMesh {
         let normal_matrix = transform.matrix3.inverse().transpose();
         Self {
             positions: self.positions.iter().map(|&p| transform.transform_point3(p)).collect(),
-            normals: self
-                .normals
-                .iter()
-                .map(|&n| (normal_matrix * n).normalize_or(n))
-                .collect(),
+            normals: self.normals.iter().map(|&n| (normal_matrix * n).normalize_or(n)).collect(),
             triangles: self.triangles.clone(),
         }
     }
 
     /// Axis-aligned bounds `(min, max)`.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.positions
-            .iter()
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)))
+        self.positions.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| (lo.min(p), hi.max(p)))
     }
 
     /// Total surface area.
@@ -287,12 +273,7 @@ impl TriMesh {
     /// `height(x, z)` and normals `normal(x, z)`. Vertex `p = j·n + i` (i along x, j
     /// along z); each cell is split into (p, p+n, p+1) and (p+1, p+n, p+n+1), so the
     /// front faces +y.
-    pub fn heightfield(
-        n: usize,
-        size: f32,
-        height: impl Fn(f32, f32) -> f32,
-        normal: impl Fn(f32, f32) -> Vec3,
-    ) -> Result<Self, MeshError> {
+    pub fn heightfield(n: usize, size: f32, height: impl Fn(f32, f32) -> f32, normal: impl Fn(f32, f32) -> Vec3) -> Result<Self, MeshError> {
         let n = n.max(2);
         let step = size / (n - 1) as f32;
         let mut positions = Vec::with_capacity(n * n);
@@ -321,12 +302,7 @@ impl TriMesh {
     /// (its normal is `half_u × half_v`).
     pub fn quad(center: Vec3, half_u: Vec3, half_v: Vec3) -> Self {
         let n = half_u.cross(half_v).normalize_or(Vec3::Y);
-        let positions = vec![
-            center - half_u - half_v,
-            center + half_u - half_v,
-            center + half_u + half_v,
-            center - half_u + half_v,
-        ];
+        let positions = vec![center - half_u - half_v, center + half_u - half_v, center + half_u + half_v, center - half_u + half_v];
         Self { positions, normals: vec![n; 4], triangles: vec![[0, 1, 2], [0, 2, 3]] }
     }
 

@@ -6,15 +6,8 @@ pub fn relative_l2(a: &[f32], b: &[f32]) -> f32 {
     if a.len() != b.len() {
         return f32::INFINITY;
     }
-    let (num, den) = a
-        .iter()
-        .zip(b)
-        .fold((0f64, 0f64), |(n, d), (&x, &y)| (n + ((x - y) as f64).powi(2), d + (y as f64).powi(2)));
-    if den == 0.0 {
-        if num == 0.0 { 0.0 } else { f32::INFINITY }
-    } else {
-        (num / den).sqrt() as f32
-    }
+    let (num, den) = a.iter().zip(b).fold((0f64, 0f64), |(n, d), (&x, &y)| (n + ((x - y) as f64).powi(2), d + (y as f64).powi(2)));
+    if den == 0.0 { if num == 0.0 { 0.0 } else { f32::INFINITY } } else { (num / den).sqrt() as f32 }
 }
 
 /// Relative L1 difference `‖a − b‖₁ / ‖b‖₁` of `a` against reference `b`: unlike L2,
@@ -25,11 +18,7 @@ pub fn relative_l1(a: &[f32], b: &[f32]) -> f32 {
         return f32::INFINITY;
     }
     let (num, den) = a.iter().zip(b).fold((0f64, 0f64), |(n, d), (&x, &y)| (n + (x - y).abs() as f64, d + y.abs() as f64));
-    if den == 0.0 {
-        if num == 0.0 { 0.0 } else { f32::INFINITY }
-    } else {
-        (num / den) as f32
-    }
+    if den == 0.0 { if num == 0.0 { 0.0 } else { f32::INFINITY } } else { (num / den) as f32 }
 }
 
 /// Separable Gaussian blur of a row-major `width × height` image with standard
@@ -68,10 +57,7 @@ pub fn read_csv_image(text: &str) -> Result<(Vec<f32>, usize, usize), String> {
     let mut width = None;
     let mut height = 0;
     for (line_no, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let row = line
-            .split(',')
-            .map(|v| v.trim().parse::<f32>().map_err(|e| format!("line {}: {v:?}: {e}", line_no + 1)))
-            .collect::<Result<Vec<_>, _>>()?;
+        let row = line.split(',').map(|v| v.trim().parse::<f32>().map_err(|e| format!("line {}: {v:?}: {e}", line_no + 1))).collect::<Result<Vec<_>, _>>()?;
         match width {
             None => width = Some(row.len()),
             Some(w) if w != row.len() => {

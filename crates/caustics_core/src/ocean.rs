@@ -217,8 +217,7 @@ impl OceanSpectrum {
     pub fn new(settings: &OceanSettings) -> Result<Self, ParamError> {
         settings.validate()?;
         let n = settings.resolution;
-        let draws: Vec<Complex32> =
-            (0..n * n).map(|i| gaussian(&mut Pcg32::for_photon(settings.seed, 0, i as u64))).collect();
+        let draws: Vec<Complex32> = (0..n * n).map(|i| gaussian(&mut Pcg32::for_photon(settings.seed, 0, i as u64))).collect();
         let mut h0 = Vec::with_capacity(n * n);
         let mut omega = Vec::with_capacity(n * n);
         // |h|, |∇h|, |D| and |∂D| are at most Σ (|h̃₀(k)| + |h̃₀(−k)|)(1 + k)(1 + k).
@@ -356,8 +355,7 @@ impl OceanSpectrum {
                 let value = |f: usize| work.fields[f][at] * sign;
                 let (h, dhdx) = (value(0).re, value(0).im);
                 let (dhdz, dx) = (value(1).re, value(1).im);
-                let (dz, dxx, dzz, dxz) =
-                    if fields == 4 { (value(2).re, value(2).im, value(3).re, value(3).im) } else { (0.0, 0.0, 0.0, 0.0) };
+                let (dz, dxx, dzz, dxz) = if fields == 4 { (value(2).re, value(2).im, value(3).re, value(3).im) } else { (0.0, 0.0, 0.0, 0.0) };
                 let along_x = Vec3::new(1.0 + chop * dxx, dhdx, chop * dxz);
                 let along_z = Vec3::new(chop * dxz, dhdz, 1.0 + chop * dzz);
                 out.displacement.push(Vec3::new(chop * dx, h, chop * dz));
@@ -408,10 +406,7 @@ impl OceanSurface {
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         let n = self.resolution as u32;
         let stride = n + 1;
-        (0..n)
-            .flat_map(|j| (0..n).map(move |i| j * stride + i))
-            .flat_map(|p| [[p, p + stride, p + 1], [p + 1, p + stride, p + stride + 1]])
-            .collect()
+        (0..n).flat_map(|j| (0..n).map(move |i| j * stride + i)).flat_map(|p| [[p, p + stride, p + 1], [p + 1, p + stride, p + stride + 1]]).collect()
     }
 
     /// The patch as a mesh: (N + 1)² vertices centred on the origin in the xz plane,

@@ -52,51 +52,28 @@ pub enum ParamError {
 
 /// Checks an index of refraction: finite and at least one.
 pub fn check_ior(ior: f32) -> Result<f32, ParamError> {
-    if ior.is_finite() && ior >= 1.0 {
-        Ok(ior)
-    } else {
-        Err(ParamError::ImpossibleIor(ior))
-    }
+    if ior.is_finite() && ior >= 1.0 { Ok(ior) } else { Err(ParamError::ImpossibleIor(ior)) }
 }
 
 /// Checks a Cauchy model: finite, and `n ≥ 1` over the visible range 0.38–0.78 µm.
 pub fn check_dispersion(d: &CauchyDispersion) -> Result<(), ParamError> {
-    let ok = d.a.is_finite()
-        && d.b.is_finite()
-        && d.ior(0.38) >= 1.0
-        && d.ior(0.78) >= 1.0;
-    if ok {
-        Ok(())
-    } else {
-        Err(ParamError::ImpossibleDispersion { a: d.a, b: d.b })
-    }
+    let ok = d.a.is_finite() && d.b.is_finite() && d.ior(0.38) >= 1.0 && d.ior(0.78) >= 1.0;
+    if ok { Ok(()) } else { Err(ParamError::ImpossibleDispersion { a: d.a, b: d.b }) }
 }
 
 /// Checks a coefficient (σₛ, σₐ, …): finite and non-negative.
 pub fn check_coefficient(name: &'static str, value: f32) -> Result<f32, ParamError> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(value)
-    } else {
-        Err(ParamError::NegativeCoefficient { name, value })
-    }
+    if value.is_finite() && value >= 0.0 { Ok(value) } else { Err(ParamError::NegativeCoefficient { name, value }) }
 }
 
 /// Checks a Henyey–Greenstein asymmetry parameter: finite and in (−1, 1).
 pub fn check_asymmetry(g: f32) -> Result<f32, ParamError> {
-    if g.is_finite() && g > -1.0 && g < 1.0 {
-        Ok(g)
-    } else {
-        Err(ParamError::ImpossibleAsymmetry(g))
-    }
+    if g.is_finite() && g > -1.0 && g < 1.0 { Ok(g) } else { Err(ParamError::ImpossibleAsymmetry(g)) }
 }
 
 /// Checks that a value is finite.
 pub fn check_finite(name: &'static str, value: f32) -> Result<f32, ParamError> {
-    if value.is_finite() {
-        Ok(value)
-    } else {
-        Err(ParamError::NotFinite { name, value })
-    }
+    if value.is_finite() { Ok(value) } else { Err(ParamError::NotFinite { name, value }) }
 }
 
 /// How a generator surface redirects light.
@@ -133,9 +110,7 @@ impl SpecularInteraction {
     pub fn ior_at(&self, wavelength_um: f32) -> Option<f32> {
         match self {
             SpecularInteraction::Reflect => None,
-            SpecularInteraction::Refract { ior, dispersion } => {
-                Some(dispersion.map_or(*ior, |d| d.ior(wavelength_um)))
-            }
+            SpecularInteraction::Refract { ior, dispersion } => Some(dispersion.map_or(*ior, |d| d.ior(wavelength_um))),
         }
     }
 }

@@ -75,9 +75,7 @@ impl Light {
     /// (Iwasaki et al. Fig. 6(d)): every technique then draws it light by light.
     pub fn linear(a: Vec3, b: Vec3, intensity: f32, n: usize) -> Vec<Self> {
         let n = n.max(1);
-        (0..n)
-            .map(|k| Self::white(LightKind::Point { position: a.lerp(b, (k as f32 + 0.5) / n as f32), intensity: intensity / n as f32 }))
-            .collect()
+        (0..n).map(|k| Self::white(LightKind::Point { position: a.lerp(b, (k as f32 + 0.5) / n as f32), intensity: intensity / n as f32 })).collect()
     }
 
     /// Checks that directions are non-zero, every number finite and non-negative, and
@@ -113,7 +111,8 @@ impl Light {
                 crate::params::check_coefficient("spot outer angle", outer_angle)?;
             }
         }
-        let (LightKind::Directional { irradiance: power, .. } | LightKind::Point { intensity: power, .. } | LightKind::Spot { intensity: power, .. }) = self.kind;
+        let (LightKind::Directional { irradiance: power, .. } | LightKind::Point { intensity: power, .. } | LightKind::Spot { intensity: power, .. }) =
+            self.kind;
         let strongest = power * self.color.max_element();
         if strongest > MAX_LIGHT_POWER {
             let expected = "at most 1e20 (lux or candela, times the colour's largest channel)";
@@ -191,11 +190,7 @@ pub fn range_window(distance_squared: f32, inverse_range_squared: f32) -> f32 {
 }
 
 fn nonzero(v: Vec3) -> Result<(), ParamError> {
-    if v.length_squared() > 0.0 {
-        Ok(())
-    } else {
-        Err(ParamError::NotFinite { name: "zero-length light direction", value: 0.0 })
-    }
+    if v.length_squared() > 0.0 { Ok(()) } else { Err(ParamError::NotFinite { name: "zero-length light direction", value: 0.0 }) }
 }
 
 /// A specular surface that reflects or refracts light into caustics.
@@ -354,12 +349,7 @@ pub enum SurfaceRole {
 /// ≥ ½) refracts with its `KHR_materials_ior` index; a smooth metal (metallic ≥ 0.99,
 /// perceptual roughness ≤ 0.05) is a mirror; everything else is a receiver. An
 /// impossible IOR is an error, so that the caller can report it and skip the surface.
-pub fn role_from_material(
-    transmission: f32,
-    ior: f32,
-    metallic: f32,
-    perceptual_roughness: f32,
-) -> Result<SurfaceRole, ParamError> {
+pub fn role_from_material(transmission: f32, ior: f32, metallic: f32, perceptual_roughness: f32) -> Result<SurfaceRole, ParamError> {
     if transmission >= 0.5 {
         crate::params::check_ior(ior)?;
         Ok(SurfaceRole::Generator(SpecularInteraction::Refract { ior, dispersion: None }))

@@ -56,10 +56,7 @@ pub fn try_wave_heightfield(n: usize, size: f32, height: f32, waves: &[Wave]) ->
 }
 
 /// The waves of the reference pool (`shared/reference/wave_pool_scene.json`).
-pub const POOL_WAVES: [Wave; 2] = [
-    Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 },
-    Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 },
-];
+pub const POOL_WAVES: [Wave; 2] = [Wave { kx: 8.0, kz: 0.0, amplitude: 0.07, phase: 0.0 }, Wave { kx: 0.0, kz: 9.0, amplitude: 0.05, phase: 0.7 }];
 
 /// The rippled pool of `shared/reference` with an `n × n` water grid: directional
 /// light along (0.3, −1, −0.2) with irradiance 1, water IOR 1.333 at y ≈ 0.8, floor
@@ -233,10 +230,7 @@ impl SceneDescription {
         if self.light.kind != "directional" {
             return Err(format!("light type {:?} is not supported (only \"directional\")", self.light.kind));
         }
-        let light = Light::white(LightKind::Directional {
-            direction: Vec3::from_array(self.light.direction),
-            irradiance: self.light.irradiance,
-        });
+        let light = Light::white(LightKind::Directional { direction: Vec3::from_array(self.light.direction), irradiance: self.light.irradiance });
         let generators = self
             .generators
             .iter()
@@ -252,8 +246,7 @@ impl SceneDescription {
                 if !(1..=MAX_DESCRIPTION_GRID).contains(&g.n) {
                     return Err(format!("heightfield n = {} is out of range (1 to {MAX_DESCRIPTION_GRID} cells a side)", g.n));
                 }
-                let waves: Vec<Wave> =
-                    g.waves.iter().map(|&[kx, kz, amplitude, phase]| Wave { kx, kz, amplitude, phase }).collect();
+                let waves: Vec<Wave> = g.waves.iter().map(|&[kx, kz, amplitude, phase]| Wave { kx, kz, amplitude, phase }).collect();
                 let mesh = try_wave_heightfield(g.n, g.size, g.height, &waves).map_err(|e| format!("the heightfield's waves make no mesh: {e}"))?;
                 Ok(Generator { mesh, interaction, double_sided: g.double_sided })
             })
@@ -263,10 +256,6 @@ impl SceneDescription {
         floor.mesh = floor.mesh.transformed(&glam::Affine3A::from_translation(Vec3::Y * self.receiver.y));
         let scene = Scene { lights: vec![light], generators, receivers: vec![floor] };
         scene.validate().map_err(|e| e.to_string())?;
-        Ok(BenchScene {
-            name: self.name.clone(),
-            scene,
-            region: GridRegion::horizontal(-half, -half, self.receiver.y, self.receiver.size, cells),
-        })
+        Ok(BenchScene { name: self.name.clone(), scene, region: GridRegion::horizontal(-half, -half, self.receiver.y, self.receiver.size, cells) })
     }
 }

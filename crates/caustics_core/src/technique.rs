@@ -40,8 +40,7 @@ pub enum Technique {
 
 impl Technique {
     /// Every technique.
-    pub const ALL: [Technique; 4] =
-        [Technique::WarpedVolumes, Technique::IlluminationTextures, Technique::Convolution, Technique::HierarchicalMaps];
+    pub const ALL: [Technique; 4] = [Technique::WarpedVolumes, Technique::IlluminationTextures, Technique::Convolution, Technique::HierarchicalMaps];
 
     /// The technique's name in prose.
     pub fn label(self) -> &'static str {
@@ -235,8 +234,7 @@ pub fn choose(requested: Option<Technique>, facts: GeneratorFacts, compiled: imp
 mod tests {
     use super::*;
 
-    const ALL_SHAPES: [GeneratorShape; 4] =
-        [GeneratorShape::ClosedRefractor, GeneratorShape::OpenRefractor, GeneratorShape::Pool, GeneratorShape::Mirror];
+    const ALL_SHAPES: [GeneratorShape; 4] = [GeneratorShape::ClosedRefractor, GeneratorShape::OpenRefractor, GeneratorShape::Pool, GeneratorShape::Mirror];
 
     fn facts(shape: GeneratorShape) -> GeneratorFacts {
         GeneratorFacts { shape, in_medium: false, sides: Sides::Front, with_closed_refractor: false }

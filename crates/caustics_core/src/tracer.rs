@@ -169,16 +169,8 @@ impl Footprint {
                 }
             }
         }
-        let cells = (0..marked.len())
-            .filter(|&i| marked[i])
-            .map(|i| ((i % Self::RES) as u16, (i / Self::RES) as u16))
-            .collect();
-        Self {
-            corner: center - direction * (2.0 * radius) + t * lo.x + b * lo.y,
-            cell_u: t * cell.x,
-            cell_v: b * cell.y,
-            cells,
-        }
+        let cells = (0..marked.len()).filter(|&i| marked[i]).map(|i| ((i % Self::RES) as u16, (i / Self::RES) as u16)).collect();
+        Self { corner: center - direction * (2.0 * radius) + t * lo.x + b * lo.y, cell_u: t * cell.x, cell_v: b * cell.y, cells }
     }
 
     /// Area of all marked cells.
@@ -200,10 +192,7 @@ pub fn orthonormal_basis(n: Vec3) -> (Vec3, Vec3) {
     let sign = 1f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    (
-        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
-        Vec3::new(b, sign + n.y * n.y * a, -n.y),
-    )
+    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
 }
 
 impl Emitter {
@@ -221,11 +210,7 @@ impl Emitter {
             LightKind::Point { position, intensity } | LightKind::Spot { position, intensity, .. } => {
                 let to_center = center - position;
                 let dist = to_center.length();
-                let (axis, cos_max) = if dist > radius {
-                    (to_center / dist, (1.0 - (radius / dist).powi(2)).max(0.0).sqrt())
-                } else {
-                    (Vec3::Y, -1.0)
-                };
+                let (axis, cos_max) = if dist > radius { (to_center / dist, (1.0 - (radius / dist).powi(2)).max(0.0).sqrt()) } else { (Vec3::Y, -1.0) };
                 let solid_angle = TAU * (1.0 - cos_max);
                 Emitter::Cone { position, axis, cos_max, flux: intensity * solid_angle / n }
             }
@@ -250,11 +235,8 @@ impl Emitter {
                 // over the spherical cap: cos θ uniform in [cos_max, 1].
                 const CONE_RES: f64 = 128.0;
                 let cell = (s * CONE_RES * CONE_RES).floor();
-                let xi = Vec2::new(
-                    (((cell % CONE_RES) + xi.x as f64) / CONE_RES) as f32,
-                    (((cell / CONE_RES).floor() + xi.y as f64) / CONE_RES) as f32,
-                )
-                .min(Vec2::splat(1.0 - f32::EPSILON));
+                let xi = Vec2::new((((cell % CONE_RES) + xi.x as f64) / CONE_RES) as f32, (((cell / CONE_RES).floor() + xi.y as f64) / CONE_RES) as f32)
+                    .min(Vec2::splat(1.0 - f32::EPSILON));
                 let cos_t = 1.0 - xi.x * (1.0 - cos_max);
                 let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
                 let phi = TAU * xi.y;
@@ -294,9 +276,7 @@ impl<'a> PhotonTracer<'a> {
     pub fn new(scene: &'a Scene) -> Result<Self, SceneError> {
         scene.validate()?;
         let bvh = SceneBvh::build(scene);
-        let dispersive = scene.generators.iter().any(|g| {
-            matches!(g.interaction, SpecularInteraction::Refract { dispersion: Some(d), .. } if d.b != 0.0)
-        });
+        let dispersive = scene.generators.iter().any(|g| matches!(g.interaction, SpecularInteraction::Refract { dispersion: Some(d), .. } if d.b != 0.0));
         let extent = scene
             .generators
             .iter()
@@ -318,12 +298,7 @@ impl<'a> PhotonTracer<'a> {
 
     /// Traces `settings.photons_per_light` photons from every light into `sink`,
     /// calling `progress(done, total)` between batches.
-    pub fn trace<S: PhotonSink>(
-        &self,
-        settings: &TraceSettings,
-        sink: &mut S,
-        progress: &(dyn Fn(u64, u64) + Sync),
-    ) -> TraceStats {
+    pub fn trace<S: PhotonSink>(&self, settings: &TraceSettings, sink: &mut S, progress: &(dyn Fn(u64, u64) + Sync)) -> TraceStats {
         const BATCH: u64 = 1 << 14;
         let mut stats = TraceStats::default();
         let Some(bounds) = self.scene.generator_bounds() else {

@@ -91,13 +91,9 @@ impl MeshBvh {
     /// One mesh's BVH in its own space, as an [`InstancedBvh`] places it. Degenerate
     /// triangles are kept: the intersection test never hits them.
     pub fn of_mesh(mesh: &TriMesh) -> Self {
-        let mut triangles: Vec<(BvhTriangle, [u32; 3])> = mesh.triangles().iter().map(|&tri| (BvhTriangle::of(mesh.positions(), mesh.normals(), tri), tri)).collect();
-        let nodes = build_nodes(
-            &mut triangles,
-            LEAF_SIZE,
-            |items| bounds(items.iter().map(|(t, _)| t)),
-            |(t, _)| t.centroid(),
-        );
+        let mut triangles: Vec<(BvhTriangle, [u32; 3])> =
+            mesh.triangles().iter().map(|&tri| (BvhTriangle::of(mesh.positions(), mesh.normals(), tri), tri)).collect();
+        let nodes = build_nodes(&mut triangles, LEAF_SIZE, |items| bounds(items.iter().map(|(t, _)| t)), |(t, _)| t.centroid());
         let (triangles, corners) = triangles.into_iter().unzip();
         Self { nodes, triangles, corners }
     }

@@ -263,11 +263,7 @@ fn direct_irradiance(tracer: &PhotonTracer, scene: &Scene, p: Vec3, n: Vec3) -> 
                 }
             };
             let cos = n.dot(to_light);
-            if cos <= 0.0 || e <= 0.0 || tracer.bvh().intersect(p, to_light, 0.0, distance).is_some() {
-                Vec3::ZERO
-            } else {
-                light.color * e * cos
-            }
+            if cos <= 0.0 || e <= 0.0 || tracer.bvh().intersect(p, to_light, 0.0, distance).is_some() { Vec3::ZERO } else { light.color * e * cos }
         })
         .sum()
 }

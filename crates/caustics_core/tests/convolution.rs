@@ -13,8 +13,7 @@ use glam::{Vec2, Vec3};
 
 fn waves(texels: usize, cell: f32, amplitude: f32, offset: f32) -> Heightfield {
     let k = std::f32::consts::TAU / 0.6;
-    Heightfield::from_fn(texels, texels, cell, |x, z| offset + amplitude * ((k * x).sin() + (0.7 * k * z + 0.3).cos()))
-        .unwrap()
+    Heightfield::from_fn(texels, texels, cell, |x, z| offset + amplitude * ((k * x).sin() + (0.7 * k * z + 0.3).cos())).unwrap()
 }
 
 fn both_forms(heightfield: &Heightfield, settings: &ConvolutionSettings) -> [Vec<f32>; 2] {
@@ -67,12 +66,7 @@ fn a_flat_surface_lights_the_floor_with_exactly_l_t_cos() {
 fn mirror_walls_conserve_flux_and_cast_the_wall_shadow() {
     let (texels, radius) = (24, 5);
     let flat = Heightfield::flat(texels, texels, 0.05).unwrap();
-    let settings = ConvolutionSettings {
-        sun_direction: Vec3::new(0.5, -1.0, 0.0),
-        extinction: 0.0,
-        kernel_radius: radius,
-        ..Default::default()
-    };
+    let settings = ConvolutionSettings { sun_direction: Vec3::new(0.5, -1.0, 0.0), extinction: 0.0, kernel_radius: radius, ..Default::default() };
     let expected = flat_irradiance(&settings);
     let direct = direct_irradiance(&flat, &settings).unwrap();
     assert!((mean(&direct) / expected as f64 - 1.0).abs() < 1e-6, "flux not conserved: {}", mean(&direct));
@@ -192,10 +186,8 @@ fn a_kernel_wider_than_the_heightfield_sums_the_extended_surface() {
 fn stiff_and_extreme_inputs_give_finite_irradiance() {
     let gentle = waves(32, 0.05, 0.005, 0.0);
     let steep = Heightfield::from_fn(32, 32, 0.01, |x, z| 0.5 * (x * 370.0).sin() * (z * 530.0).cos()).unwrap();
-    let checkerboard = Heightfield::from_fn(16, 16, 0.001, |x, z| {
-        if ((x * 1000.0) as usize + (z * 1000.0) as usize).is_multiple_of(2) { 1.0 } else { -1.0 }
-    })
-    .unwrap();
+    let checkerboard =
+        Heightfield::from_fn(16, 16, 0.001, |x, z| if ((x * 1000.0) as usize + (z * 1000.0) as usize).is_multiple_of(2) { 1.0 } else { -1.0 }).unwrap();
     let ripples = waves(32, 0.05, 4e-5, 0.0);
     let still = Heightfield::flat(16, 16, 0.05).unwrap();
     let texel = Heightfield::new(1, 1, 0.05, vec![0.01]).unwrap();
@@ -389,10 +381,7 @@ fn a_drop_near_a_wall_is_reflected_by_its_mirror_image() {
     let mut steepest = 0.0f32;
     for step in 0..=40 {
         let along = step as f32 * 0.05;
-        for (inside, outside) in [
-            (Vec2::new(delta, along), Vec2::new(-delta, along)),
-            (Vec2::new(along, delta), Vec2::new(along, -delta)),
-        ] {
+        for (inside, outside) in [(Vec2::new(delta, along), Vec2::new(-delta, along)), (Vec2::new(along, delta), Vec2::new(along, -delta))] {
             let derivative = (pool.height_at(inside, time) - pool.height_at(outside, time)) / (2.0 * delta);
             assert!(derivative.abs() < 1e-5, "∂h/∂n = {derivative} at {inside}");
         }
@@ -487,7 +476,7 @@ fn narrow_lobes_never_subtract_light_and_keep_the_flux() {
     // keeps the floor's flux to rounding, and leaves the result no farther from the
     // direct integral (whose Gaussian lobe is positive everywhere) than the signed sum.
     for (amplitude, exponent) in [(0.02f32, 400.0f32), (0.05, 400.0), (0.05, 1000.0), (0.08, 1000.0), (0.05, 10_000.0), (0.02, 10_000.0)] {
-    let surface = waves(64, 0.05, amplitude, 0.0);
+        let surface = waves(64, 0.05, amplitude, 0.0);
         let settings = ConvolutionSettings { exponent, scattering: 0.5 * exponent, kernel_radius: 6, ..Default::default() };
         let mut plan = ConvolutionCaustics::new(&settings, 64, 64, 0.05).unwrap();
         let signed = plan.signed_irradiance(&surface).unwrap();
@@ -505,6 +494,5 @@ fn narrow_lobes_never_subtract_light_and_keep_the_flux() {
         assert!(lifted.iter().all(|&e| e >= 0.0), "n = {exponent}: negative irradiance");
         assert!((flux(&lifted) / flux(&signed) - 1.0).abs() < 1e-5, "n = {exponent}: flux {} against {}", flux(&lifted), flux(&signed));
         assert!(l2(&lifted) <= l2(&signed) + 1e-6, "n = {exponent}");
-
     }
 }

@@ -5,12 +5,12 @@
 //! map, all photons on one texel, a refractor filling the view, a light inside a
 //! generator, 4096² buffers and an empty one.
 
+use caustics_core::estimate::{GridRegion, IrradianceGrid};
 use caustics_core::hierarchical::caustic_map::{self, CausticMap, FLUX_UNITS, photons_below, splat_level};
 use caustics_core::hierarchical::hierarchy::{self, DIVERSE, EMPTY, Node, PhotonPyramid};
 use caustics_core::hierarchical::photons::{Photon, PhotonBuffer, PhotonStats};
 use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, LevelOverflow, LightView, PhotonPaths, Projection, Splats, ViewCaustics,
-    irradiance_at, scene_caustics,
+    CausticMapSettings, Clustering, Gather, LevelOverflow, LightView, PhotonPaths, Projection, Splats, ViewCaustics, irradiance_at, scene_caustics,
 };
 use caustics_core::mesh::TriMesh;
 use caustics_core::optics::{fresnel_transmittance, refract};
@@ -18,7 +18,6 @@ use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::glass_sphere;
 use caustics_core::tracer::{PhotonTracer, TraceSettings};
-use caustics_core::estimate::{GridRegion, IrradianceGrid};
 use glam::{Vec2, Vec3};
 use std::collections::HashSet;
 
@@ -26,7 +25,15 @@ const FIXED: Splats = Splats::Fixed { diameter: 3.0 };
 const VARIABLE: Splats = Splats::Variable { max_level: 3, overflow: LevelOverflow::Clamp };
 
 fn settings(photons: u32, map: u32, gather: Gather, splats: Splats) -> CausticMapSettings {
-    CausticMapSettings { photon_resolution: photons, map_resolution: map, gather, splats, exit_iterations: 4, paths: PhotonPaths::ImageSpace, fresnel_branches: 0 }
+    CausticMapSettings {
+        photon_resolution: photons,
+        map_resolution: map,
+        gather,
+        splats,
+        exit_iterations: 4,
+        paths: PhotonPaths::ImageSpace,
+        fresnel_branches: 0,
+    }
 }
 
 const HIERARCHICAL: Gather = Gather::Hierarchical { clustering: Clustering::Off };
@@ -272,7 +279,11 @@ fn a_glass_ball_under_a_point_light_matches_the_tracer_at_the_defaults() {
     let ours = cell_means_of(&region, |p| irradiance_at(&views, p, Vec3::Y));
     let l2 = caustics_core::metrics::relative_l2(&ours, &truth);
     eprintln!("glass ball under a point light over a wide floor, at the defaults: relative L2 {l2:.4}");
-    assert_eq!(views.iter().map(|v| (v.view.emission, v.maps.map_resolution)).collect::<Vec<_>>(), [(0.5, 2048)], "one face reaching past its edge, its maps at twice the side");
+    assert_eq!(
+        views.iter().map(|v| (v.view.emission, v.maps.map_resolution)).collect::<Vec<_>>(),
+        [(0.5, 2048)],
+        "one face reaching past its edge, its maps at twice the side"
+    );
     assert!(l2 <= 0.08, "relative L2 {l2} against the tracer");
 }
 
@@ -324,7 +335,15 @@ fn the_hierarchical_gather_keeps_exactly_the_valid_photons_and_the_same_map() {
     let (flat, flat_stats) = hierarchy::gather(&pyramid, Gather::Flat);
     let (tree, tree_stats) = hierarchy::gather(&pyramid, HIERARCHICAL);
     let valid: HashSet<u32> = (0..256 * 256).filter(|&i| photons.photons[i as usize].is_valid()).collect();
-    let as_set = |entries: &[hierarchy::GatherEntry]| entries.iter().map(|e| { assert_eq!(e.level, 0); e.node }).collect::<HashSet<_>>();
+    let as_set = |entries: &[hierarchy::GatherEntry]| {
+        entries
+            .iter()
+            .map(|e| {
+                assert_eq!(e.level, 0);
+                e.node
+            })
+            .collect::<HashSet<_>>()
+    };
     assert_eq!(as_set(&flat), valid);
     assert_eq!(as_set(&tree), valid);
     // The flat gather processes every photon; the traversal far fewer (a disc of
@@ -588,10 +607,7 @@ fn total_internal_reflection_inside_the_refractor_is_dropped_and_counted() {
     // sun: light that enters an upper face near the side corners meets the lower face
     // below at 73°, past the critical angle of 24°.
     let bar = TriMesh::cuboid(Vec3::new(-0.5, -0.5, -1.0), Vec3::new(0.5, 0.5, 1.0));
-    let on_edge = bar.transformed(&glam::Affine3A::from_rotation_translation(
-        glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4),
-        Vec3::Y * 1.5,
-    ));
+    let on_edge = bar.transformed(&glam::Affine3A::from_rotation_translation(glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_4), Vec3::Y * 1.5));
     let scene = Scene { lights: vec![sun(Vec3::NEG_Y)], generators: vec![glass(on_edge, 2.42)], receivers: vec![floor(8.0, 0.0)] };
     let view = only_view(&scene, &settings(128, 128, CLUSTERED, VARIABLE));
     assert_all_finite(&view);
@@ -604,11 +620,8 @@ fn total_internal_reflection_inside_the_refractor_is_dropped_and_counted() {
 fn photons_that_leave_the_map_are_counted_and_nothing_breaks() {
     // A mirror tilted so that it throws the light back up, away from every receiver.
     let mirror = TriMesh::quad(Vec3::Y, Vec3::X * 0.5, Vec3::new(0.0, 0.3, -1.0).normalize() * 0.5);
-    let scene = Scene {
-        lights: vec![sun(Vec3::NEG_Y)],
-        generators: vec![Generator::new(mirror, SpecularInteraction::Reflect)],
-        receivers: vec![floor(4.0, 0.0)],
-    };
+    let scene =
+        Scene { lights: vec![sun(Vec3::NEG_Y)], generators: vec![Generator::new(mirror, SpecularInteraction::Reflect)], receivers: vec![floor(4.0, 0.0)] };
     let view = only_view(&scene, &settings(64, 64, CLUSTERED, VARIABLE));
     assert_all_finite(&view);
     assert!(view.photons.stats.left_map > 0);
@@ -706,11 +719,7 @@ fn grazing_light_and_degenerate_triangles_stay_finite() {
     let mut water = TriMesh::heightfield(17, 4.0, |x, _| 0.8 + 0.1 * (4.0 * x).sin(), |x, _| Vec3::new(-0.4 * (4.0 * x).cos(), 1.0, 0.0)).unwrap();
     // A zero-area sliver.
     water.append(&TriMesh::new(vec![Vec3::Y; 3], vec![Vec3::Y; 3], vec![[0, 1, 2]]).unwrap());
-    let scene = Scene {
-        lights: vec![sun(Vec3::new(1.0, -0.02, 0.0))],
-        generators: vec![glass(water, 1.333)],
-        receivers: vec![floor(4.0, 0.0)],
-    };
+    let scene = Scene { lights: vec![sun(Vec3::new(1.0, -0.02, 0.0))], generators: vec![glass(water, 1.333)], receivers: vec![floor(4.0, 0.0)] };
     let view = only_view(&scene, &settings(64, 64, CLUSTERED, VARIABLE));
     assert_all_finite(&view);
 }
@@ -809,7 +818,8 @@ fn placed_meshes_hit_where_their_world_space_copies_do() {
         (bvh, Mat4::from(*at), k as u32)
     }));
     assert_eq!(placed.meshes.len(), 2, "the ball is laid out once");
-    let world = InstancedBvh::new(places.iter().enumerate().map(|(k, (mesh, at))| (Arc::new(MeshBvh::of_mesh(&mesh.transformed(at))), Mat4::IDENTITY, k as u32)));
+    let world =
+        InstancedBvh::new(places.iter().enumerate().map(|(k, (mesh, at))| (Arc::new(MeshBvh::of_mesh(&mesh.transformed(at))), Mat4::IDENTITY, k as u32)));
     let mut rng = caustics_core::rng::Pcg32::for_photon(11, 0, 1);
     let (mut hits, mut agree, mut skipped) = (0, 0, 0);
     for _ in 0..20_000 {
@@ -818,7 +828,11 @@ fn placed_meshes_hit_where_their_world_space_copies_do() {
         let dir = (towards - origin).normalize();
         if let (Some(a), Some(b)) = (placed.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH), world.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH)) {
             hits += 1;
-            if (a.t - b.t).abs() < 1e-4 * b.t.max(1.0) && a.generator == b.generator && a.geometric_normal.dot(b.geometric_normal) > 0.999 && a.normal.dot(b.normal) > 0.999 {
+            if (a.t - b.t).abs() < 1e-4 * b.t.max(1.0)
+                && a.generator == b.generator
+                && a.geometric_normal.dot(b.geometric_normal) > 0.999
+                && a.normal.dot(b.normal) > 0.999
+            {
                 agree += 1;
             }
             // Passing through the mesh it hit, the ray goes on to a farther hit or none.
@@ -844,7 +858,8 @@ fn a_refit_tree_hits_where_a_tree_built_on_the_deformed_mesh_does() {
     use glam::{Mat4, Quat};
     use std::sync::Arc;
     let still = wave_heightfield(24, 3.0, 0.0, &[]);
-    let waves = wave_heightfield(24, 3.0, 0.0, &[Wave { kx: 5.0, kz: 1.0, amplitude: 0.2, phase: 0.3 }, Wave { kx: -1.0, kz: 6.0, amplitude: 0.15, phase: 1.1 }]);
+    let waves =
+        wave_heightfield(24, 3.0, 0.0, &[Wave { kx: 5.0, kz: 1.0, amplitude: 0.2, phase: 0.3 }, Wave { kx: -1.0, kz: 6.0, amplitude: 0.15, phase: 1.1 }]);
     let built = MeshBvh::of_mesh(&still);
     let mut refit = built.clone();
     refit.refit(waves.positions(), waves.normals()).unwrap();
@@ -862,7 +877,9 @@ fn a_refit_tree_hits_where_a_tree_built_on_the_deformed_mesh_does() {
         let (a, b) = (placed.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH), fresh.intersect(origin, dir, 0.0, f32::INFINITY, NO_MESH));
         if let Some(b) = b {
             hits += 1;
-            if a.is_some_and(|a| (a.t - b.t).abs() < 1e-5 * b.t.max(1.0) && a.geometric_normal.dot(b.geometric_normal) > 0.999 && a.normal.dot(b.normal) > 0.999) {
+            if a.is_some_and(|a| {
+                (a.t - b.t).abs() < 1e-5 * b.t.max(1.0) && a.geometric_normal.dot(b.geometric_normal) > 0.999 && a.normal.dot(b.normal) > 0.999
+            }) {
                 agree += 1;
             }
         }
@@ -875,7 +892,9 @@ fn a_refit_tree_hits_where_a_tree_built_on_the_deformed_mesh_does() {
     assert!(refit.refit(&still.positions()[1..], still.normals()).is_err(), "a vertex short");
     let levels = built.levels();
     assert_eq!(levels.iter().map(Vec::len).sum::<usize>(), built.nodes.len(), "every node on one level");
-    assert!(levels.windows(2).all(|w| w[1].iter().all(|&c| w[0].iter().any(|&p| built.nodes[p as usize].first == c || built.nodes[p as usize].first + 1 == c))));
+    assert!(
+        levels.windows(2).all(|w| w[1].iter().all(|&c| w[0].iter().any(|&p| built.nodes[p as usize].first == c || built.nodes[p as usize].first + 1 == c)))
+    );
 }
 
 /// A glass ball high beside a vertical mirror under a low sun: the ball focuses its

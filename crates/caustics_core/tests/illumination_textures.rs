@@ -8,9 +8,9 @@
 use caustics_core::illumination_textures::{
     CacheOutcome, Cosine, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild, TransportError,
 };
-use caustics_core::scene::{Light, LightKind, Receiver};
 use caustics_core::mesh::TriMesh;
 use caustics_core::optics::{fresnel_transmittance, refract};
+use caustics_core::scene::{Light, LightKind, Receiver};
 use glam::{Affine3A, Quat, Vec3};
 
 fn table(mesh: &TriMesh, ior: f32, side: u32) -> LightTransportTable {
@@ -40,7 +40,8 @@ fn a_slab_passes_light_straight_on_with_both_fresnel_factors() {
     let mut checked = 0;
     for v in (0..slab.positions().len()).filter(|&v| inner(v)).step_by(5) {
         for to_light in directions_around(Vec3::Y) {
-            let out = table.lookup(v, to_light).unwrap_or_else(|| panic!("no light through the slab at {} from {to_light}: {:?}", slab.positions()[v], table.stats));
+            let out =
+                table.lookup(v, to_light).unwrap_or_else(|| panic!("no light through the slab at {} from {to_light}: {:?}", slab.positions()[v], table.stats));
             let inside = refract(-to_light, Vec3::Y, 1.0 / ior).direction().unwrap();
             let expected = fresnel_transmittance(to_light.y, 1.0 / ior) * fresnel_transmittance(inside.y, ior);
             assert!((out.exit.y + 0.1).abs() < 1e-4, "{to_light}: leaves at {}", out.exit);
@@ -207,7 +208,9 @@ fn illumination_textures_under_a_slab_hold_e_cos_theta_t1_t2() {
     let expected = 2.0 * fresnel_transmittance(sun_direction.y, 1.0 / ior) * fresnel_transmittance(inside.y, ior) * -sun_direction.y;
     for planes in [1, 4, 16] {
         let settings = IlluminationSettings { planes, texture_size: 128 };
-        let textures = IlluminationTextures::frame(&table, &slab, &world_from_object, &sun, std::slice::from_ref(&floor), &settings).map(IlluminationTextures::drawn).unwrap();
+        let textures = IlluminationTextures::frame(&table, &slab, &world_from_object, &sun, std::slice::from_ref(&floor), &settings)
+            .map(IlluminationTextures::drawn)
+            .unwrap();
         assert!(textures.axis.abs_diff_eq(sun_direction, 1e-4), "the planes face the beam: {}", textures.axis);
         let samples: Vec<f32> = (0..400)
             .map(|i| Vec3::new(-0.9 + 0.09 * (i % 20) as f32 + 0.03, 0.0, -0.9 + 0.09 * (i / 20) as f32 + 0.02))
@@ -296,7 +299,13 @@ fn light_that_every_ray_loses_to_total_internal_reflection_draws_nothing() {
     let table = table(&prism, 1.5, 9);
     let light = Light::white(LightKind::Directional { direction: Vec3::Y, irradiance: 1.0 });
     let leg: Vec<usize> = (0..prism.positions().len()).filter(|&v| prism.normals()[v] == Vec3::NEG_Y).collect();
-    let inner = leg.iter().filter(|&&v| { let p = prism.positions()[v]; p.x > 0.01 && p.x < 0.99 && p.z.abs() < 0.99 }).count();
+    let inner = leg
+        .iter()
+        .filter(|&&v| {
+            let p = prism.positions()[v];
+            p.x > 0.01 && p.x < 0.99 && p.z.abs() < 0.99
+        })
+        .count();
     assert!(inner > 20);
     assert!(leg.iter().all(|&v| table.lookup(v, Vec3::NEG_Y).is_none()), "a ray of the leg got out");
     assert!(table.stats.total_internal_reflection > 0, "{:?}", table.stats);
@@ -330,7 +339,8 @@ fn grazing_light_one_and_sixteen_planes_and_a_receiver_under_a_texel_stay_finite
     // A receiver a thousandth of a texel wide: its texel holds the light crossing it.
     let speck = Receiver { mesh: TriMesh::quad(Vec3::new(0.1, 0.0, 0.1), Vec3::X * 1e-5, Vec3::Z * 1e-5), albedo: Vec3::ONE };
     let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1.0 });
-    let textures = IlluminationTextures::frame(&table, &slab, &place, &sun, &[speck], &IlluminationSettings::default()).map(IlluminationTextures::drawn).unwrap();
+    let textures =
+        IlluminationTextures::frame(&table, &slab, &place, &sun, &[speck], &IlluminationSettings::default()).map(IlluminationTextures::drawn).unwrap();
     let e = textures.irradiance_at(Vec3::new(0.1, 0.0, 0.1), Vec3::Y, Cosine::Receiver).x;
     let expected = fresnel_transmittance(1.0, 1.0 / 1.5) * fresnel_transmittance(1.0, 1.5);
     eprintln!("a speck of 2e-5 m: {e:.4} (E T₁T₂ = {expected:.4})");
@@ -354,7 +364,9 @@ fn a_glass_ball_over_the_bunny_is_within_0_15_of_the_tracer_and_planes_help() {
     let table = LightTransportTable::build(ball, TransportBuild { ior: 1.5, grid: DirectionGrid::default() }, &|_, _| {}).unwrap();
     let error = |planes: u32, cosine: Cosine| {
         let settings = IlluminationSettings { planes, ..IlluminationSettings::default() };
-        let t = IlluminationTextures::frame(&table, ball, &Affine3A::IDENTITY, &scene.lights[0], &scene.receivers, &settings).map(IlluminationTextures::drawn).unwrap();
+        let t = IlluminationTextures::frame(&table, ball, &Affine3A::IDENTITY, &scene.lights[0], &scene.receivers, &settings)
+            .map(IlluminationTextures::drawn)
+            .unwrap();
         let ours: Vec<f32> = samples.iter().map(|cell| cell.iter().map(|&(p, n, w)| t.irradiance_at(p, n, cosine).x * w).sum()).collect();
         relative_l2(&ours, &truth)
     };
@@ -378,14 +390,19 @@ fn a_balls_caustic_carries_the_flux_the_table_sends() {
     let sun = Light::white(LightKind::Directional { direction: Vec3::NEG_Y, irradiance: 1.0 });
     let floor = Receiver { mesh: TriMesh::quad(Vec3::ZERO, Vec3::Z * 3.0, Vec3::X * 3.0), albedo: Vec3::ONE };
     let settings = IlluminationSettings { planes: 4, texture_size: 256 };
-    let t = IlluminationTextures::frame(&table, &ball, &Affine3A::from_translation(Vec3::Y), &sun, &[floor], &settings).map(IlluminationTextures::drawn).unwrap();
+    let t =
+        IlluminationTextures::frame(&table, &ball, &Affine3A::from_translation(Vec3::Y), &sun, &[floor], &settings).map(IlluminationTextures::drawn).unwrap();
     let (n, side) = (800, 3.0f32);
     let h = side / n as f32;
     let landed: f64 = (0..n * n)
         .map(|i| Vec3::new(-0.5 * side + h * ((i % n) as f32 + 0.5), 0.0, -0.5 * side + h * ((i / n) as f32 + 0.5)))
         .map(|p| (t.irradiance_at(p, Vec3::Y, Cosine::Receiver).x * h * h) as f64)
         .sum();
-    eprintln!("ball: the floor takes {landed:.5} of the {:.5} the table sends (the ball's cross-section: {:.5})", t.flux_out, std::f32::consts::PI * 0.35 * 0.35);
+    eprintln!(
+        "ball: the floor takes {landed:.5} of the {:.5} the table sends (the ball's cross-section: {:.5})",
+        t.flux_out,
+        std::f32::consts::PI * 0.35 * 0.35
+    );
     assert!((landed / t.flux_out - 1.0).abs() < 0.01, "{landed} of {}", t.flux_out);
 }
 

@@ -75,7 +75,12 @@ fn the_bunny_asset_is_closed_and_wound_outwards() {
     assert_eq!((bunny.positions().len(), bunny.triangles().len()), (1839, 3674));
     // Every edge once each way: closed, consistently wound; positive volume: outwards.
     assert!(bunny.is_closed());
-    let volume: f32 = (0..bunny.triangles().len()).map(|t| { let [a, b, c] = bunny.corners(t); a.dot(b.cross(c)) / 6.0 }).sum();
+    let volume: f32 = (0..bunny.triangles().len())
+        .map(|t| {
+            let [a, b, c] = bunny.corners(t);
+            a.dot(b.cross(c)) / 6.0
+        })
+        .sum();
     assert!(volume > 0.0);
 }
 

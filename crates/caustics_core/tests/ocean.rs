@@ -158,8 +158,7 @@ fn worst_normal_error(s: &OceanSurface) -> f32 {
 fn spectral_normals_agree_with_finite_differences() {
     // Fine grid relative to the shortest waves (the cutoff damps them), so central
     // differences approximate the exact spectral slopes closely.
-    let settings =
-        OceanSettings { resolution: 128, size: 16.0, wind_speed: 5.0, small_wave_cutoff: 0.5, ..Default::default() };
+    let settings = OceanSettings { resolution: 128, size: 16.0, wind_speed: 5.0, small_wave_cutoff: 0.5, ..Default::default() };
     let s = surface(&settings, 0.7);
     let worst = worst_normal_error(&s);
     assert!(worst < 0.02, "normals differ from the heights' slopes by up to {worst} rad");

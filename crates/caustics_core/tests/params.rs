@@ -39,19 +39,10 @@ fn malformed_meshes_are_refused() {
     let n = vec![Vec3::Y; 3];
     assert!(TriMesh::new(p.clone(), n.clone(), vec![[0, 1, 2]]).is_ok());
     assert_eq!(TriMesh::new(p.clone(), n.clone(), vec![]), Err(MeshError::Empty));
-    assert!(matches!(
-        TriMesh::new(p.clone(), n.clone(), vec![[0, 1, 3]]),
-        Err(MeshError::IndexOutOfRange { index: 3, .. })
-    ));
-    assert_eq!(
-        TriMesh::new(p.clone(), vec![Vec3::Y, Vec3::NAN, Vec3::Y], vec![[0, 1, 2]]),
-        Err(MeshError::BadNormal(1))
-    );
+    assert!(matches!(TriMesh::new(p.clone(), n.clone(), vec![[0, 1, 3]]), Err(MeshError::IndexOutOfRange { index: 3, .. })));
+    assert_eq!(TriMesh::new(p.clone(), vec![Vec3::Y, Vec3::NAN, Vec3::Y], vec![[0, 1, 2]]), Err(MeshError::BadNormal(1)));
     assert_eq!(TriMesh::new(p.clone(), vec![Vec3::ZERO; 3], vec![[0, 1, 2]]), Err(MeshError::BadNormal(0)));
-    assert_eq!(
-        TriMesh::new(vec![Vec3::ZERO, Vec3::NAN, Vec3::Z], n.clone(), vec![[0, 1, 2]]),
-        Err(MeshError::NonFinitePosition(1))
-    );
+    assert_eq!(TriMesh::new(vec![Vec3::ZERO, Vec3::NAN, Vec3::Z], n.clone(), vec![[0, 1, 2]]), Err(MeshError::NonFinitePosition(1)));
     assert!(matches!(TriMesh::new(p.clone(), vec![Vec3::Y], vec![[0, 1, 2]]), Err(MeshError::NormalCount { .. })));
     // Found by the fuzzer: finite coordinates whose products overflow made the BVH
     // builder panic and the tracer emit infinite flux. Refused past MAX_COORDINATE;
@@ -81,10 +72,7 @@ fn lights_too_strong_for_f32_are_refused() {
 #[test]
 fn materials_are_tagged_by_the_gltf_convention() {
     use caustics_core::scene::{SurfaceRole, role_from_material};
-    assert_eq!(
-        role_from_material(1.0, 1.333, 0.0, 0.0),
-        Ok(SurfaceRole::Generator(SpecularInteraction::Refract { ior: 1.333, dispersion: None }))
-    );
+    assert_eq!(role_from_material(1.0, 1.333, 0.0, 0.0), Ok(SurfaceRole::Generator(SpecularInteraction::Refract { ior: 1.333, dispersion: None })));
     assert_eq!(role_from_material(0.0, 1.5, 1.0, 0.0), Ok(SurfaceRole::Generator(SpecularInteraction::Reflect)));
     assert_eq!(role_from_material(0.0, 1.5, 1.0, 0.4), Ok(SurfaceRole::Receiver), "rough metal is diffuse enough");
     assert_eq!(role_from_material(0.0, 1.5, 0.0, 0.9), Ok(SurfaceRole::Receiver));

@@ -61,10 +61,7 @@ fn marching_the_grid_matches_the_exact_integral_across_and_along_a_beam() {
     let settings = VolumeSettings::default();
     // Across the beam (its 1 m width spans eight cells, blurred by one at each side)
     // and down its length.
-    for (eye, end, bound) in [
-        (Vec3::new(-3.0, 1.0, 0.1), Vec3::new(3.0, 1.0, 0.1), 0.06),
-        (Vec3::new(0.1, 1.9, 0.1), Vec3::new(0.1, 0.0, 0.1), 0.02),
-    ] {
+    for (eye, end, bound) in [(Vec3::new(-3.0, 1.0, 0.1), Vec3::new(3.0, 1.0, 0.1), 0.06), (Vec3::new(0.1, 1.9, 0.1), Vec3::new(0.1, 0.0, 0.1), 0.02)] {
         let exact = in_scattered_radiance(&volumes, eye, end, &medium, &settings).x;
         let marched = grid.in_scattered_radiance(eye, end, 256).x;
         assert!((marched - exact).abs() < bound * exact, "{eye} → {end}: {marched} against {exact}");
@@ -76,13 +73,7 @@ fn marching_the_grid_matches_the_exact_integral_across_and_along_a_beam() {
 /// `sub.0²` and `sub.1²` rays: a pixel shows that mean, and beams are sharp, so that
 /// a few rays a pixel alias them (the disco ball's exact shafts differ by 6 % between
 /// 4² and 12² rays a pixel).
-fn shaft_images(
-    scene: &Scene,
-    medium: MediumBox,
-    camera: &PinholeCamera,
-    (longest, steps): (u32, u32),
-    sub: (u32, u32),
-) -> (Vec<f32>, Vec<f32>) {
+fn shaft_images(scene: &Scene, medium: MediumBox, camera: &PinholeCamera, (longest, steps): (u32, u32), sub: (u32, u32)) -> (Vec<f32>, Vec<f32>) {
     let settings = VolumeSettings::default();
     let set = build_scene_volumes(scene, &settings);
     assert!(set.volumes.len() > 100, "{} volumes", set.volumes.len());
@@ -135,14 +126,7 @@ fn ocean_shafts_from_the_grid_are_within_five_percent_of_the_exact_integral() {
         world_from_local: Affine3A::from_scale_rotation_translation(Vec3::new(12.0, 3.0, 12.0), Quat::IDENTITY, Vec3::Y * 1.5),
         coefficients: MediumCoefficients { scattering: 0.06, absorption: Vec3::splat(0.04), asymmetry: 0.6 },
     };
-    let camera = PinholeCamera {
-        position: Vec3::new(-4.5, 1.6, 4.5),
-        look_at: Vec3::new(0.5, 0.4, -0.5),
-        up: Vec3::Y,
-        fov_y: 0.8,
-        width: 32,
-        height: 18,
-    };
+    let camera = PinholeCamera { position: Vec3::new(-4.5, 1.6, 4.5), look_at: Vec3::new(0.5, 0.4, -0.5), up: Vec3::Y, fov_y: 0.8, width: 32, height: 18 };
     let (exact, marched) = shaft_images(&scene, medium, &camera, (96, 256), (8, 8));
     let error = relative_l2(&marched, &exact);
     eprintln!("ocean shafts, grid against exact: relative L2 {error:.4}");
@@ -180,14 +164,7 @@ fn disco_ball_shafts_from_the_grid_are_within_five_percent_of_the_exact_integral
         world_from_local: Affine3A::from_scale_rotation_translation(Vec3::splat(4.0), Quat::IDENTITY, Vec3::Y * 2.0),
         coefficients: MediumCoefficients { scattering: 0.08, absorption: Vec3::splat(0.01), asymmetry: 0.3 },
     };
-    let camera = PinholeCamera {
-        position: Vec3::new(0.0, 2.0, 6.2),
-        look_at: Vec3::new(0.0, 2.0, 0.0),
-        up: Vec3::Y,
-        fov_y: 1.0,
-        width: 32,
-        height: 24,
-    };
+    let camera = PinholeCamera { position: Vec3::new(0.0, 2.0, 6.2), look_at: Vec3::new(0.0, 2.0, 0.0), up: Vec3::Y, fov_y: 1.0, width: 32, height: 24 };
     let (exact, marched) = shaft_images(&scene, medium, &camera, (96, 256), (12, 12));
     let error = relative_l2(&marched, &exact);
     eprintln!("disco ball shafts, grid against exact: relative L2 {error:.4}");
@@ -198,11 +175,22 @@ fn disco_ball_shafts_from_the_grid_are_within_five_percent_of_the_exact_integral
 fn shafts_under_rippled_water_match_the_tracers_photon_beams() {
     // A 2 m pond of rippled water whose surface is the top of a 1 m deep medium, under
     // a slanted sun, seen from the side: every ray crosses the shafts.
-    let waves = |x: f32, z: f32| (0.03 * (4.0 * x + 0.3).sin() * (3.0 * z).cos(), 0.03 * 4.0 * (4.0 * x + 0.3).cos() * (3.0 * z).cos(), -0.03 * 3.0 * (4.0 * x + 0.3).sin() * (3.0 * z).sin());
-    let water = TriMesh::heightfield(33, 2.0, |x, z| 1.0 + waves(x, z).0, |x, z| {
-        let (_, dx, dz) = waves(x, z);
-        Vec3::new(-dx, 1.0, -dz).normalize()
-    })
+    let waves = |x: f32, z: f32| {
+        (
+            0.03 * (4.0 * x + 0.3).sin() * (3.0 * z).cos(),
+            0.03 * 4.0 * (4.0 * x + 0.3).cos() * (3.0 * z).cos(),
+            -0.03 * 3.0 * (4.0 * x + 0.3).sin() * (3.0 * z).sin(),
+        )
+    };
+    let water = TriMesh::heightfield(
+        33,
+        2.0,
+        |x, z| 1.0 + waves(x, z).0,
+        |x, z| {
+            let (_, dx, dz) = waves(x, z);
+            Vec3::new(-dx, 1.0, -dz).normalize()
+        },
+    )
     .unwrap();
     let scene = Scene {
         lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(0.3, -1.0, 0.15).normalize(), irradiance: 1.0 })],
@@ -213,14 +201,7 @@ fn shafts_under_rippled_water_match_the_tracers_photon_beams() {
         world_from_local: Affine3A::from_scale_rotation_translation(Vec3::new(2.0, 1.0, 2.0), Quat::IDENTITY, Vec3::Y * 0.5),
         coefficients: MediumCoefficients { scattering: 0.3, absorption: Vec3::splat(0.2), asymmetry: 0.5 },
     };
-    let camera = PinholeCamera {
-        position: Vec3::new(0.4, 0.5, 3.0),
-        look_at: Vec3::new(0.0, 0.5, 0.0),
-        up: Vec3::Y,
-        fov_y: 0.45,
-        width: 16,
-        height: 12,
-    };
+    let camera = PinholeCamera { position: Vec3::new(0.4, 0.5, 3.0), look_at: Vec3::new(0.0, 0.5, 0.0), up: Vec3::Y, fov_y: 0.45, width: 16, height: 12 };
     let settings = VolumeSettings::default();
     let volumes = build_scene_volumes(&scene, &settings).volumes;
     let tracer = PhotonTracer::new(&scene).unwrap();

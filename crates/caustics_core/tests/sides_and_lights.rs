@@ -72,7 +72,10 @@ fn an_open_mirror_lit_from_behind_reflects_only_when_double_sided() {
     assert!(m_front > 0.0);
     assert_eq!(m_one, 0.0);
     assert!((m_both - m_front).abs() < 1e-4 * m_front, "maps: {m_both} vs {m_front}");
-    eprintln!("mirror lit from the front / behind, double-sided: tracer {:.4} / {:.4}, volumes {v_front:.4} / {v_both:.4}, maps {m_front:.4} / {m_both:.4}", t_front.deposited.x, t_both.deposited.x);
+    eprintln!(
+        "mirror lit from the front / behind, double-sided: tracer {:.4} / {:.4}, volumes {v_front:.4} / {v_both:.4}, maps {m_front:.4} / {m_both:.4}",
+        t_front.deposited.x, t_both.deposited.x
+    );
 }
 
 #[test]
@@ -102,12 +105,8 @@ fn a_point_lights_range_fades_its_caustic_as_bevy_fades_its_light() {
     // 24² cells, facing down: the volumes sample the window at every vertex.
     let up = TriMesh::heightfield(25, 1.2, |_, _| 1.0, |_, _| Vec3::Y).unwrap();
     let down = |n: &Vec3| -*n;
-    let mirror = TriMesh::new(
-        up.positions().to_vec(),
-        up.normals().iter().map(down).collect(),
-        up.triangles().iter().map(|t| [t[0], t[2], t[1]]).collect(),
-    )
-    .unwrap();
+    let mirror =
+        TriMesh::new(up.positions().to_vec(), up.normals().iter().map(down).collect(), up.triangles().iter().map(|t| [t[0], t[2], t[1]]).collect()).unwrap();
     let scene = |range: f32| Scene {
         lights: vec![Light { range, ..Light::white(LightKind::Point { position: Vec3::Y * 0.5, intensity: 3.0 }) }],
         generators: vec![Generator::new(mirror.clone(), SpecularInteraction::Reflect)],

@@ -22,10 +22,7 @@ fn settings(photons: u64) -> TraceSettings {
 }
 
 fn water_plane(y: f32, half: f32) -> Generator {
-    Generator::new(
-        TriMesh::quad(Vec3::Y * y, Vec3::Z * half, Vec3::X * half),
-        SpecularInteraction::Refract { ior: 1.333, dispersion: None },
-    )
+    Generator::new(TriMesh::quad(Vec3::Y * y, Vec3::Z * half, Vec3::X * half), SpecularInteraction::Refract { ior: 1.333, dispersion: None })
 }
 
 /// A flat water surface under an oblique sun: the floor receives E⊥·cos θᵢ·T(θᵢ)

@@ -9,8 +9,7 @@ use caustics_core::params::{MediumCoefficients, SpecularInteraction};
 use caustics_core::scene::{Generator, Light, LightKind, Receiver, Scene};
 use caustics_core::scenes::{Wave, wave_heightfield};
 use caustics_core::volumes::{
-    Footprint, HEXAHEDRON_TRIANGLES, IntensityMode, MediumBox, VolumeSet, VolumeSettings, build_scene_volumes,
-    in_scattered_radiance,
+    Footprint, HEXAHEDRON_TRIANGLES, IntensityMode, MediumBox, VolumeSet, VolumeSettings, build_scene_volumes, in_scattered_radiance,
 };
 use glam::{Affine3A, Vec3};
 use proptest::prelude::*;
@@ -40,8 +39,7 @@ fn flat(n: usize, size: f32, height: f32) -> TriMesh {
 
 /// Irradiance on every cell centre of a horizontal region facing up.
 fn floor_irradiance(set: &VolumeSet, region: &GridRegion, settings: &VolumeSettings) -> Vec<Vec3> {
-    let points: Vec<Vec3> =
-        (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
+    let points: Vec<Vec3> = (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
     set.irradiance_at(&points, &vec![Vec3::Y; points.len()], settings)
 }
 
@@ -56,8 +54,7 @@ fn floor_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &V
 fn footprint_cell_means(set: &VolumeSet, region: &GridRegion, k: usize, settings: &VolumeSettings) -> Vec<f32> {
     let fine = GridRegion { nu: region.nu * k, nv: region.nv * k, ..*region };
     let footprint = Footprint { du: fine.edge_u / fine.nu as f32, dv: fine.edge_v / fine.nv as f32 };
-    let samples: Vec<_> =
-        (0..fine.nv).flat_map(|r| (0..fine.nu).map(move |c| (fine.cell_center(r, c), Vec3::Y, footprint))).collect();
+    let samples: Vec<_> = (0..fine.nv).flat_map(|r| (0..fine.nu).map(move |c| (fine.cell_center(r, c), Vec3::Y, footprint))).collect();
     let e = set.irradiance_over_at(&samples, settings);
     (0..region.nv * region.nu)
         .map(|i| {
@@ -78,8 +75,7 @@ fn integrated(values: &[Vec3], region: &GridRegion) -> f64 {
 #[test]
 fn flat_water_transmits_exactly_the_fresnel_fraction() {
     let l = Vec3::new(0.3, -1.0, -0.2).normalize();
-    let scene =
-        Scene { lights: vec![sun(l)], generators: vec![water(flat(9, 4.0, 0.8), 1.333)], receivers: vec![floor(6.0, 0.0)] };
+    let scene = Scene { lights: vec![sun(l)], generators: vec![water(flat(9, 4.0, 0.8), 1.333)], receivers: vec![floor(6.0, 0.0)] };
     let expected = l.y.abs() * fresnel_transmittance(l.y, 1.0 / 1.333);
     for settings in ALL_MODES {
         let set = build_scene_volumes(&scene, &settings);
@@ -95,11 +91,7 @@ fn flat_water_transmits_exactly_the_fresnel_fraction() {
 fn ior_one_casts_no_caustic_only_the_direct_light() {
     let l = Vec3::new(0.2, -1.0, 0.1).normalize();
     let waves = [Wave { kx: 8.0, kz: 3.0, amplitude: 0.08, phase: 0.3 }];
-    let scene = Scene {
-        lights: vec![sun(l)],
-        generators: vec![water(wave_heightfield(33, 4.0, 0.8, &waves), 1.0)],
-        receivers: vec![floor(6.0, 0.0)],
-    };
+    let scene = Scene { lights: vec![sun(l)], generators: vec![water(wave_heightfield(33, 4.0, 0.8, &waves), 1.0)], receivers: vec![floor(6.0, 0.0)] };
     let set = build_scene_volumes(&scene, &INTERPOLATED);
     let region = GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 40);
     for e in floor_irradiance(&set, &region, &INTERPOLATED) {
@@ -114,11 +106,7 @@ fn emitted_times_fresnel(mesh: &TriMesh, l: Vec3, ior: f32) -> f64 {
         .map(|t| {
             let [a, b, c] = mesh.corners(t);
             let cross = (b - a).cross(c - a);
-            let t_mean = mesh.triangles()[t]
-                .iter()
-                .map(|&i| fresnel_transmittance(l.dot(mesh.normals()[i as usize]), 1.0 / ior))
-                .sum::<f32>()
-                / 3.0;
+            let t_mean = mesh.triangles()[t].iter().map(|&i| fresnel_transmittance(l.dot(mesh.normals()[i as usize]), 1.0 / ior)).sum::<f32>() / 3.0;
             (0.5 * cross.length() * cross.normalize().dot(l).abs() * t_mean) as f64
         })
         .sum()
@@ -194,8 +182,7 @@ fn a_focal_point_gives_finite_energy_conserving_irradiance() {
         for (y, size, must_conserve) in [(0.5, 1.0, true), (1.0, 0.1, false), (1.5, 1.0, true), (2.0, 2.0, true)] {
             // 599 cells: no cell centre falls on a mesh edge, where two volumes both count it.
             let region = GridRegion::horizontal(-0.5 * size, -0.5 * size, y, size, 599);
-            let points: Vec<Vec3> =
-                (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
+            let points: Vec<Vec3> = (0..region.nv).flat_map(|r| (0..region.nu).map(move |c| region.cell_center(r, c))).collect();
             let e = set.irradiance_at(&points, &vec![Vec3::NEG_Y; points.len()], &settings);
             assert_finite(&e);
             let got = integrated(&e, &region);
@@ -235,7 +222,7 @@ fn grazing_light_and_degenerate_triangles_give_finite_output() {
         Vec3::new(0.0, 1.0, 0.0),
         Vec3::new(1.0, 1.0, 0.0),
         Vec3::new(0.0, 1.0, 1.0),
-        Vec3::new(0.5, 1.0, 0.0), // on the first edge: a zero-area triangle
+        Vec3::new(0.5, 1.0, 0.0),  // on the first edge: a zero-area triangle
         Vec3::new(2.0, 1.0, 1e-6), // a sliver
     ];
     let triangles = vec![[0, 2, 1], [0, 3, 1], [0, 4, 1], [1, 1, 2]];
@@ -381,11 +368,7 @@ fn interpolation_beats_constant_intensity_on_a_coarse_curved_mirror() {
     let l = Vec3::new(0.2, -1.0, 0.0).normalize();
     let waves = [Wave { kx: 3.0, kz: 2.0, amplitude: 0.08, phase: 0.0 }];
     let build = |n: usize, settings: &VolumeSettings| {
-        let scene = Scene {
-            lights: vec![sun(l)],
-            generators: vec![water(wave_heightfield(n, 3.0, 1.0, &waves), 1.333)],
-            receivers: vec![floor(6.0, 0.0)],
-        };
+        let scene = Scene { lights: vec![sun(l)], generators: vec![water(wave_heightfield(n, 3.0, 1.0, &waves), 1.333)], receivers: vec![floor(6.0, 0.0)] };
         let set = build_scene_volumes(&scene, settings);
         floor_irradiance(&set, &GridRegion::horizontal(-1.0, -1.0, 0.0, 2.0, 96), settings)
     };
@@ -406,19 +389,10 @@ fn point_and_spot_lights_reflect_as_their_mirror_images() {
     let mirror = TriMesh::heightfield(65, 2.0, |_, _| 1.0, |_, _| Vec3::NEG_Y).unwrap();
     let position = Vec3::new(0.0, 0.5, 0.0);
     let image = Vec3::new(0.0, 1.5, 0.0);
-    let spot = Light::white(LightKind::Spot {
-        position,
-        direction: Vec3::Y,
-        intensity: 3.0,
-        inner_angle: 0.4,
-        outer_angle: 0.9,
-    });
+    let spot = Light::white(LightKind::Spot { position, direction: Vec3::Y, intensity: 3.0, inner_angle: 0.4, outer_angle: 0.9 });
     for light in [Light::white(LightKind::Point { position, intensity: 3.0 }), spot] {
-        let scene = Scene {
-            lights: vec![light],
-            generators: vec![Generator::new(mirror.clone(), SpecularInteraction::Reflect)],
-            receivers: vec![floor(6.0, 0.0)],
-        };
+        let scene =
+            Scene { lights: vec![light], generators: vec![Generator::new(mirror.clone(), SpecularInteraction::Reflect)], receivers: vec![floor(6.0, 0.0)] };
         for settings in ALL_MODES {
             let set = build_scene_volumes(&scene, &settings);
             // Cell centres off the mesh edges' images (where two volumes both count).
@@ -440,13 +414,7 @@ fn point_and_spot_lights_reflect_as_their_mirror_images() {
                 let near_kink = [0.4f32, 0.9].iter().any(|k| (angle - k).abs() < 0.05);
                 let is_spot = matches!(light.kind, LightKind::Spot { .. });
                 if settings.intensity != IntensityMode::Constant && !(is_spot && near_kink) {
-                    assert!(
-                        (e.x - expected).abs() < 0.02 * expected.max(0.05),
-                        "{:?} {:?} at {p}: {} vs {expected}",
-                        light.kind,
-                        settings.intensity,
-                        e.x
-                    );
+                    assert!((e.x - expected).abs() < 0.02 * expected.max(0.05), "{:?} {:?} at {p}: {} vs {expected}", light.kind, settings.intensity, e.x);
                 }
                 (got_sum, expected_sum) = (got_sum + e.x, expected_sum + expected);
             }
@@ -529,8 +497,7 @@ fn a_roof_over_half_the_pool_leaves_no_caustic_under_it() {
     // volumes, away from the shadow's edge (x ≈ 0.24 on the water, 0.42 below it on the
     // floor; waves bend light up to 0.2 m further).
     let open = caustics_core::scenes::wave_pool(129, 64);
-    let open_volumes: Vec<f32> =
-        floor_irradiance(&build_scene_volumes(&open.scene, &CONSERVING), &region, &CONSERVING).iter().map(|e| e.x).collect();
+    let open_volumes: Vec<f32> = floor_irradiance(&build_scene_volumes(&open.scene, &CONSERVING), &region, &CONSERVING).iter().map(|e| e.x).collect();
     let lit: Vec<usize> = (0..n * n).filter(|&i| region.cell_center(i / n, i % n).x > 0.75).collect();
     let pick = |v: &[f32]| lit.iter().map(|&i| v[i]).collect::<Vec<_>>();
     let same = caustics_core::metrics::relative_l1(&pick(&volumes), &pick(&open_volumes));
@@ -632,11 +599,7 @@ fn footprint_means_change_with_a_moving_sea_as_the_tracer_does() {
     let ocean = OceanSettings { resolution: 64, size: 8.0, wind_speed: 4.0, ..Default::default() };
     let spectrum = OceanSpectrum::new(&ocean).unwrap();
     let l = Vec3::new(0.2, -1.0, 0.1).normalize();
-    let scene_at = |t: f32| Scene {
-        lights: vec![sun(l)],
-        generators: vec![water(spectrum.evaluate(t).mesh(), 1.333)],
-        receivers: vec![floor(12.0, -3.0)],
-    };
+    let scene_at = |t: f32| Scene { lights: vec![sun(l)], generators: vec![water(spectrum.evaluate(t).mesh(), 1.333)], receivers: vec![floor(12.0, -3.0)] };
     let region = GridRegion::horizontal(-2.0, -2.0, -3.0, 4.0, 64);
     let frames = [scene_at(1.0), scene_at(1.0 + 1.0 / 60.0)];
     let filtered = VolumeSettings::default();
@@ -647,9 +610,7 @@ fn footprint_means_change_with_a_moving_sea_as_the_tracer_does() {
     let change = |[a, b]: [Vec<f32>; 2]| caustics_core::metrics::relative_l2(&b, &a);
     let tracer = change(frames.each_ref().map(|s| traced(s, 1)));
     let noise = change([traced(&frames[0], 1), traced(&frames[0], 2)]);
-    let volumes = |settings: &VolumeSettings| {
-        change(frames.each_ref().map(|s| footprint_cell_means(&build_scene_volumes(s, settings), &region, 1, settings)))
-    };
+    let volumes = |settings: &VolumeSettings| change(frames.each_ref().map(|s| footprint_cell_means(&build_scene_volumes(s, settings), &region, 1, settings)));
     let (footprints, points) = (volumes(&filtered), volumes(&point));
     eprintln!("frame-to-frame change (relative L2): tracer {tracer:.4} (its own noise {noise:.4}), footprints {footprints:.4}, point samples {points:.4}");
     assert!(noise < 0.5 * tracer, "the tracer's noise {noise} hides the change {tracer}");

@@ -1,21 +1,21 @@
 //! Render world: extraction, GPU buffers, the compute passes of the convolution and
 //! the projection of the floor irradiance into each view's caustic irradiance buffer.
 
-use crate::cpu_time::timed;
 use super::{PoolRipples, PoolSurface};
-use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
-use crate::technique::CausticTechniqueChoice;
 use crate::CausticTechnique;
+use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
+use crate::cpu_time::timed;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, ViewBindGroups, write_changed};
 use crate::irradiance::{ActiveCausticTechniques, ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
+use crate::technique::CausticTechniqueChoice;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::{
-    diagnostic::RecordDiagnostics,
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    diagnostic::RecordDiagnostics,
     render_resource::{
         binding_types::{storage_buffer, storage_buffer_read_only, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
         *,
@@ -201,15 +201,10 @@ pub(super) fn build(app: &mut App) {
                 timed(&cpu.render, prepare_buffers)
                     .run_if(|extracted: Res<ExtractedPools>, gpu: Res<PoolGpu>| !extracted.0.is_empty() || !gpu.0.is_empty())
                     .in_set(RenderSystems::PrepareResources),
-                timed(&cpu.render, crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>)
-                    .run_if(pools_on_gpu)
-                    .in_set(RenderSystems::Prepare),
+                timed(&cpu.render, crate::irradiance::prepare_projection_pipelines::<ConvolutionPipelines>).run_if(pools_on_gpu).in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(
-            RenderGraph,
-            timed(&cpu.render, compute_floor_irradiance).run_if(pools_on_gpu).in_set(RenderGraphSystems::Render).before(camera_driver),
-        )
+        .add_systems(RenderGraph, timed(&cpu.render, compute_floor_irradiance).run_if(pools_on_gpu).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Core3d,
             timed(&cpu.render, project_floor_irradiance)
@@ -230,20 +225,10 @@ fn pools_on_gpu(gpu: Res<PoolGpu>) -> bool {
 type PoolGenerator = (&'static CausticGenerator, &'static CausticTechniqueChoice);
 
 /// The pools whose water refracts sunlight by this technique.
-type ConvolutionPools = Query<
-    'static,
-    'static,
-    (Entity, &'static PoolSurface, PoolGenerator, &'static GlobalTransform),
-    Without<InvalidCausticParams>,
->;
+type ConvolutionPools = Query<'static, 'static, (Entity, &'static PoolSurface, PoolGenerator, &'static GlobalTransform), Without<InvalidCausticParams>>;
 
 /// The pools whose kernels [`aim_kernels`] aims.
-type AimedPools<'w, 's> = Query<
-    'w,
-    's,
-    (Entity, &'static mut PoolSurface, PoolGenerator, &'static GlobalTransform),
-    Without<InvalidCausticParams>,
->;
+type AimedPools<'w, 's> = Query<'w, 's, (Entity, &'static mut PoolSurface, PoolGenerator, &'static GlobalTransform), Without<InvalidCausticParams>>;
 
 /// The directional lights a pool may refract.
 type Suns = Query<'static, 'static, SunComponents>;
@@ -278,10 +263,7 @@ fn pool_sun<'a>(
 
 /// Main world: aims each pool's kernels at the sunlight it refracts (the lobe is
 /// expanded about it); only a change of light, index or pool orientation redraws them.
-fn aim_kernels(
-    mut pools: AimedPools,
-    suns: Query<SunComponents>,
-) {
+fn aim_kernels(mut pools: AimedPools, suns: Query<SunComponents>) {
     for (entity, mut surface, generator, transform) in &mut pools {
         let Some(ior) = uses_convolution(generator) else { continue };
         let Some((_, direction)) = pool_sun(&pool_from_world(surface.settings(), transform), suns.iter()) else { continue };
@@ -413,12 +395,7 @@ fn prepare_buffers(
     }
 }
 
-fn init_pipelines(
-    mut commands: Commands,
-    asset_server: Res<AssetServer>,
-    cache: Res<PipelineCache>,
-    fullscreen: Res<FullscreenShader>,
-) {
+fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache: Res<PipelineCache>, fullscreen: Res<FullscreenShader>) {
     let compute_layout = BindGroupLayoutDescriptor::new(
         "pool_convolution_layout",
         &BindGroupLayoutEntries::sequential(
@@ -464,7 +441,13 @@ impl SpecializedRenderPipeline for ConvolutionPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("pool_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline(
+            "pool_project_pipeline",
+            &self.project_layouts[multisampled as usize].descriptor,
+            &self.project_shader,
+            &self.fullscreen,
+            multisampled,
+        )
     }
 }
 
@@ -544,7 +527,7 @@ mod tests {
             (DirectionalLight { illuminance, ..default() }, transform, visibility)
         };
         let suns = [
-            sun(100_000.0, Vec3::new(0.2, 1.0, 0.0), true), // brightest, below the horizon
+            sun(100_000.0, Vec3::new(0.2, 1.0, 0.0), true),  // brightest, below the horizon
             sun(50_000.0, Vec3::new(0.0, -1.0, 0.3), false), // hidden
             sun(2_000.0, Vec3::new(0.3, -1.0, 0.0), true),
             sun(1_000.0, Vec3::NEG_Y, true),

@@ -1,18 +1,18 @@
 //! Main world: the pool's water, simulated from its impulses and written into its mesh.
 
+use super::{DropPebble, PoolRipples};
+use crate::CausticTechnique;
+use crate::components::CausticGenerator;
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
-use bevy::render::renderer::RenderDevice;
-use super::{DropPebble, PoolRipples};
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
-use crate::components::CausticGenerator;
 use crate::mesh_vertices::MovesOnGpu;
 use crate::technique::CausticTechniqueChoice;
 use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
-use crate::CausticTechnique;
+use bevy::render::renderer::RenderDevice;
 use caustics_core::convolution::ripples::{Impulse, PoolRipples as Ripples};
 use caustics_core::convolution::{Boundary, ConvolutionKernels, Heightfield};
 use std::sync::Arc;
@@ -209,8 +209,7 @@ fn configure_pools(
         }
         let same_water = surface.as_ref().is_some_and(|s| {
             let hf = &s.heightfield;
-            *s.ripples.settings() == pool.waves()
-                && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
+            *s.ripples.settings() == pool.waves() && (hf.columns(), hf.rows(), hf.cell_size()) == (pool.columns as usize, pool.rows as usize, pool.cell_size)
         });
         let made = match surface {
             Some(mut surface) if same_water => surface.kernels.reaimed(pool).map(|kernels| {
@@ -236,11 +235,7 @@ fn configure_pools(
 }
 
 /// Starts an impulse for each [`DropPebble`] in the first pool whose water lies under it.
-fn drop_pebbles(
-    mut pebbles: MessageReader<DropPebble>,
-    mut pools: Query<(Entity, &GlobalTransform, &mut PoolSurface)>,
-    time: Res<Time>,
-) {
+fn drop_pebbles(mut pebbles: MessageReader<DropPebble>, mut pools: Query<(Entity, &GlobalTransform, &mut PoolSurface)>, time: Res<Time>) {
     for pebble in pebbles.read() {
         let landed = pools.iter_mut().find_map(|(entity, transform, surface)| {
             let local = transform.affine().inverse().transform_point3(pebble.position);

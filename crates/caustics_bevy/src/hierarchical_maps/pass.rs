@@ -1,7 +1,7 @@
 //! Render world: the passes that make each light view's caustic map once per change,
 //! and its projection into every view each frame.
 
-use super::render::{CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw, COUNTERS_PER_VIEW};
+use super::render::{COUNTERS_PER_VIEW, CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw};
 use crate::irradiance::{ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
 use bevy::prelude::*;
@@ -57,7 +57,12 @@ fn light_map_pass<'a>(
     let clear = LoadOp::Clear(wgpu::Color { r: NO_SURFACE as f64, g: 0.0, b: 0.0, a: 0.0 });
     encoder.begin_render_pass(&RenderPassDescriptor {
         label: Some(label),
-        color_attachments: &[Some(RenderPassColorAttachment { view: target, depth_slice: None, resolve_target: None, ops: Operations { load: clear, store: StoreOp::Store } })],
+        color_attachments: &[Some(RenderPassColorAttachment {
+            view: target,
+            depth_slice: None,
+            resolve_target: None,
+            ops: Operations { load: clear, store: StoreOp::Store },
+        })],
         depth_stencil_attachment: Some(RenderPassDepthStencilAttachment {
             view: depth,
             depth_ops: Some(Operations { load: LoadOp::Clear(depth_clear), store: StoreOp::Discard }),

@@ -3,22 +3,22 @@
 //! does, so that an unchanged scene keeps its maps.
 
 use super::HierarchicalMapsSettings;
+use crate::CausticTechnique;
 use crate::components::{CausticGenerator, InvalidCausticParams};
-use crate::technique::CausticTechniqueChoice;
 use crate::irradiance::ActiveCausticTechniques;
+use crate::irradiance::mesh_bvhs::MeshBvhs;
 use crate::read_scene::{
     AnyLight, ChangedParts, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_light, core_mesh, read_scene_changes, to_core,
     world_aabb,
 };
+use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::bvh::SceneBvh;
-use crate::irradiance::mesh_bvhs::MeshBvhs;
 use caustics_core::hierarchical::{CausticMapSettings, LightView, PhotonPaths, light_intensity};
-use caustics_core::triangle_bvh::InstancedBvh;
-use caustics_core::scene::{Light, Receiver, Scene, Sides};
 use caustics_core::params::SpecularInteraction;
-use crate::CausticTechnique;
+use caustics_core::scene::{Light, Receiver, Scene, Sides};
+use caustics_core::triangle_bvh::InstancedBvh;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -83,11 +83,13 @@ pub struct CausticMapPlan {
 
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
-    app.init_resource::<CausticMapPlan>()
-        .add_systems(
-            PostUpdate,
-            crate::cpu_time::timed(&cpu, plan_caustic_maps).run_if(crate::cpu_time::timed(&cpu, maps_wanted)).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
-        );
+    app.init_resource::<CausticMapPlan>().add_systems(
+        PostUpdate,
+        crate::cpu_time::timed(&cpu, plan_caustic_maps)
+            .run_if(crate::cpu_time::timed(&cpu, maps_wanted))
+            .after(read_scene_changes)
+            .in_set(crate::CausticSystems::ReadScene),
+    );
 }
 
 /// Whether the maps have a plan to make or to clear: a generator drawn by them, or a
@@ -118,9 +120,10 @@ fn leave_out_shadowed(plan: &mut CausticMapPlan, lights: &[Light], meshes: &Asse
     let occluders = occluder_bvh(&plan.occluders, meshes);
     let lit = |g: &CausticMapInstance| {
         !g.drawn
-            || meshes.get(g.mesh).and_then(|m| core_mesh(m, &GlobalTransform::from(g.world_from_local)).ok()).is_none_or(|mesh| {
-                lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p)))
-            })
+            || meshes
+                .get(g.mesh)
+                .and_then(|m| core_mesh(m, &GlobalTransform::from(g.world_from_local)).ok())
+                .is_none_or(|mesh| lights.iter().any(|l| mesh.positions().par_iter().any(|&p| !occluders.hides(l, p))))
     };
     let before = plan.generators.len();
     plan.generators.retain(lit);
@@ -187,7 +190,10 @@ fn plan_caustic_maps(
         }
         if next.generators.len() == super::render::MAX_GENERATORS {
             if warned_generators.insert(entity) {
-                warn!("bevy_caustics: CausticGenerator {entity} is left out of the caustic maps: they draw at most {} generators", super::render::MAX_GENERATORS);
+                warn!(
+                    "bevy_caustics: CausticGenerator {entity} is left out of the caustic maps: they draw at most {} generators",
+                    super::render::MAX_GENERATORS
+                );
             }
             continue;
         }

@@ -1,12 +1,11 @@
 //! Render world: extraction of the plan, and the GPU buffers, pipelines and bind groups
 //! the passes (`pass.rs`) draw with.
 
+use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 use crate::cpu_time::timed;
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
-use super::plan::{CausticMapInstance, CausticMapPlan, PlannedLightView};
 use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout, ViewBindGroups};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
-use caustics_core::triangle_bvh::InstancedBvh;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::material::specialize::SpecializedMeshPipelineError;
@@ -18,8 +17,7 @@ use bevy::render::{
     render_asset::RenderAssets,
     render_resource::{
         binding_types::{
-            storage_buffer, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
-            texture_depth_2d_multisampled, uniform_buffer,
+            storage_buffer, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer,
         },
         *,
     },
@@ -27,9 +25,8 @@ use bevy::render::{
     view::ViewUniform,
 };
 use caustics_core::hierarchical::hierarchy::start_level;
-use caustics_core::hierarchical::{
-    CausticMapSettings, Clustering, Gather, LevelOverflow, PhotonPaths, Projection, Splats,
-};
+use caustics_core::hierarchical::{CausticMapSettings, Clustering, Gather, LevelOverflow, PhotonPaths, Projection, Splats};
+use caustics_core::triangle_bvh::InstancedBvh;
 
 /// `LightView` in `types.wgsl`.
 #[derive(Clone, Copy, Default, ShaderType)]
@@ -227,11 +224,7 @@ pub(super) struct LightMapPipeline {
 impl SpecializedMeshPipeline for LightMapPipeline {
     type Key = (LightMapPass, PrimitiveTopology);
 
-    fn specialize(
-        &self,
-        (pass, topology): Self::Key,
-        layout: &MeshVertexBufferLayoutRef,
-    ) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
+    fn specialize(&self, (pass, topology): Self::Key, layout: &MeshVertexBufferLayoutRef) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
         let receivers = pass == LightMapPass::Receivers;
         let mut attributes = vec![Mesh::ATTRIBUTE_POSITION.at_shader_location(0)];
         if !receivers {
@@ -514,15 +507,10 @@ pub(super) fn build(app: &mut App) {
                 timed(&cpu, prepare_maps)
                     .run_if(|extracted: Res<ExtractedPlan>, gpu: Res<CausticMapsGpu>| !extracted.0.views.is_empty() || gpu.generation.is_some())
                     .in_set(RenderSystems::PrepareResources),
-                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>)
-                    .run_if(maps_in_view)
-                    .in_set(RenderSystems::Prepare),
+                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<CausticMapPipelines>).run_if(maps_in_view).in_set(RenderSystems::Prepare),
             ),
         )
-        .add_systems(
-            RenderGraph,
-            timed(&cpu, super::pass::make_caustic_maps).run_if(maps_in_view).in_set(RenderGraphSystems::Render).before(camera_driver),
-        )
+        .add_systems(RenderGraph, timed(&cpu, super::pass::make_caustic_maps).run_if(maps_in_view).in_set(RenderGraphSystems::Render).before(camera_driver))
         .add_systems(
             Core3d,
             timed(&cpu, super::pass::project_caustic_maps)
@@ -580,10 +568,8 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
             ),
         ),
     );
-    let args_layout = BindGroupLayoutDescriptor::new(
-        "caustic_map_args_layout",
-        &BindGroupLayoutEntries::single(ShaderStages::COMPUTE, storage_buffer::<u32>(false)),
-    );
+    let args_layout =
+        BindGroupLayoutDescriptor::new("caustic_map_args_layout", &BindGroupLayoutEntries::single(ShaderStages::COMPUTE, storage_buffer::<u32>(false)));
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "caustic_map.wgsl");
     let compute = KERNELS.map(|(kernel, entry)| {
         let mut layout = vec![compute_layout.clone()];
@@ -629,7 +615,13 @@ impl SpecializedRenderPipeline for CausticMapPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("caustic_map_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline(
+            "caustic_map_project_pipeline",
+            &self.project_layouts[multisampled as usize].descriptor,
+            &self.project_shader,
+            &self.fullscreen,
+            multisampled,
+        )
     }
 }
 
@@ -757,7 +749,11 @@ fn prepare_maps(
         if gpu.lowered != Some(asked) {
             warn!(
                 "bevy_caustics: {}² photons into a {}² caustic map do not fit this GPU's buffers or CausticGpuBudget ({}); the caustic maps use {}² into {}²",
-                settings.photon_resolution, settings.map_resolution, mib(budget.bytes), fitted.photon_resolution, fitted.map_resolution
+                settings.photon_resolution,
+                settings.map_resolution,
+                mib(budget.bytes),
+                fitted.photon_resolution,
+                fitted.map_resolution
             );
             gpu.lowered = Some(asked);
         }
@@ -886,12 +882,22 @@ fn prepare_maps(
         };
         let generator_bind_group = map_group(kept_generators, generator_buffer, &generators);
         let occluder_bind_group = map_group(kept_occluders, occluder_buffer, &occluders);
-        let scratch_buffers = [&scratch.photon_uv, &scratch.photon_flux, &scratch.pyramid, &scratch.lists[0], &scratch.lists[1], &scratch.lists[2], &scratch.counters, &scratch.levels];
-        let bound: Vec<Bound> = [compute_layout.into(), view_buffer.into(), steps_buffer.into(), (&scratch.front.1).into(), (&scratch.back.1).into(), (&receivers.1).into()]
-            .into_iter()
-            .chain(scratch_buffers.map(Bound::from))
-            .chain([(&resolved).into(), (&bvh_buffer).into()])
-            .collect();
+        let scratch_buffers = [
+            &scratch.photon_uv,
+            &scratch.photon_flux,
+            &scratch.pyramid,
+            &scratch.lists[0],
+            &scratch.lists[1],
+            &scratch.lists[2],
+            &scratch.counters,
+            &scratch.levels,
+        ];
+        let bound: Vec<Bound> =
+            [compute_layout.into(), view_buffer.into(), steps_buffer.into(), (&scratch.front.1).into(), (&scratch.back.1).into(), (&receivers.1).into()]
+                .into_iter()
+                .chain(scratch_buffers.map(Bound::from))
+                .chain([(&resolved).into(), (&bvh_buffer).into()])
+                .collect();
         let compute_bind_group = kept_compute.get(&bound, || {
             device.create_bind_group(
                 "caustic_map_compute_bind_group",

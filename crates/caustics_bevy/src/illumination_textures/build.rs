@@ -2,24 +2,24 @@
 //! planes, set up again only when something they depend on changed.
 
 use super::IlluminationTexturesSettings;
+use crate::CausticTechnique;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
-use bevy::render::renderer::RenderDevice;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
-use crate::read_scene::{AnyLight, ChangedParts, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_lights, core_mesh, read_scene_changes};
+use crate::read_scene::{
+    AnyLight, ChangedParts, LightComponents, MeshComponents, OccluderComponents, blocks_caustic_light, core_lights, core_mesh, read_scene_changes,
+};
 use crate::technique::CausticTechniqueChoice;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
+use bevy::render::renderer::RenderDevice;
 use bevy::tasks::{AsyncComputeTaskPool, Task, block_on, poll_once};
 use caustics_core::glam::Affine3A;
 use caustics_core::hierarchical::photons::photon_ior;
-use caustics_core::illumination_textures::{
-    CacheOutcome, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild,
-};
+use caustics_core::illumination_textures::{CacheOutcome, DirectionGrid, IlluminationSettings, IlluminationTextures, LightTransportTable, TransportBuild};
 use caustics_core::mesh::TriMesh;
 use caustics_core::scene::Light;
-use crate::CausticTechnique;
 use caustics_core::triangle_bvh::InstancedBvh;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -79,23 +79,20 @@ pub struct IlluminationFrames {
 
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
-    app.init_resource::<LightTransportTables>()
-        .init_resource::<IlluminationFrames>()
-        .init_resource::<BuildState>()
-        .add_systems(
-            PostUpdate,
-            crate::cpu_time::timed(&cpu, set_up_planes).run_if(crate::cpu_time::timed(&cpu, planes_wanted)).after(read_scene_changes).in_set(crate::CausticSystems::ReadScene),
-        );
+    app.init_resource::<LightTransportTables>().init_resource::<IlluminationFrames>().init_resource::<BuildState>().add_systems(
+        PostUpdate,
+        crate::cpu_time::timed(&cpu, set_up_planes)
+            .run_if(crate::cpu_time::timed(&cpu, planes_wanted))
+            .after(read_scene_changes)
+            .in_set(crate::CausticSystems::ReadScene),
+    );
 }
 
 /// Whether the planes have work or something to clear: a generator drawn by them, a
 /// build under way or asked for, or frames that still hold one. A scene without them
 /// spends nothing on their set-up.
 fn planes_wanted(choices: Query<&CausticTechniqueChoice>, frames: Res<IlluminationFrames>, state: Res<BuildState>) -> bool {
-    state.pending
-        || state.running.is_some()
-        || !frames.frames.is_empty()
-        || choices.iter().any(|c| c.technique() == CausticTechnique::IlluminationTextures)
+    state.pending || state.running.is_some() || !frames.frames.is_empty() || choices.iter().any(|c| c.technique() == CausticTechnique::IlluminationTextures)
 }
 
 /// One generator as the build reads it.
@@ -278,7 +275,8 @@ fn set_up_planes(
     // Tables and meshes no generator uses any more are let go.
     tables.tables.retain(|key, _| keys.contains(key));
     state.local_meshes.retain(|key, _| keys.contains(key));
-    let receivers = Arc::new(bvhs.place(next.occluders.iter().enumerate().map(|(k, (mesh, transform))| (*mesh, transform.to_matrix(), k as u32, None)), &meshes));
+    let receivers =
+        Arc::new(bvhs.place(next.occluders.iter().enumerate().map(|(k, (mesh, transform))| (*mesh, transform.to_matrix(), k as u32, None)), &meshes));
     let lights = next.lights;
     let fitted = fitting(core_settings, lights.len(), device.as_deref(), budget.bytes);
     let builds = !inputs.is_empty() && !lights.is_empty();
@@ -297,9 +295,10 @@ fn set_up_planes(
     let core_settings = fitted;
     let (directions, max_bytes, cache_dir) = (settings.table_directions, settings.max_table_bytes, settings.cache_dir.clone());
     let clock = cpu.main.clone();
-    state.running = Some(AsyncComputeTaskPool::get().spawn(async move {
-        clock.time(|| make_frames(inputs, &lights, receivers, &core_settings, (directions, max_bytes, cache_dir)))
-    }));
+    state.running = Some(
+        AsyncComputeTaskPool::get()
+            .spawn(async move { clock.time(|| make_frames(inputs, &lights, receivers, &core_settings, (directions, max_bytes, cache_dir))) }),
+    );
 }
 
 /// The planes' inputs as the scene stands: the generators drawn with illumination
@@ -335,9 +334,8 @@ fn inputs(
 /// floats) and depth maps (48 bytes a texel, one storage binding): the size halves until
 /// they fit, or reaches 16. Without a render device only the budget bounds them.
 fn fitting(settings: IlluminationSettings, frames: usize, device: Option<&RenderDevice>, budget: u64) -> IlluminationSettings {
-    let (largest, widest, layers) = device.map_or((u64::MAX, u32::MAX, u32::MAX), |d| {
-        (largest_binding(d), d.limits().max_texture_dimension_2d, d.limits().max_texture_array_layers)
-    });
+    let (largest, widest, layers) =
+        device.map_or((u64::MAX, u32::MAX, u32::MAX), |d| (largest_binding(d), d.limits().max_texture_dimension_2d, d.limits().max_texture_array_layers));
     let mut fitted = IlluminationSettings { planes: settings.planes.min(layers), ..settings };
     let texels = |s: &IlluminationSettings| u64::from(s.texture_size).pow(2);
     let depth_map = super::SURFACE_TEXEL_BYTES;
@@ -366,10 +364,8 @@ fn make_frames(
                 let vertices = input.mesh.positions().len();
                 let (grid, lowered) = DirectionGrid::fitting(directions, vertices, max_bytes);
                 if lowered {
-                    let problem = format!(
-                        "its light transport table at {directions}² directions would pass max_table_bytes ({max_bytes}); it uses {}²",
-                        grid.side()
-                    );
+                    let problem =
+                        format!("its light transport table at {directions}² directions would pass max_table_bytes ({max_bytes}); it uses {}²", grid.side());
                     output.problems.push((input.entity, problem));
                 }
                 let build = TransportBuild { ior: f32::from_bits(input.key.ior), grid };

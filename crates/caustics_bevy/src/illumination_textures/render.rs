@@ -1,8 +1,10 @@
 //! Render world: extraction of the frames, and the GPU buffers, textures, pipelines and
 //! bind groups the passes (`pass.rs`) draw with.
 
-use crate::cpu_time::timed;
 use super::{IlluminationFrames, IlluminationTexturesSettings, MAX_PLANES, SURFACE_TEXEL_BYTES, pass};
+use crate::cpu_time::timed;
+use crate::irradiance::kept_bind_group::{KeptLayout, ViewBindGroups};
+use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use bevy::core_pipeline::schedule::{Core3d, camera_driver};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader};
 use bevy::prelude::*;
@@ -10,16 +12,14 @@ use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     render_resource::{
         binding_types::{
-            storage_buffer_read_only, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d_array, texture_2d_multisampled, texture_depth_2d, texture_depth_2d_multisampled,
-            uniform_buffer,
+            storage_buffer_read_only, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d_array, texture_2d_multisampled, texture_depth_2d,
+            texture_depth_2d_multisampled, uniform_buffer,
         },
         *,
     },
     renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     view::ViewUniform,
 };
-use crate::irradiance::kept_bind_group::{KeptLayout, ViewBindGroups};
-use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use caustics_core::illumination_textures::{Cosine, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS};
 use caustics_core::triangle_bvh::InstancedBvh;
 use std::sync::Arc;
@@ -198,9 +198,7 @@ pub(super) fn build(app: &mut App) {
             Render,
             (
                 timed(&cpu, prepare_frames).in_set(RenderSystems::PrepareResources),
-                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>)
-                    .run_if(textures_in_view)
-                    .in_set(RenderSystems::Prepare),
+                timed(&cpu, crate::irradiance::prepare_projection_pipelines::<IlluminationPipelines>).run_if(textures_in_view).in_set(RenderSystems::Prepare),
             ),
         )
         .add_systems(
@@ -276,11 +274,7 @@ fn init_pipelines(
         fragment: Some(FragmentState {
             shader,
             entry_point: Some("draw_fragment".into()),
-            targets: vec![Some(ColorTargetState {
-                format,
-                blend: Some(BlendState { color: additive, alpha: additive }),
-                write_mask: ColorWrites::ALL,
-            })],
+            targets: vec![Some(ColorTargetState { format, blend: Some(BlendState { color: additive, alpha: additive }), write_mask: ColorWrites::ALL })],
             ..default()
         }),
         ..default()
@@ -319,7 +313,13 @@ impl SpecializedRenderPipeline for IlluminationPipelines {
     type Key = bool;
 
     fn specialize(&self, multisampled: bool) -> RenderPipelineDescriptor {
-        crate::irradiance::projection_pipeline("illumination_project_pipeline", &self.project_layouts[multisampled as usize].descriptor, &self.project_shader, &self.fullscreen, multisampled)
+        crate::irradiance::projection_pipeline(
+            "illumination_project_pipeline",
+            &self.project_layouts[multisampled as usize].descriptor,
+            &self.project_shader,
+            &self.fullscreen,
+            multisampled,
+        )
     }
 }
 
@@ -413,8 +413,16 @@ fn prepare_frames(
             usage: TextureUsages::RENDER_ATTACHMENT | TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_SRC,
             view_formats: &[],
         });
-        let buffer = |label, size| device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC, mapped_at_creation: false });
-        let (surface, seen) = (buffer("caustic_illumination_depth_map", u64::from(t.size).pow(2) * SURFACE_TEXEL_BYTES), buffer("caustic_illumination_seen_depths", 8));
+        let buffer = |label, size| {
+            device.create_buffer(&BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let (surface, seen) =
+            (buffer("caustic_illumination_depth_map", u64::from(t.size).pow(2) * SURFACE_TEXEL_BYTES), buffer("caustic_illumination_seen_depths", 8));
         let view = |dimension, base_array_layer, array_layer_count| {
             textures.create_view(&TextureViewDescriptor { dimension: Some(dimension), base_array_layer, array_layer_count, ..default() })
         };
@@ -422,6 +430,18 @@ fn prepare_frames(
         let array = view(TextureViewDimension::D2Array, 0, Some(layers));
         let Some((see_bind_group, draw_bind_group)) = bind_groups(&uniform, &volume_buffer, &surface, &seen) else { continue };
         let projections = ViewBindGroups::default();
-        gpu.frames.push(FrameGpu { uniform, volumes: volume_buffer, volume_count, textures, layers: layer_views, array, surface, seen, see_bind_group, draw_bind_group, projections });
+        gpu.frames.push(FrameGpu {
+            uniform,
+            volumes: volume_buffer,
+            volume_count,
+            textures,
+            layers: layer_views,
+            array,
+            surface,
+            seen,
+            see_bind_group,
+            draw_bind_group,
+            projections,
+        });
     }
 }

@@ -40,10 +40,16 @@ impl BvhRefitPipelines {
         let read = || storage_buffer_read_only_sized(false, None);
         let layout = BindGroupLayoutDescriptor::new(
             "caustic_bvh_refit_layout",
-            &BindGroupLayoutEntries::sequential(ShaderStages::COMPUTE, (uniform_buffer::<GpuRefitJob>(true), read(), read(), read(), storage_buffer_sized(false, None))),
+            &BindGroupLayoutEntries::sequential(
+                ShaderStages::COMPUTE,
+                (uniform_buffer::<GpuRefitJob>(true), read(), read(), read(), storage_buffer_sized(false, None)),
+            ),
         );
         let shader = bevy::asset::load_embedded_asset!(asset_server, "bvh_refit.wgsl");
-        Self { pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes"]), layout: KeptLayout::new(layout) }
+        Self {
+            pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes"]),
+            layout: KeptLayout::new(layout),
+        }
     }
 }
 
@@ -109,7 +115,15 @@ impl BvhRefit {
     /// BVHs) where they lie in `buffer`, which holds `bvh`. A mesh that `bvh` does not
     /// hold, or whose vertices Bevy has not uploaded in a form a compute pass reads,
     /// keeps its tree as it stands.
-    pub fn prepare(&mut self, bvh: &InstancedBvh, buffer: &Buffer, moving: &[(AssetId<Mesh>, Arc<MeshBvh>)], pipelines: &BvhRefitPipelines, (meshes, allocator, device, queue): DrawnMeshes, cache: &PipelineCache) {
+    pub fn prepare(
+        &mut self,
+        bvh: &InstancedBvh,
+        buffer: &Buffer,
+        moving: &[(AssetId<Mesh>, Arc<MeshBvh>)],
+        pipelines: &BvhRefitPipelines,
+        (meshes, allocator, device, queue): DrawnMeshes,
+        cache: &PipelineCache,
+    ) {
         self.meshes.retain(|id, kept| moving.iter().any(|(m, b)| m == id && Arc::ptr_eq(b, &kept.bvh)));
         self.dispatches.clear();
         let starts = bvh.gpu_mesh_starts();
@@ -150,7 +164,13 @@ impl BvhRefit {
                 device.create_bind_group(
                     "caustic_bvh_refit_bind_group",
                     layout,
-                    &BindGroupEntries::sequential((binding.clone(), BindingResource::Buffer(vertices.binding()), corners.as_entire_binding(), levels.as_entire_binding(), buffer.as_entire_binding())),
+                    &BindGroupEntries::sequential((
+                        binding.clone(),
+                        BindingResource::Buffer(vertices.binding()),
+                        corners.as_entire_binding(),
+                        levels.as_entire_binding(),
+                        buffer.as_entire_binding(),
+                    )),
                 )
             });
             let offset = |j: usize| self.written.1[j];

@@ -5,35 +5,39 @@
 //! caustics, and transparent surfaces drawn later blend over them. See the module
 //! docs of [`super`].
 
+use super::kept_bind_group::{KeptLayout, write_changed};
 use super::{ExtractedReceivers, GpuViewCaustics, ViewCausticIrradiance, ViewCausticWork};
 use crate::components::CausticReceiver;
 use crate::report::PassRecorder;
-use super::kept_bind_group::{KeptLayout, write_changed};
 use bevy::camera::{MainPassResolutionOverride, Viewport};
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
+use bevy::ecs::entity::EntityHash;
+use bevy::ecs::query::ROQueryItem;
+use bevy::ecs::system::{
+    SystemParamItem,
+    lifetimeless::{Read, SRes},
+};
+use bevy::math::FloatOrd;
+use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef};
+use bevy::pbr::{
+    DrawMesh, MeshInputUniform, MeshPipeline, MeshPipelineKey, MeshPipelineViewLayoutKey, MeshUniform, RenderMeshInstances, SetMeshBindGroup,
+    SetMeshViewBindGroup, ViewKeyCache, get_mesh_instance_world_from_local,
+};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
 use bevy::render::camera::ExtractedCamera;
 use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::renderer::{RenderContext, ViewQuery};
 use bevy::render::view::{RetainedViewEntity, ViewDepthTexture, ViewTarget};
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderSystems};
-use bevy::ecs::query::ROQueryItem;
-use bevy::ecs::system::{SystemParamItem, lifetimeless::{Read, SRes}};
-use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef};
-use bevy::pbr::{
-    DrawMesh, MeshInputUniform, MeshPipeline, MeshPipelineKey, MeshPipelineViewLayoutKey, MeshUniform,
-    RenderMeshInstances, SetMeshBindGroup, SetMeshViewBindGroup, ViewKeyCache, get_mesh_instance_world_from_local,
-};
-use bevy::platform::collections::HashMap;
-use bevy::prelude::*;
 use bevy::render::{
     batching::gpu_preprocessing::BatchedInstanceBuffers,
     mesh::{RenderMesh, allocator::MeshAllocator},
     render_asset::RenderAssets,
     render_phase::{
-        AddRenderCommand, CachedRenderPipelinePhaseItem, DrawFunctionId, DrawFunctions, PhaseItem, PhaseItemExtraIndex,
-        RenderCommand, RenderCommandResult, SetItemPipeline, SortedPhaseItem, SortedRenderPhasePlugin, TrackedRenderPass,
-        ViewSortedRenderPhases,
+        AddRenderCommand, CachedRenderPipelinePhaseItem, DrawFunctionId, DrawFunctions, PhaseItem, PhaseItemExtraIndex, RenderCommand, RenderCommandResult,
+        SetItemPipeline, SortedPhaseItem, SortedRenderPhasePlugin, TrackedRenderPass, ViewSortedRenderPhases,
     },
     render_resource::{binding_types::*, *},
     renderer::{RenderDevice, RenderQueue},
@@ -41,8 +45,6 @@ use bevy::render::{
     texture::{FallbackImage, GpuImage},
     view::{ExtractedView, RenderVisibleEntities},
 };
-use bevy::math::FloatOrd;
-use bevy::ecs::entity::EntityHash;
 use indexmap::IndexMap;
 use std::ops::Range;
 
@@ -215,11 +217,7 @@ pub(super) fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipel
         "caustic_receiver_layout",
         &BindGroupLayoutEntries::sequential(
             ShaderStages::FRAGMENT,
-            (
-                uniform_buffer::<ReceiverUniform>(false),
-                texture_2d(TextureSampleType::Float { filterable: true }),
-                sampler(SamplerBindingType::Filtering),
-            ),
+            (uniform_buffer::<ReceiverUniform>(false), texture_2d(TextureSampleType::Float { filterable: true }), sampler(SamplerBindingType::Filtering)),
         ),
     );
     commands.insert_resource(CausticCompositePipeline {
@@ -233,11 +231,7 @@ pub(super) fn init_pipeline(mut commands: Commands, mesh_pipeline: Res<MeshPipel
 impl SpecializedMeshPipeline for CausticCompositePipeline {
     type Key = MeshPipelineKey;
 
-    fn specialize(
-        &self,
-        key: Self::Key,
-        layout: &MeshVertexBufferLayoutRef,
-    ) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
+    fn specialize(&self, key: Self::Key, layout: &MeshVertexBufferLayoutRef) -> Result<RenderPipelineDescriptor, SpecializedMeshPipelineError> {
         let mut attributes = vec![Mesh::ATTRIBUTE_POSITION.at_shader_location(0)];
         let mut shader_defs = Vec::new();
         if layout.0.contains(Mesh::ATTRIBUTE_UV_0) {
@@ -367,11 +361,8 @@ pub(super) fn prepare_receiver_bind_groups(
         uniform.set_label(Some("caustic_receiver_albedo"));
         uniform.write_buffer(&device, &queue);
         let Some(binding) = uniform.binding() else { continue };
-        let bind_group = device.create_bind_group(
-            "caustic_receiver_bind_group",
-            layout,
-            &BindGroupEntries::sequential((binding, &image.texture_view, &image.sampler)),
-        );
+        let bind_group =
+            device.create_bind_group("caustic_receiver_bind_group", layout, &BindGroupEntries::sequential((binding, &image.texture_view, &image.sampler)));
         bind_groups.0.insert(*entity, ReceiverBinding { uniform, texture, bind_group });
     }
 }
@@ -396,11 +387,9 @@ pub(super) fn queue(
 ) {
     let draw_function = draw_functions.read().id::<DrawCausticComposite>();
     for (view, visible) in &views {
-        let (Some(phase), Some(&view_key), Some(visible)) = (
-            phases.get_mut(&view.retained_view_entity),
-            view_key_cache.get(&view.retained_view_entity),
-            visible.get::<CausticReceiver>(),
-        ) else {
+        let (Some(phase), Some(&view_key), Some(visible)) =
+            (phases.get_mut(&view.retained_view_entity), view_key_cache.get(&view.retained_view_entity), visible.get::<CausticReceiver>())
+        else {
             continue;
         };
         let mut queued = false;
@@ -417,13 +406,8 @@ pub(super) fn queue(
             let Ok(pipeline_id) = pipelines.specialize(&pipeline_cache, &pipeline, key, &mesh.layout) else {
                 continue;
             };
-            let center = get_mesh_instance_world_from_local(
-                *main_entity,
-                instance.current_uniform_index,
-                &mesh_instances,
-                batched.as_deref(),
-            )
-            .transform_point3(mesh.aabb_center);
+            let center = get_mesh_instance_world_from_local(*main_entity, instance.current_uniform_index, &mesh_instances, batched.as_deref())
+                .transform_point3(mesh.aabb_center);
             phase.add_transient(CausticComposite3d {
                 mesh_center: center,
                 entity: (*render_entity, *main_entity),
@@ -442,14 +426,8 @@ pub(super) fn queue(
     }
 }
 
-type DrawCausticComposite = (
-    SetItemPipeline,
-    SetMeshViewBindGroup<0>,
-    SetCausticIrradianceBindGroup<1>,
-    SetMeshBindGroup<2>,
-    SetReceiverBindGroup<3>,
-    DrawMesh,
-);
+type DrawCausticComposite =
+    (SetItemPipeline, SetMeshViewBindGroup<0>, SetCausticIrradianceBindGroup<1>, SetMeshBindGroup<2>, SetReceiverBindGroup<3>, DrawMesh);
 
 struct SetCausticIrradianceBindGroup<const I: usize>;
 
@@ -478,13 +456,7 @@ impl<P: PhaseItem, const I: usize> RenderCommand<P> for SetReceiverBindGroup<I> 
     type ViewQuery = ();
     type ItemQuery = ();
 
-    fn render<'w>(
-        item: &P,
-        _: (),
-        _: Option<()>,
-        bind_groups: SystemParamItem<'w, '_, Self::Param>,
-        pass: &mut TrackedRenderPass<'w>,
-    ) -> RenderCommandResult {
+    fn render<'w>(item: &P, _: (), _: Option<()>, bind_groups: SystemParamItem<'w, '_, Self::Param>, pass: &mut TrackedRenderPass<'w>) -> RenderCommandResult {
         let Some(binding) = bind_groups.into_inner().0.get(&item.main_entity()) else {
             return RenderCommandResult::Skip;
         };

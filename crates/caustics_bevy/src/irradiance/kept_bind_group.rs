@@ -6,14 +6,14 @@
 //! bind group layout is fetched from the pipeline cache once: each fetch clones, hashes
 //! and looks up its descriptor under a lock.
 
-use bevy::render::render_resource::encase::internal::WriteInto;
-use bevy::render::render_resource::{
-    BindGroup, BindGroupLayout, BindGroupLayoutDescriptor, BindGroupLayoutId, Buffer, BufferId, PipelineCache, ShaderType, TextureView,
-    TextureViewId, UniformBuffer,
-};
-use bevy::render::renderer::{RenderDevice, RenderQueue};
 use bevy::ecs::entity::Entity;
 use bevy::platform::collections::HashMap;
+use bevy::render::render_resource::encase::internal::WriteInto;
+use bevy::render::render_resource::{
+    BindGroup, BindGroupLayout, BindGroupLayoutDescriptor, BindGroupLayoutId, Buffer, BufferId, PipelineCache, ShaderType, TextureView, TextureViewId,
+    UniformBuffer,
+};
+use bevy::render::renderer::{RenderDevice, RenderQueue};
 use std::sync::OnceLock;
 
 /// What a bind group binds, by identity.

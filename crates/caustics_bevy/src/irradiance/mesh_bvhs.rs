@@ -6,8 +6,8 @@
 //! moves. A mesh that moves costs its instance's transform, not its triangles.
 
 use crate::read_scene::core_mesh;
-use bevy::platform::collections::HashMap;
 use bevy::camera::primitives::Aabb;
+use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 use bevy::render::render_resource::{Buffer, BufferInitDescriptor, BufferUsages};
 use bevy::render::renderer::{RenderDevice, RenderQueue};
@@ -46,8 +46,11 @@ impl MeshBvhs {
 /// Drops the BVHs of meshes that changed or went away, before anything places them.
 pub(super) fn forget_changed_meshes(mut events: MessageReader<AssetEvent<Mesh>>, mut bvhs: ResMut<MeshBvhs>) {
     for event in events.read() {
-        let (AssetEvent::Added { id } | AssetEvent::Modified { id } | AssetEvent::Removed { id } | AssetEvent::Unused { id } | AssetEvent::LoadedWithDependencies { id }) =
-            event;
+        let (AssetEvent::Added { id }
+        | AssetEvent::Modified { id }
+        | AssetEvent::Removed { id }
+        | AssetEvent::Unused { id }
+        | AssetEvent::LoadedWithDependencies { id }) = event;
         bvhs.0.remove(id);
     }
 }
@@ -74,7 +77,11 @@ impl InstancedBvhBuffer {
             }
             _ => {
                 let contents = [top.as_slice(), &bvh.gpu_meshes()].concat();
-                let buffer = device.create_buffer_with_data(&BufferInitDescriptor { label: Some(label), contents: &contents, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST });
+                let buffer = device.create_buffer_with_data(&BufferInitDescriptor {
+                    label: Some(label),
+                    contents: &contents,
+                    usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+                });
                 (self.meshes, self.top_bytes) = (bvh.meshes.clone(), top.len());
                 self.buffer = Some(buffer.clone());
                 buffer

@@ -25,19 +25,17 @@ pub mod kept_bind_group;
 pub mod mesh_bvhs;
 pub mod reference_view;
 
-use crate::cpu_time::timed;
-use kept_bind_group::{Bound, KeptLayout, ViewBindGroups};
 use crate::components::{CausticReceiver, Caustics, InvalidCausticParams, ParticipatingMedium};
+use crate::cpu_time::timed;
 use crate::report::PassRecorder;
 use bevy::camera::{Hdr, Viewport};
 use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::Core3d};
 use bevy::ecs::component::ComponentId;
 use bevy::ecs::system::SystemParam;
 use bevy::pbr::{ExtendedMaterial, Material, MaterialExtension, MeshMaterial3d, MeshPipeline, MeshPipelineKey, RenderMeshQueueData, StandardMaterial};
-use bevy::render::mesh::RenderMesh;
-use std::marker::PhantomData;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
+use bevy::render::mesh::RenderMesh;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
     camera::ExtractedCamera,
@@ -53,6 +51,8 @@ use bevy::render::{
     texture::{CachedTexture, GpuImage, TextureCache},
     view::{Msaa, ViewUniform, ViewUniformOffset, ViewUniforms},
 };
+use kept_bind_group::{Bound, KeptLayout, ViewBindGroups};
+use std::marker::PhantomData;
 
 pub use composite::CausticCompositePipeline;
 pub(crate) use composite::draw_composite;
@@ -246,9 +246,17 @@ pub fn mesh_layout(mesh_pipeline: &MeshPipeline, key: MeshPipelineKey) -> BindGr
 
 /// A single-sampled 2D texture of `size` from Bevy's texture cache, which hands a view
 /// the same texture frame after frame while its descriptor stays the same.
-pub fn cached_texture(cache: &mut TextureCache, device: &RenderDevice, label: &'static str, size: UVec2, format: TextureFormat, usage: TextureUsages) -> CachedTexture {
+pub fn cached_texture(
+    cache: &mut TextureCache,
+    device: &RenderDevice,
+    label: &'static str,
+    size: UVec2,
+    format: TextureFormat,
+    usage: TextureUsages,
+) -> CachedTexture {
     let size = Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 };
-    let descriptor = TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
+    let descriptor =
+        TextureDescriptor { label: Some(label), size, mip_level_count: 1, sample_count: 1, dimension: TextureDimension::D2, format, usage, view_formats: &[] };
     cache.get(device, descriptor)
 }
 
@@ -368,7 +376,12 @@ pub struct ProjectionContext<'w, 's, P: 'static> {
 
 impl<P: 'static> ProjectionContext<'_, '_, P> {
     /// The view's inputs ([`ViewProjectionPipeline::inputs`]).
-    pub fn inputs<'a>(&'a self, pipeline: &ViewProjectionPipeline<P>, prepass: &'a ViewPrepassTextures, layouts: &'a [KeptLayout; 2]) -> Option<ProjectionInputs<'a>> {
+    pub fn inputs<'a>(
+        &'a self,
+        pipeline: &ViewProjectionPipeline<P>,
+        prepass: &'a ViewPrepassTextures,
+        layouts: &'a [KeptLayout; 2],
+    ) -> Option<ProjectionInputs<'a>> {
         pipeline.inputs(&self.cache, prepass, &self.view_uniforms, layouts)
     }
 
@@ -462,7 +475,10 @@ pub(crate) fn build(app: &mut App) {
         .init_resource::<mesh_bvhs::MeshBvhs>()
         .add_systems(
             PostUpdate,
-            (timed(&cpu.main, warn_receivers_with_unread_material), timed(&cpu.main, mesh_bvhs::forget_changed_meshes).before(crate::CausticSystems::ReadScene)),
+            (
+                timed(&cpu.main, warn_receivers_with_unread_material),
+                timed(&cpu.main, mesh_bvhs::forget_changed_meshes).before(crate::CausticSystems::ReadScene),
+            ),
         )
         .add_plugins(CausticReceiverMaterialPlugin::<StandardMaterial>::default())
         .add_plugins(ExtractComponentPlugin::<InjectedIrradiance>::default());
@@ -472,10 +488,7 @@ pub(crate) fn build(app: &mut App) {
     render_app
         .init_resource::<ExtractedReceivers>()
         .init_resource::<ExtractedMedia>()
-        .add_systems(
-            RenderStartup,
-            (composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems), init_inject_pipeline),
-        )
+        .add_systems(RenderStartup, (composite::init_pipeline.after(bevy::pbr::MeshPipelineSystems), init_inject_pipeline))
         .add_systems(ExtractSchedule, (timed(&cpu.render, start_receivers), timed(&cpu.render, extract_media), timed(&cpu.render, mark_views_with_work)))
         .add_systems(
             Render,
@@ -547,7 +560,9 @@ pub fn warn_receivers_with_unread_material(
     let readable = readable.as_deref().map_or(&[][..], |r| &r.0[..]);
     for (entity, components) in &receivers {
         if !readable.iter().any(|&id| components.contains_id(id)) && warned.insert(entity) {
-            warn!("bevy_caustics: CausticReceiver {entity} has a material the composite cannot read: its caustics are shown with albedo 1 (add CausticReceiverMaterialPlugin for its material)");
+            warn!(
+                "bevy_caustics: CausticReceiver {entity} has a material the composite cannot read: its caustics are shown with albedo 1 (add CausticReceiverMaterialPlugin for its material)"
+            );
         }
     }
 }
@@ -586,12 +601,8 @@ fn extract_receiver_albedo<M: ReceiverMaterial>(
 }
 
 /// Valid media and whether they are visible.
-pub type MediumQuery = Query<
-    'static,
-    'static,
-    (&'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility),
-    Without<InvalidCausticParams>,
->;
+pub type MediumQuery =
+    Query<'static, 'static, (&'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility), Without<InvalidCausticParams>>;
 
 fn extract_media(mut extracted: ResMut<ExtractedMedia>, media: Extract<MediumQuery>) {
     extracted.0 = media
@@ -608,12 +619,7 @@ fn extract_media(mut extracted: ResMut<ExtractedMedia>, media: Extract<MediumQue
 
 /// 3D cameras: their caustics settings, whether they have injected irradiance and
 /// whether they render HDR.
-type CameraQuery = Query<
-    'static,
-    'static,
-    (Entity, RenderEntity, Option<&'static Caustics>, Has<InjectedIrradiance>, Has<Hdr>),
-    With<Camera3d>,
->;
+type CameraQuery = Query<'static, 'static, (Entity, RenderEntity, Option<&'static Caustics>, Has<InjectedIrradiance>, Has<Hdr>), With<Camera3d>>;
 
 /// A view has caustics work when its camera opted in with [`Caustics`] and the
 /// application injects irradiance into it or a technique has something to draw.
@@ -652,7 +658,8 @@ fn mark_views_with_work(
 }
 
 /// The views' caustics buffers, and whether Bevy's volumetric fog draws the media there.
-type IrradianceViews = (Entity, &'static ExtractedCamera, &'static ViewCausticWork, Option<&'static mut ViewCausticIrradiance>, Has<bevy::light::VolumetricFog>);
+type IrradianceViews =
+    (Entity, &'static ExtractedCamera, &'static ViewCausticWork, Option<&'static mut ViewCausticIrradiance>, Has<bevy::light::VolumetricFog>);
 
 #[expect(clippy::too_many_arguments)]
 fn prepare_irradiance_buffers(
@@ -705,12 +712,7 @@ pub(crate) struct InjectPipeline {
     pipeline: CachedRenderPipelineId,
 }
 
-fn init_inject_pipeline(
-    mut commands: Commands,
-    asset_server: Res<AssetServer>,
-    fullscreen: Res<FullscreenShader>,
-    pipeline_cache: Res<PipelineCache>,
-) {
+fn init_inject_pipeline(mut commands: Commands, asset_server: Res<AssetServer>, fullscreen: Res<FullscreenShader>, pipeline_cache: Res<PipelineCache>) {
     let layout = BindGroupLayoutDescriptor::new(
         "caustic_inject_layout",
         &BindGroupLayoutEntries::sequential(
@@ -724,11 +726,7 @@ fn init_inject_pipeline(
         vertex: fullscreen.to_vertex_state(),
         fragment: Some(FragmentState {
             shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "inject.wgsl"),
-            targets: vec![Some(ColorTargetState {
-                format: CAUSTIC_IRRADIANCE_FORMAT,
-                blend: None,
-                write_mask: ColorWrites::ALL,
-            })],
+            targets: vec![Some(ColorTargetState { format: CAUSTIC_IRRADIANCE_FORMAT, blend: None, write_mask: ColorWrites::ALL })],
             ..default()
         }),
         ..default()
@@ -746,16 +744,11 @@ impl InjectPipeline {
         view_offset: &ViewUniformOffset,
         (device, cache, view_uniforms): (&RenderDevice, &PipelineCache, &ViewUniforms),
     ) -> bool {
-        let (Some(pipeline), Some(image), Some(view_binding)) =
-            (cache.get_render_pipeline(self.pipeline), image, view_uniforms.uniforms.binding())
-        else {
+        let (Some(pipeline), Some(image), Some(view_binding)) = (cache.get_render_pipeline(self.pipeline), image, view_uniforms.uniforms.binding()) else {
             return false;
         };
-        let bind_group = device.create_bind_group(
-            "caustic_inject_bind_group",
-            self.layout.get(cache),
-            &BindGroupEntries::sequential((&image.texture_view, view_binding)),
-        );
+        let bind_group =
+            device.create_bind_group("caustic_inject_bind_group", self.layout.get(cache), &BindGroupEntries::sequential((&image.texture_view, view_binding)));
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &bind_group, &[view_offset.offset]);
         pass.draw(0..3, 0..1);

@@ -43,10 +43,7 @@ pub(super) fn build(app: &mut App) {
     app.add_plugins((ExtractComponentPlugin::<CaptureCausticIrradiance>::default(), ExtractComponentPlugin::<ReferenceSplit>::default()));
     let cpu = CausticCpuTime::of(app).render;
     if let Some(render_app) = app.get_sub_app_mut(RenderApp) {
-        render_app.add_systems(
-            Core3d,
-            timed(&cpu, split_and_capture).in_set(Core3dSystems::MainPass).before(main_opaque_pass_3d),
-        );
+        render_app.add_systems(Core3d, timed(&cpu, split_and_capture).in_set(Core3dSystems::MainPass).before(main_opaque_pass_3d));
     }
 }
 

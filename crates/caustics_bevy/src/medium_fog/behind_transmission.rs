@@ -30,7 +30,10 @@ use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::CORE_3D_DEPTH_FORMAT;
 use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
 use bevy::ecs::query::ROQueryItem;
-use bevy::ecs::system::{SystemParamItem, lifetimeless::{Read, SRes}};
+use bevy::ecs::system::{
+    SystemParamItem,
+    lifetimeless::{Read, SRes},
+};
 use bevy::light::VolumetricFog;
 use bevy::mesh::{Mesh, MeshVertexBufferLayoutRef};
 use bevy::pbr::{
@@ -61,17 +64,11 @@ pub(super) fn build(app: &mut App) {
         .add_systems(RenderStartup, init_pipeline.after(bevy::pbr::MeshPipelineSystems).after(dim::init_pipeline))
         .add_systems(
             Render,
-            (
-                queue.in_set(RenderSystems::Queue).after(RenderSystems::QueueMeshes),
-                prepare_bind_groups.in_set(RenderSystems::PrepareBindGroups),
-            ),
+            (queue.in_set(RenderSystems::Queue).after(RenderSystems::QueueMeshes), prepare_bind_groups.in_set(RenderSystems::PrepareBindGroups)),
         )
         .add_systems(
             Core3d,
-            dim_behind_transmission
-                .after(crate::irradiance::draw_composite)
-                .before(bevy::pbr::main_transmissive_pass_3d)
-                .in_set(Core3dSystems::MainPass),
+            dim_behind_transmission.after(crate::irradiance::draw_composite).before(bevy::pbr::main_transmissive_pass_3d).in_set(Core3dSystems::MainPass),
         );
 }
 
@@ -209,7 +206,8 @@ fn prepare_bind_groups(
     mut texture_cache: ResMut<TextureCache>,
     device: Res<RenderDevice>,
 ) {
-    let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
+    let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer())
+    else {
         return;
     };
     for (camera, view_depth, mut view) in &mut views {
@@ -244,12 +242,9 @@ fn dim_behind_transmission(
 ) {
     let view_entity = view.entity();
     let (camera, extracted_view, target, view_offset, passes) = view.into_inner();
-    let (Some(phase), Some(depth), Some(bind_group), Some(dim)) = (
-        phases.get(&extracted_view.retained_view_entity),
-        passes.depth.as_ref(),
-        passes.bind_group.current(),
-        pipeline_cache.get_render_pipeline(passes.dim),
-    ) else {
+    let (Some(phase), Some(depth), Some(bind_group), Some(dim)) =
+        (phases.get(&extracted_view.retained_view_entity), passes.depth.as_ref(), passes.bind_group.current(), pipeline_cache.get_render_pipeline(passes.dim))
+    else {
         return;
     };
     let viewport = camera.viewport.clone();

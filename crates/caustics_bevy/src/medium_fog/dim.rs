@@ -5,9 +5,9 @@
 
 use crate::irradiance::kept_bind_group::{KeptLayout, write_changed};
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
+use bevy::camera::Viewport;
 use bevy::core_pipeline::FullscreenShader;
 use bevy::prelude::*;
-use bevy::camera::Viewport;
 use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::render_resource::{binding_types::*, *};
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
@@ -150,7 +150,15 @@ fn prepare_media(media: Res<ExtractedMedia>, mut uniform: ResMut<MediaUniform>, 
 }
 
 /// Multiplies the view's image by what `pipeline` returns, over the camera's viewport.
-pub fn multiply(ctx: &mut RenderContext, target: &ViewTarget, viewport: Option<&Viewport>, span: &'static str, pipeline: &RenderPipeline, bind_group: &BindGroup, view_offset: u32) {
+pub fn multiply(
+    ctx: &mut RenderContext,
+    target: &ViewTarget,
+    viewport: Option<&Viewport>,
+    span: &'static str,
+    pipeline: &RenderPipeline,
+    bind_group: &BindGroup,
+    view_offset: u32,
+) {
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {

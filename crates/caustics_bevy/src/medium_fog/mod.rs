@@ -85,12 +85,14 @@ fn coefficients_of(fog: &FogVolume) -> FogCoefficients {
 /// `fog` drawing `coefficients`; its fog colour and texture stay.
 fn set_coefficients(fog: &mut FogVolume, coefficients: FogCoefficients) {
     let [density, absorption, scattering, asymmetry, light_intensity, red, green, blue] = coefficients;
-    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity] = [density, absorption, scattering, asymmetry, light_intensity];
+    [fog.density_factor, fog.absorption, fog.scattering, fog.scattering_asymmetry, fog.light_intensity] =
+        [density, absorption, scattering, asymmetry, light_intensity];
     fog.light_tint = Color::linear_rgb(red, green, blue);
 }
 
 /// The media, with their fog volumes and whether they are invalid.
-type Media = (Entity, &'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static mut FogVolume>, Has<InvalidCausticParams>);
+type Media =
+    (Entity, &'static ParticipatingMedium, &'static GlobalTransform, &'static InheritedVisibility, Option<&'static mut FogVolume>, Has<InvalidCausticParams>);
 
 /// Keeps each visible, valid medium's `FogVolume` in step with it, and takes away the
 /// plugin's fog where the medium went, turned invalid or is hidden (Bevy's fog draws
@@ -102,7 +104,9 @@ fn keep_fog_volumes(
     mut removed: RemovedComponents<ParticipatingMedium>,
 ) {
     for entity in removed.read() {
-        if kept.contains(entity) && let Ok(mut entity) = commands.get_entity(entity) {
+        if kept.contains(entity)
+            && let Ok(mut entity) = commands.get_entity(entity)
+        {
             entity.remove::<(FogVolume, MediumFogVolume)>();
         }
     }

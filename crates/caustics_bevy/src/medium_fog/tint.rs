@@ -10,8 +10,8 @@
 //! alike the pass is left out.
 
 use super::dim::{self, Dim, DimKey, DimPipeline, MediaUniform};
-use crate::irradiance::{ExtractedMedia, GpuMedium};
 use crate::irradiance::kept_bind_group::KeptBindGroup;
+use crate::irradiance::{ExtractedMedia, GpuMedium};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::core_3d::main_transparent_pass_3d;
 use bevy::core_pipeline::{Core3dSystems, schedule::Core3d};
@@ -87,7 +87,8 @@ fn prepare_bind_groups(
     pipeline_cache: Res<PipelineCache>,
     device: Res<RenderDevice>,
 ) {
-    let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer()) else {
+    let (Some(view_buffer), Some(view_binding), Some(media_buffer)) = (view_uniforms.uniforms.buffer(), view_uniforms.uniforms.binding(), uniform.0.buffer())
+    else {
         return;
     };
     for (view_depth, mut view) in &mut views {
@@ -104,11 +105,7 @@ fn prepare_bind_groups(
 }
 
 /// Multiplies the view's image by the tint.
-fn tint(
-    view: ViewQuery<(&ExtractedCamera, &ViewTarget, &ViewUniformOffset, &ViewMediumTint)>,
-    pipeline_cache: Res<PipelineCache>,
-    mut ctx: RenderContext,
-) {
+fn tint(view: ViewQuery<(&ExtractedCamera, &ViewTarget, &ViewUniformOffset, &ViewMediumTint)>, pipeline_cache: Res<PipelineCache>, mut ctx: RenderContext) {
     let (camera, target, view_offset, tint) = view.into_inner();
     let (Some(bind_group), Some(pipeline)) = (tint.bind_group.current(), pipeline_cache.get_render_pipeline(tint.pipeline)) else {
         return;

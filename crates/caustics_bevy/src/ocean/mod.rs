@@ -16,6 +16,7 @@
 
 mod render;
 
+use crate::CausticTechnique;
 use crate::cpu_time::timed;
 use crate::grid_mesh::{grid_mesh, is_grid, rewrite_grid};
 use crate::mesh_vertices::MovesOnGpu;
@@ -25,7 +26,6 @@ use bevy::camera::visibility::NoAutoAabb;
 use bevy::platform::collections::HashSet;
 use bevy::prelude::*;
 use caustics_core::ocean::{OceanSettings, OceanSpectrum, OceanSurface};
-use crate::CausticTechnique;
 use std::sync::Arc;
 
 /// The largest resolution evaluated on the GPU: four complex fields of 2048² texels fill
@@ -189,16 +189,22 @@ fn draw_waves(
 type Oceans<'w, 's> = Query<
     'w,
     's,
-    (Entity, &'static Ocean, &'static mut OceanWaves, Option<&'static Mesh3d>, Option<&'static CausticTechniqueChoice>, Has<crate::CausticGenerator>, Has<MovesOnGpu>),
+    (
+        Entity,
+        &'static Ocean,
+        &'static mut OceanWaves,
+        Option<&'static Mesh3d>,
+        Option<&'static CausticTechniqueChoice>,
+        Has<crate::CausticGenerator>,
+        Has<MovesOnGpu>,
+    ),
 >;
 
 /// Whether an ocean's waves are evaluated on the GPU: asked for, possible, and no
 /// technique reads the ocean's triangles on the CPU (only the caustic volumes' build
 /// reads them on the GPU; a generator whose technique is not chosen yet waits a frame).
 fn evaluates_on_gpu(ocean: &Ocean, gpu: bool, choice: Option<&CausticTechniqueChoice>, generator: bool) -> bool {
-    gpu && ocean.on_gpu
-        && ocean.resolution <= MAX_GPU_RESOLUTION
-        && (!generator || choice.is_some_and(|c| c.technique() == CausticTechnique::WarpedVolumes))
+    gpu && ocean.on_gpu && ocean.resolution <= MAX_GPU_RESOLUTION && (!generator || choice.is_some_and(|c| c.technique() == CausticTechnique::WarpedVolumes))
 }
 
 /// Moves every ocean: on the GPU, makes its mesh once (the surface of this moment) and
@@ -217,7 +223,8 @@ fn animate_oceans(mut commands: Commands, time: Res<Time>, gpu: Option<Res<GpuWa
         spectrum.evaluate_into(time.elapsed_secs() * ocean.time_scale, surface);
         if on_gpu {
             let (size, bound) = (spectrum.settings().size, spectrum.height_bound());
-            let aabb = Aabb::from_min_max(Vec3::new(-0.5 * size - bound, -bound, -0.5 * size - bound), Vec3::new(0.5 * size + bound, bound, 0.5 * size + bound));
+            let aabb =
+                Aabb::from_min_max(Vec3::new(-0.5 * size - bound, -bound, -0.5 * size - bound), Vec3::new(0.5 * size + bound, bound, 0.5 * size + bound));
             commands.entity(entity).insert((MovesOnGpu, NoAutoAabb, aabb));
         } else if was_on_gpu {
             commands.entity(entity).remove::<(MovesOnGpu, NoAutoAabb)>();

@@ -6,10 +6,10 @@
 //! per change of the ocean's settings; a frame costs the CPU one uniform write.
 
 use super::{OceanModes, OceanWaves};
-use crate::mesh_vertices::MovesOnGpu;
 use crate::cpu_time::timed;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::MeshVertices;
+use crate::mesh_vertices::MovesOnGpu;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -101,7 +101,9 @@ pub(super) fn build(app: &mut App) {
         .add_systems(
             Render,
             timed(&cpu, prepare_oceans)
-                .run_if(|extracted: Res<ExtractedOceans>, oceans: Res<GpuOceans>| !extracted.0.is_empty() || !oceans.buffers.is_empty() || !oceans.dispatches.is_empty())
+                .run_if(|extracted: Res<ExtractedOceans>, oceans: Res<GpuOceans>| {
+                    !extracted.0.is_empty() || !oceans.buffers.is_empty() || !oceans.dispatches.is_empty()
+                })
                 .in_set(RenderSystems::PrepareResources),
         )
         .add_systems(
@@ -131,13 +133,10 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
 }
 
 /// The oceans whose waves move on the GPU.
-type GpuOceanQuery<'w, 's> = Query<'w, 's, (Entity, &'static super::Ocean, &'static OceanWaves, &'static Mesh3d, &'static InheritedVisibility), With<MovesOnGpu>>;
+type GpuOceanQuery<'w, 's> =
+    Query<'w, 's, (Entity, &'static super::Ocean, &'static OceanWaves, &'static Mesh3d, &'static InheritedVisibility), With<MovesOnGpu>>;
 
-fn extract_oceans(
-    mut extracted: ResMut<ExtractedOceans>,
-    oceans: Extract<GpuOceanQuery>,
-    time: Extract<Res<Time>>,
-) {
+fn extract_oceans(mut extracted: ResMut<ExtractedOceans>, oceans: Extract<GpuOceanQuery>, time: Extract<Res<Time>>) {
     extracted.0.clear();
     for (entity, ocean, waves, mesh, _) in oceans.iter().filter(|(.., visible)| visible.get()) {
         let settings = waves.spectrum.settings();
@@ -160,7 +159,14 @@ fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffe
 impl OceanBuffers {
     fn new(device: &RenderDevice, modes: &Arc<OceanModes>, fields: u32) -> Self {
         let bytes = modes.omega.len() as u64 * u64::from(fields) * 8;
-        let field = || device.create_buffer(&BufferDescriptor { label: Some("caustic_ocean_fields"), size: bytes, usage: BufferUsages::STORAGE, mapped_at_creation: false });
+        let field = || {
+            device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_ocean_fields"),
+                size: bytes,
+                usage: BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
         Self {
             modes: modes.clone(),
             amplitudes: storage(device, "caustic_ocean_amplitudes", bytemuck::cast_slice(&modes.amplitudes)),

@@ -10,8 +10,8 @@ use super::ShaftIntegral;
 use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::FullscreenShader;
 use bevy::prelude::*;
@@ -256,7 +256,12 @@ pub(super) fn prepare_grids(
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
         let buffer = |label, size| {
-            Some(device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST, mapped_at_creation: false }))
+            Some(device.create_buffer(&BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }))
         };
         grids.cells = buffer("caustic_shaft_grid", bytes);
         grids.fixed = buffer("caustic_shaft_grid_fixed", u64::from(first) * FIXED_CELL_BYTES);

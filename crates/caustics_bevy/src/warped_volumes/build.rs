@@ -6,22 +6,24 @@
 //! (`compute.rs`); the counts of the last build come back into [`CausticVolumes`].
 
 use super::WarpedVolumesSettings;
+use crate::CausticTechnique;
 use crate::components::{CausticGenerator, InvalidCausticParams};
 use crate::irradiance::ActiveCausticTechniques;
+use crate::irradiance::mesh_bvhs::MeshBvhs;
 use crate::mesh_vertices::MovesOnGpu;
-use crate::read_scene::{AnyLight, ChangedParts, LightComponents, OccluderComponents, blocks_caustic_light, core_lights, read_scene_changes, to_core, world_aabb};
+use crate::read_scene::{
+    AnyLight, ChangedParts, LightComponents, OccluderComponents, blocks_caustic_light, core_lights, read_scene_changes, to_core, world_aabb,
+};
 use crate::technique::CausticTechniqueChoice;
+use bevy::camera::primitives::Aabb;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
 use caustics_core::glam;
-use crate::irradiance::mesh_bvhs::MeshBvhs;
-use bevy::camera::primitives::Aabb;
-use caustics_core::triangle_bvh::{InstancedBvh, MeshBvh};
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
 use caustics_core::scene::Light;
-use crate::CausticTechnique;
+use caustics_core::triangle_bvh::{InstancedBvh, MeshBvh};
 use caustics_core::volumes::{BuildStats, VertexFans, VolumeSettings};
 use std::sync::{Arc, Mutex};
 
@@ -111,14 +113,11 @@ pub(super) struct VolumeSources {
 
 pub(super) fn build(app: &mut App) {
     let cpu = crate::CausticCpuTime::of(app).main;
-    app.init_resource::<CausticVolumes>()
-        .init_resource::<VolumeSources>()
-        .init_resource::<BuildStatsChannel>()
-        .add_systems(
-            PostUpdate,
-            (crate::cpu_time::timed(&cpu, gather_sources).after(read_scene_changes), crate::cpu_time::timed(&cpu, receive_stats))
-                .in_set(crate::CausticSystems::ReadScene),
-        );
+    app.init_resource::<CausticVolumes>().init_resource::<VolumeSources>().init_resource::<BuildStatsChannel>().add_systems(
+        PostUpdate,
+        (crate::cpu_time::timed(&cpu, gather_sources).after(read_scene_changes), crate::cpu_time::timed(&cpu, receive_stats))
+            .in_set(crate::CausticSystems::ReadScene),
+    );
 }
 
 type Generators<'w, 's> = Query<
@@ -187,7 +186,8 @@ fn unusable_vertex(mesh: &Mesh) -> Option<String> {
     if let Some(vertex) = first(Mesh::ATTRIBUTE_POSITION, |p| !p.is_finite()) {
         return Some(format!("has vertex {vertex} with a position that is not finite"));
     }
-    first(Mesh::ATTRIBUTE_NORMAL, |n| !n.is_finite() || *n == Vec3::ZERO).map(|vertex| format!("has vertex {vertex} with a normal that is NaN, infinite or zero"))
+    first(Mesh::ATTRIBUTE_NORMAL, |n| !n.is_finite() || *n == Vec3::ZERO)
+        .map(|vertex| format!("has vertex {vertex} with a normal that is NaN, infinite or zero"))
 }
 
 impl Topology {
@@ -211,9 +211,8 @@ impl Topology {
         // Positions do not matter to the fans: the topology's mesh stands at the origin.
         let mesh = TriMesh::new(vec![glam::Vec3::ZERO; vertices], vec![glam::Vec3::Y; vertices], corners).map_err(|e| e.to_string())?;
         let fans = VertexFans::new(&mesh);
-        let owned_sides = (0..mesh.triangles().len())
-            .map(|t| fans.owned_edges(&mesh, t).iter().enumerate().map(|(i, &owned)| u32::from(owned) << i).sum())
-            .collect();
+        let owned_sides =
+            (0..mesh.triangles().len()).map(|t| fans.owned_edges(&mesh, t).iter().enumerate().map(|(i, &owned)| u32::from(owned) << i).sum()).collect();
         Ok(Self { vertices, triangles, fans, owned_sides })
     }
 }

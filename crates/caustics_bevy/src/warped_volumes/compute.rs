@@ -11,6 +11,9 @@
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
 use super::render::{GpuCausticVolume, VolumeBuffers, WordsReadback};
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
+use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
+use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
+use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
 use crate::mesh_vertices::MeshVertices;
 use crate::report::PassRecorder;
 use bevy::platform::collections::HashMap;
@@ -27,12 +30,9 @@ use bevy::render::{
     renderer::{RenderContext, RenderDevice, RenderQueue},
 };
 use caustics_core::glam;
-use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
-use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
-use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
-use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::mesh::TriMesh;
 use caustics_core::scene::{Light, LightKind};
+use caustics_core::triangle_bvh::InstancedBvh;
 use caustics_core::volumes::{BuildStats, channels};
 use std::sync::{Arc, Mutex};
 
@@ -75,7 +75,13 @@ impl GpuBuildJob {
     /// `None` for a mirror, and its flux colour), against the occluders' BVH whose
     /// instances start at `occluders`, its vertices read through `vertex`
     /// ([`MeshVertices::layout`]).
-    fn new(generator: &VolumeGenerator, light: &Light, (ior, color): (Option<f32>, glam::Vec3), sources: &VolumeSources, (occluders, vertex): (u32, UVec4)) -> Self {
+    fn new(
+        generator: &VolumeGenerator,
+        light: &Light,
+        (ior, color): (Option<f32>, glam::Vec3),
+        sources: &VolumeSources,
+        (occluders, vertex): (u32, UVec4),
+    ) -> Self {
         let (light_vec, spot, power, spot_scale) = match light.kind {
             LightKind::Directional { direction, irradiance } => (v4(direction.normalize(), 0.0), Vec4::ZERO, irradiance, 0.0),
             LightKind::Point { position, intensity } => (v4(position, 1.0), Vec4::ZERO, intensity, 0.0),
@@ -96,12 +102,7 @@ impl GpuBuildJob {
             color: v4(color, ior.unwrap_or(0.0)),
             bounds_lo: v4(lo, sources.settings.min_ray_cosine),
             bounds_hi: v4(hi, if generator.two_sided { 1.0 } else { 0.0 }),
-            counts: UVec4::new(
-                generator.topology.vertices as u32,
-                generator.topology.owned_sides.len() as u32,
-                occluders,
-                generator.occluder_index,
-            ),
+            counts: UVec4::new(generator.topology.vertices as u32, generator.topology.owned_sides.len() as u32, occluders, generator.occluder_index),
             vertex,
         }
     }
@@ -150,21 +151,13 @@ fn vertex_source(mesh: &Mesh, topology: &Topology) -> VertexSource {
     }
 }
 
-pub(super) fn extract_sources(
-    mut extracted: ResMut<ExtractedSources>,
-    sources: Extract<Res<VolumeSources>>,
-    meshes: Extract<Res<Assets<Mesh>>>,
-) {
+pub(super) fn extract_sources(mut extracted: ResMut<ExtractedSources>, sources: Extract<Res<VolumeSources>>, meshes: Extract<Res<Assets<Mesh>>>) {
     extracted.new = extracted.generation != sources.generation;
     if !extracted.new {
         return;
     }
     extracted.generation = sources.generation;
-    extracted.vertices = sources
-        .generators
-        .iter()
-        .map(|(_, g)| meshes.get(g.mesh).map_or(VertexSource::Missing, |m| vertex_source(m, &g.topology)))
-        .collect();
+    extracted.vertices = sources.generators.iter().map(|(_, g)| meshes.get(g.mesh).map_or(VertexSource::Missing, |m| vertex_source(m, &g.topology))).collect();
     extracted.sources = (**sources).clone();
 }
 
@@ -254,7 +247,8 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
-    let pipelines = crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes"]);
+    let pipelines =
+        crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes"]);
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
@@ -300,7 +294,13 @@ impl GeneratorBuffers {
                     }
                     _ => self.copy.insert(storage(device, "caustic_volume_vertices", bytes)).clone(),
                 };
-                Some(MeshVertices { size: std::num::NonZeroU64::new(copy.size())?, buffer: copy, offset: 0, layout: UVec4::new(0, 6, 0, 3), count: self.topology.vertices as u32 })
+                Some(MeshVertices {
+                    size: std::num::NonZeroU64::new(copy.size())?,
+                    buffer: copy,
+                    offset: 0,
+                    layout: UVec4::new(0, 6, 0, 3),
+                    count: self.topology.vertices as u32,
+                })
             }
             VertexSource::Missing => None,
         }
@@ -436,7 +436,8 @@ pub(super) fn prepare_build(
         let offset = build.written_jobs.1[job];
         let (Some(g), Some(vertices)) = (build.generators.get_mut(&entity), vertex_bindings.get(&entity)) else { continue };
         let [a, b, c, d] = g.indices.each_ref().map(Bound::from);
-        let bound = [layout.into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
+        let bound =
+            [layout.into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
         let (indices, rays) = (&g.indices, &g.rays);
         let bind_group = g.bind_group.get(&bound, || {
             device.create_bind_group(
@@ -524,7 +525,8 @@ fn shared_hue(colours: &[glam::Vec3]) -> Option<glam::Vec3> {
 
 /// The counts of a build, from its counters.
 fn stats_of(words: &[u32]) -> BuildStats {
-    let flux = |i: usize| glam::DVec3::new(f64::from(f32::from_bits(words[i])), f64::from(f32::from_bits(words[i + 1])), f64::from(f32::from_bits(words[i + 2])));
+    let flux =
+        |i: usize| glam::DVec3::new(f64::from(f32::from_bits(words[i])), f64::from(f32::from_bits(words[i + 1])), f64::from(f32::from_bits(words[i + 2])));
     BuildStats {
         volumes: words[1] as usize,
         unlit: words[4] as usize,

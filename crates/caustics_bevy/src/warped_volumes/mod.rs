@@ -167,12 +167,7 @@ impl WarpedVolumesSettings {
             VolumeIntensity::Interpolated => IntensityMode::Interpolated,
             VolumeIntensity::Constant => IntensityMode::Constant,
         };
-        VolumeSettings {
-            intensity,
-            max_magnification: self.max_magnification,
-            footprint_filter: self.footprint_filter,
-            ..VolumeSettings::default()
-        }
+        VolumeSettings { intensity, max_magnification: self.max_magnification, footprint_filter: self.footprint_filter, ..VolumeSettings::default() }
     }
 }
 

@@ -1,6 +1,9 @@
 //! The two passes: caustic irradiance on receivers, and in-scattering in media.
 
-use super::render::{ShaftPipeline, SurfacePipelines, SurfaceWorkReadback, VolumeBuffers, ViewSeesMedium, ViewShaftBindGroup, ViewShafts, ViewSurfaceTargets, ViewVolumePipelines};
+use super::render::{
+    ShaftPipeline, SurfacePipelines, SurfaceWorkReadback, ViewSeesMedium, ViewShaftBindGroup, ViewShafts, ViewSurfaceTargets, ViewVolumePipelines,
+    VolumeBuffers,
+};
 use crate::irradiance::{ViewCausticIrradiance, ViewCausticWork};
 use crate::report::PassRecorder;
 use bevy::core_pipeline::prepass::ViewPrepassTextures;
@@ -102,8 +105,7 @@ impl VolumeDraw<'_> {
 }
 
 /// What the passes read of a view.
-type VolumeView<'a> =
-    (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
+type VolumeView<'a> = (&'a ViewCausticIrradiance, &'a ViewCausticWork, &'a ViewVolumePipelines, &'a ViewPrepassTextures, &'a ViewUniformOffset);
 
 /// Adds the caustic volumes' irradiance at every receiver pixel to the view's buffer:
 /// a copy of the view's depth prepass with each pixel's receiver depth

@@ -1,34 +1,37 @@
 //! Render world: extraction, GPU buffers and pipelines of the caustic volumes passes.
 
-use super::build::{BuildStatsChannel, SurfaceWork};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use super::beam_grid::{self, BeamGridPipelines, MarchKey};
+use super::build::{BuildStatsChannel, SurfaceWork};
 use super::{ShaftIntegral, WarpedVolumesSettings, compute, pass};
-use crate::cpu_time::timed;
 use crate::components::Caustics;
-use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork, cached_texture};
+use crate::cpu_time::timed;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
+use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA, MediumQuery, ViewCausticIrradiance, ViewCausticWork, cached_texture};
 use bevy::camera::primitives::{Aabb, Frustum};
-use bevy::core_pipeline::{Core3dSystems, FullscreenShader, prepass::ViewPrepassTextures, schedule::{Core3d, camera_driver}};
+use bevy::core_pipeline::{
+    Core3dSystems, FullscreenShader,
+    prepass::ViewPrepassTextures,
+    schedule::{Core3d, camera_driver},
+};
 use bevy::prelude::*;
 use bevy::render::{
     Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems,
+    camera::ExtractedCamera,
     render_resource::{
         binding_types::{
-            sampler, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d,
-            texture_depth_2d_multisampled, uniform_buffer,
+            sampler, storage_buffer_read_only, texture_2d, texture_2d_multisampled, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer,
         },
         *,
     },
     renderer::{RenderDevice, RenderGraph, RenderGraphSystems, RenderQueue},
     sync_world::RenderEntity,
     texture::{CachedTexture, TextureCache},
-    camera::ExtractedCamera,
     view::{ExtractedView, Msaa, ViewUniform, ViewUniforms},
 };
 use bevy::shader::ShaderDefVal;
 use caustics_core::volumes::IntensityMode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// One caustic volume as `volumes.wgsl` reads it and `build.wgsl` writes it
 /// (`CausticVolume` in `types.wgsl`): its layout and size.
@@ -139,7 +142,12 @@ impl WordsReadback {
         }
         let size = 4 * words;
         let staging = self.staging.get_or_insert_with(|| {
-            device.create_buffer(&BufferDescriptor { label: Some(label), size, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false })
+            device.create_buffer(&BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
         });
         encoder.copy_buffer_to_buffer(source, 0, staging, 0, size);
         (self.copied, self.idle, self.wait) = (true, 0, COPY_EVERY - 1);
@@ -317,16 +325,10 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<SurfaceWorkReadback>()
         .add_systems(RenderStartup, ((init_pipeline, beam_grid::init_pipelines), warm_pipelines).chain())
         .add_systems(RenderStartup, compute::init_pipelines)
-        .add_systems(
-            ExtractSchedule,
-            (timed(&cpu, extract_settings), timed(&cpu, compute::extract_sources), timed(&cpu, mark_views_seeing_media)),
-        )
+        .add_systems(ExtractSchedule, (timed(&cpu, extract_settings), timed(&cpu, compute::extract_sources), timed(&cpu, mark_views_seeing_media)))
         .add_systems(
             RenderGraph,
-            (timed(&cpu, compute::build_volumes), timed(&cpu, beam_grid::deposit_beams))
-                .chain()
-                .in_set(RenderGraphSystems::Render)
-                .before(camera_driver),
+            (timed(&cpu, compute::build_volumes), timed(&cpu, beam_grid::deposit_beams)).chain().in_set(RenderGraphSystems::Render).before(camera_driver),
         )
         .add_systems(
             Render,
@@ -345,10 +347,7 @@ pub(super) fn build(app: &mut App) {
         .add_systems(
             Core3d,
             (
-                timed(&cpu, pass::surface_pass)
-                    .after(crate::irradiance::inject_irradiance)
-                    .after(Core3dSystems::Prepass)
-                    .before(Core3dSystems::MainPass),
+                timed(&cpu, pass::surface_pass).after(crate::irradiance::inject_irradiance).after(Core3dSystems::Prepass).before(Core3dSystems::MainPass),
                 // After Bevy's volumetric fog (which runs before the early post-processing):
                 // the shafts, dimmed along the eye ray already, are not dimmed again.
                 timed(&cpu, pass::volumetric_pass).in_set(Core3dSystems::EarlyPostProcess),
@@ -364,17 +363,11 @@ fn extract_settings(mut extracted: ResMut<ExtractedVolumeSettings>, settings: Ex
 type CameraFrusta = Query<'static, 'static, (RenderEntity, &'static Frustum, Option<&'static Caustics>), With<Camera3d>>;
 
 /// Marks the views that show shafts and whose frustum meets a medium's box.
-fn mark_views_seeing_media(
-    mut commands: Commands,
-    views: Extract<CameraFrusta>,
-    media: Extract<MediumQuery>,
-) {
+fn mark_views_seeing_media(mut commands: Commands, views: Extract<CameraFrusta>, media: Extract<MediumQuery>) {
     let unit_cube = Aabb { center: Vec3::ZERO.into(), half_extents: Vec3::splat(0.5).into() };
     for (view, frustum, settings) in &views {
         let sees = settings.is_some_and(|s| s.shafts)
-            && media
-                .iter()
-                .any(|(_, t, visible)| visible.get() && frustum.intersects_obb(&unit_cube, &t.affine(), true, true));
+            && media.iter().any(|(_, t, visible)| visible.get() && frustum.intersects_obb(&unit_cube, &t.affine(), true, true));
         if sees {
             commands.entity(view).insert(ViewSeesMedium);
         } else {
@@ -489,9 +482,8 @@ fn init_pipeline(
     cache: Res<PipelineCache>,
 ) {
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "volumes.wgsl");
-    let surface_layouts = [false, true].map(|multisampled| {
-        volumes_layout("caustic_volumes_surface_layout", (multisampled, true), ShaderStages::VERTEX_FRAGMENT, &[words(true)])
-    });
+    let surface_layouts =
+        [false, true].map(|multisampled| volumes_layout("caustic_volumes_surface_layout", (multisampled, true), ShaderStages::VERTEX_FRAGMENT, &[words(true)]));
     let volumetric_layouts =
         [false, true].map(|multisampled| volumes_layout("caustic_volumes_volumetric_layout", (multisampled, false), ShaderStages::VERTEX_FRAGMENT, &[]));
     let splat_layouts = [false, true].map(|multisampled| {
@@ -610,8 +602,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
             // pixel's receiver point read from `ViewSurfaceTargets::centre`.
             shader_defs.extend(["SURFACE".into(), "RECEIVER_CENTRE".into()]);
         }
-        let (label, entry) =
-            if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
+        let (label, entry) = if key.volumetric { ("caustic_volumetric_pipeline", "volumetric") } else { ("caustic_volumes_pipeline", "surface") };
         // Shafts go into the view's image scaled by the view's
         // `Caustics::intensity` as the blend constant (straight, or when they
         // are upsampled from their own texture); the composite scales the surface
@@ -621,12 +612,7 @@ impl SpecializedRenderPipeline for VolumesPipeline {
         RenderPipelineDescriptor {
             label: Some(label.into()),
             layout: vec![self.layout(key.volumetric, key.multisampled).descriptor.clone()],
-            vertex: VertexState {
-                shader: self.shader.clone(),
-                shader_defs: shader_defs.clone(),
-                entry_point: Some("vertex".into()),
-                buffers: vec![],
-            },
+            vertex: VertexState { shader: self.shader.clone(), shader_defs: shader_defs.clone(), entry_point: Some("vertex".into()), buffers: vec![] },
             fragment: Some(FragmentState {
                 shader: self.shader.clone(),
                 shader_defs,
@@ -678,13 +664,16 @@ fn prepare_pipelines(
         }
         let multisampled = msaa.samples() > 1;
         let mut specialize = |volumetric, target_format, shaft_scale| {
-            pipelines.specialize(&cache, &pipeline, VolumesPipelineKey { volumetric, multisampled, filtered: filtered && !volumetric, shaft_scale, target_format })
+            pipelines.specialize(
+                &cache,
+                &pipeline,
+                VolumesPipelineKey { volumetric, multisampled, filtered: filtered && !volumetric, shaft_scale, target_format },
+            )
         };
         let surface = specialize(false, crate::CAUSTIC_IRRADIANCE_FORMAT, 1);
         // Below full resolution, into the shaft texture, then spread over the image.
         let target_format = if scale > 1 { SHAFT_FORMAT } else { view.target_format };
-        let upsample = (scale > 1)
-            .then(|| upsample_pipelines.specialize(&cache, &upsample, ShaftUpsampleKey { target_format: view.target_format, scale }));
+        let upsample = (scale > 1).then(|| upsample_pipelines.specialize(&cache, &upsample, ShaftUpsampleKey { target_format: view.target_format, scale }));
         let shafts = if grid {
             ShaftPipeline::March(march_pipelines.specialize(&cache, &march, MarchKey { multisampled, shaft_scale: scale, target_format }))
         } else {
@@ -802,11 +791,17 @@ fn prepare_surface_targets(
         };
         let large = match targets.filter(|t| t.large.size() == large_size) {
             Some(t) => t.large.clone(),
-            None => buffer("caustic_volumes_large", large_size, BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC),
+            None => {
+                buffer("caustic_volumes_large", large_size, BufferUsages::STORAGE | BufferUsages::INDIRECT | BufferUsages::COPY_DST | BufferUsages::COPY_SRC)
+            }
         };
         let layout = pipelines.resolve_layout.get(&cache);
         let resolve_bind_group = kept_resolve.get(&[layout.into(), view_buffer.into(), (&splatted).into()], || {
-            device.create_bind_group("caustic_volumes_resolve_bind_group", layout, &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())))
+            device.create_bind_group(
+                "caustic_volumes_resolve_bind_group",
+                layout,
+                &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())),
+            )
         });
         let layout = pipelines.splat_layouts[multisampled].get(&cache);
         let bound = [
@@ -839,11 +834,13 @@ fn prepare_surface_targets(
         let layout = volume_layouts.layout(false, multisampled == 1).get(&cache);
         let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), (&centre.default_view).into(), normal.into(), (&large).into()];
         let draw_bind_group = kept_draw.get(&bound, || {
-            let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
+            let entries =
+                (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
             device.create_bind_group("caustic_volumes_surface_bind_group", layout, &BindGroupEntries::sequential(entries))
         });
         let kept = [kept_depth, kept_resolve, kept_splat, kept_draw];
-        let targets = ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, draw_bind_group, kept };
+        let targets =
+            ViewSurfaceTargets { depth: texture, centre, depth_bind_group, splatted, large, resolve_bind_group, splat_bind_group, draw_bind_group, kept };
         // Replaced in place: no command a frame for a view that keeps its targets.
         match kept_targets {
             Some(mut kept) => *kept = targets,

@@ -2,8 +2,8 @@
 
 use super::heightfield::check_grid;
 use super::{Boundary, ConvolutionSettings, Heightfield, MIN_DOWNWARD_COSINE, TransmittedLight, transmitted_light};
-use glam::DVec3;
 use crate::params::ParamError;
+use glam::DVec3;
 use rustfft::num_complex::Complex64;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
@@ -48,9 +48,8 @@ impl ConvolutionKernels {
         let (exponent, extinction) = (settings.exponent as f64, settings.extinction as f64);
         let frame = settings.lobe_frame();
         let radius = settings.kernel_radius as isize;
-        let offsets: Vec<DVec3> = (-radius..=radius)
-            .flat_map(|dz| (-radius..=radius).map(move |dx| DVec3::new(dx as f64 * cell, -depth, dz as f64 * cell)))
-            .collect();
+        let offsets: Vec<DVec3> =
+            (-radius..=radius).flat_map(|dz| (-radius..=radius).map(move |dx| DVec3::new(dx as f64 * cell, -depth, dz as f64 * cell))).collect();
         let nearest = offsets.iter().map(|p| frame[2].dot(*p) / p.length()).fold(f64::MIN_POSITIVE, f64::max);
         let mut normaliser = 0.0;
         for p in &offsets {
@@ -77,10 +76,13 @@ impl ConvolutionKernels {
                 // without adding or removing any (the vertical's are odd: nothing to take).
                 let sums = offsets.iter().map(|p| tap(p).0).fold([0.0; 3], |a, k| [a[0] + k[0], a[1] + k[1], a[2] + k[2]]);
                 let shares = [sums[0] / sums[2], sums[1] / sums[2]];
-                offsets.iter().map(move |p| {
-                    let ([k1, k2, k0], attenuation) = tap(p);
-                    [(k1 - shares[0] * k0) * attenuation, (k2 - shares[1] * k0) * attenuation, k0 * attenuation]
-                }).collect::<Vec<_>>()
+                offsets
+                    .iter()
+                    .map(move |p| {
+                        let ([k1, k2, k0], attenuation) = tap(p);
+                        [(k1 - shares[0] * k0) * attenuation, (k2 - shares[1] * k0) * attenuation, k0 * attenuation]
+                    })
+                    .collect::<Vec<_>>()
             })
             .collect();
         Ok(Self { radius: settings.kernel_radius, frame, taps, normaliser })
@@ -175,18 +177,7 @@ impl ConvolutionCaustics {
             })
             .collect();
         let zeros = vec![Complex64::ZERO; width * height];
-        Ok(Self {
-            settings: *settings,
-            columns,
-            rows,
-            cell_size,
-            kernels,
-            kernel_spectra,
-            forward,
-            inverse,
-            term: zeros.clone(),
-            spectrum: zeros,
-        })
+        Ok(Self { settings: *settings, columns, rows, cell_size, kernels, kernel_spectra, forward, inverse, term: zeros.clone(), spectrum: zeros })
     }
 
     /// The kernels in use.
@@ -305,14 +296,7 @@ impl Fft2d {
         let along_rows = planner.plan_fft(width, direction);
         let along_columns = planner.plan_fft(height, direction);
         let scratch_len = along_rows.get_inplace_scratch_len().max(along_columns.get_inplace_scratch_len());
-        Self {
-            width,
-            height,
-            along_rows,
-            along_columns,
-            column: vec![Complex64::ZERO; height],
-            scratch: vec![Complex64::ZERO; scratch_len],
-        }
+        Self { width, height, along_rows, along_columns, column: vec![Complex64::ZERO; height], scratch: vec![Complex64::ZERO; scratch_len] }
     }
 
     fn process(&mut self, data: &mut [Complex64]) {

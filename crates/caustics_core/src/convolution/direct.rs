@@ -15,13 +15,8 @@ pub fn direct_irradiance(heightfield: &Heightfield, settings: &ConvolutionSettin
     let (columns, rows) = (heightfield.columns(), heightfield.rows());
     let cell = heightfield.cell_size() as f64;
     let radius = settings.kernel_radius as isize;
-    let offsets: Vec<(isize, isize)> =
-        (-radius..=radius).flat_map(|dz| (-radius..=radius).map(move |dx| (dx, dz))).collect();
-    let lobe = Lobe {
-        depth: settings.depth as f64,
-        scattering: settings.scattering as f64,
-        cell,
-    };
+    let offsets: Vec<(isize, isize)> = (-radius..=radius).flat_map(|dz| (-radius..=radius).map(move |dx| (dx, dz))).collect();
+    let lobe = Lobe { depth: settings.depth as f64, scattering: settings.scattering as f64, cell };
 
     // ln of each texel's lobe summed over the footprint without extinction.
     let log_normalisers: Vec<f64> = light
@@ -83,8 +78,7 @@ impl Lobe {
 
 /// `ln Σ exp(xᵢ)` without overflow or underflow (one pass, rescaling at each new maximum).
 fn log_sum_exp(terms: impl Iterator<Item = f64>) -> f64 {
-    let (max, sum) = terms.fold((f64::NEG_INFINITY, 0.0), |(max, sum), x| {
-        if x > max { (x, sum * (max - x).exp() + 1.0) } else { (max, sum + (x - max).exp()) }
-    });
+    let (max, sum) =
+        terms.fold((f64::NEG_INFINITY, 0.0), |(max, sum), x| if x > max { (x, sum * (max - x).exp() + 1.0) } else { (max, sum + (x - max).exp()) });
     max + sum.ln()
 }

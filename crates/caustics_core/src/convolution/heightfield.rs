@@ -42,12 +42,7 @@ impl Heightfield {
     }
 
     /// A heightfield sampling `height(x, z)` at the texel centres.
-    pub fn from_fn(
-        columns: usize,
-        rows: usize,
-        cell_size: f32,
-        height: impl Fn(f32, f32) -> f32,
-    ) -> Result<Self, ParamError> {
+    pub fn from_fn(columns: usize, rows: usize, cell_size: f32, height: impl Fn(f32, f32) -> f32) -> Result<Self, ParamError> {
         check_grid(columns, rows, cell_size)?;
         let centre = |i: usize| (i as f32 + 0.5) * cell_size;
         let heights = (0..rows).flat_map(|row| (0..columns).map(move |column| (column, row)));

@@ -197,9 +197,7 @@ impl ConvolutionSettings {
     pub fn lobe_frame(&self) -> [glam::DVec3; 3] {
         let axis = match self.lobe_axis {
             LobeAxis::Vertical => Vec3::NEG_Y,
-            LobeAxis::RefractedSun => {
-                refract(self.sun_unit(), Vec3::Y, 1.0 / self.ior).direction().filter(|d| d.y < 0.0).unwrap_or(Vec3::NEG_Y)
-            }
+            LobeAxis::RefractedSun => refract(self.sun_unit(), Vec3::Y, 1.0 / self.ior).direction().filter(|d| d.y < 0.0).unwrap_or(Vec3::NEG_Y),
         };
         let axis = axis.as_dvec3().normalize();
         let e1 = (glam::DVec3::X - axis.x * axis).normalize();

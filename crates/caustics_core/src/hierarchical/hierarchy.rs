@@ -123,9 +123,7 @@ impl PhotonPyramid {
         while width > 1 && (levels.len() as u32) <= top {
             let below = levels.last().expect("level 0 exists");
             let half = width / 2;
-            let level = (0..half * half)
-                .map(|i| Node::parent(children(i % half, i / half).map(|(x, y)| below[(y * width + x) as usize])))
-                .collect();
+            let level = (0..half * half).map(|i| Node::parent(children(i % half, i / half).map(|(x, y)| below[(y * width + x) as usize]))).collect();
             levels.push(level);
             width = half;
         }

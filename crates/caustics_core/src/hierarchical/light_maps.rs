@@ -119,14 +119,7 @@ impl LightMaps {
 /// light (`away_from_light = false`: a front face) or with it (`true`: a back face),
 /// skipping the others as face culling does — except on the generators `unculled`
 /// lists (true per generator), which any face stops.
-fn first_facing(
-    scene: &Scene,
-    bvh: &SceneBvh,
-    view: &LightView,
-    (origin, dir): (Vec3, Vec3),
-    away_from_light: bool,
-    unculled: &[bool],
-) -> SurfaceSample {
+fn first_facing(scene: &Scene, bvh: &SceneBvh, view: &LightView, (origin, dir): (Vec3, Vec3), away_from_light: bool, unculled: &[bool]) -> SurfaceSample {
     let light_dir = if away_from_light { -dir } else { dir };
     let mut t_min = 0.0;
     for _ in 0..MAX_SKIPPED {

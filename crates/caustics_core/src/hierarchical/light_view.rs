@@ -120,12 +120,8 @@ impl LightView {
     pub fn ray(&self, uv: Vec2) -> (Vec3, Vec3) {
         let q = self.plane_of_uv(uv);
         match self.projection {
-            Projection::Orthographic { .. } => {
-                (self.origin + self.right * q.x + self.up * q.y + self.forward * self.near, self.forward)
-            }
-            Projection::Perspective { .. } => {
-                (self.origin, (self.forward + self.right * q.x + self.up * q.y).normalize())
-            }
+            Projection::Orthographic { .. } => (self.origin + self.right * q.x + self.up * q.y + self.forward * self.near, self.forward),
+            Projection::Perspective { .. } => (self.origin, (self.forward + self.right * q.x + self.up * q.y).normalize()),
         }
     }
 
@@ -322,26 +318,9 @@ fn box_corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
 }
 
 /// A perspective view from `position` whose depth range covers every corner of the scene.
-fn perspective(
-    position: Vec3,
-    right: Vec3,
-    up: Vec3,
-    forward: Vec3,
-    tan_half_fov: f32,
-    corners: &[Vec3; 8],
-    size: f32,
-) -> LightView {
+fn perspective(position: Vec3, right: Vec3, up: Vec3, forward: Vec3, tan_half_fov: f32, corners: &[Vec3; 8], size: f32) -> LightView {
     let far = corners.iter().map(|&c| (c - position).length()).fold(0.0, f32::max).max(1e-3 * size) * 1.01;
-    LightView {
-        projection: Projection::Perspective { tan_half_fov },
-        origin: position,
-        right,
-        up,
-        forward,
-        near: (1e-4 * far).max(1e-6),
-        far,
-        emission: 1.0,
-    }
+    LightView { projection: Projection::Perspective { tan_half_fov }, origin: position, right, up, forward, near: (1e-4 * far).max(1e-6), far, emission: 1.0 }
 }
 
 /// How far a cube face's maps reach (the tangent of their half-angle): the face's own

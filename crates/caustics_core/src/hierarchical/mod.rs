@@ -350,11 +350,8 @@ pub fn scene_caustics(scene: &Scene, settings: &CausticMapSettings) -> Vec<ViewC
     let Some(receivers) = scene.receivers.iter().map(|r| r.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))) else {
         return Vec::new();
     };
-    let views: Vec<(&Light, LightView)> = scene
-        .lights
-        .iter()
-        .flat_map(|light| LightView::for_light(light, generators, receivers).into_iter().map(move |view| (light, view)))
-        .collect();
+    let views: Vec<(&Light, LightView)> =
+        scene.lights.iter().flat_map(|light| LightView::for_light(light, generators, receivers).into_iter().map(move |view| (light, view))).collect();
     let settings = settings.for_views(views.iter().map(|(_, view)| view));
     views.iter().map(|(light, view)| ViewCaustics::compute(scene, light, view, &settings)).collect()
 }

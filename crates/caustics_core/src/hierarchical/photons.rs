@@ -23,12 +23,12 @@
 //! until it reaches a receiver in the receiver map. The image-space pair sees one
 //! entry and the farthest exit, which is exact for a convex refractor alone.
 
-use crate::triangle_bvh::{InstancedBvh, NO_MESH};
 use super::light_maps::{LightMaps, NO_SURFACE};
 use super::light_view::{LightView, Projection};
 use crate::optics::{RGB_WAVELENGTHS_UM, Refraction, fresnel_transmittance, reflect, refract};
 use crate::params::SpecularInteraction;
 use crate::scene::{Generator, Light, Sides};
+use crate::triangle_bvh::{InstancedBvh, NO_MESH};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -475,15 +475,7 @@ pub const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
 /// light's own ray (`back`) and iterates `d ← (z_back(p1 + d t) − z1) / (t·forward)`.
 /// A ray that runs across the view (`t·forward` ≈ 0) keeps the first estimate: the
 /// distance to the far side along the light's ray.
-fn exit_distance(
-    maps: &LightMaps,
-    view: &LightView,
-    p1: Vec3,
-    z1: f32,
-    t: Vec3,
-    back: super::light_maps::SurfaceSample,
-    iterations: u32,
-) -> (f32, Vec3) {
+fn exit_distance(maps: &LightMaps, view: &LightView, p1: Vec3, z1: f32, t: Vec3, back: super::light_maps::SurfaceSample, iterations: u32) -> (f32, Vec3) {
     let dz = t.dot(view.forward);
     if dz < 1e-3 {
         return ((back.depth - z1).max(0.0), back.normal);
@@ -547,7 +539,15 @@ pub fn march_receivers(maps: &LightMaps, view: &LightView, origin: Vec3, dir: Ve
         Projection::Orthographic { .. } => (v.x, -v.y),
         Projection::Perspective { .. } => (v.x * o.z - o.x * v.z, -(v.y * o.z - o.y * v.z)),
     };
-    let step = |s: f32| if s > 0.0 { 1i64 } else if s < 0.0 { -1 } else { 0 };
+    let step = |s: f32| {
+        if s > 0.0 {
+            1i64
+        } else if s < 0.0 {
+            -1
+        } else {
+            0
+        }
+    };
     let (step_u, step_v) = (step(su), step(sv));
     let mf = m as f32;
     let mut d_enter = 0.0f32;

@@ -12,10 +12,6 @@ mod planes;
 mod transport;
 
 pub use planes::{
-    Cosine, IlluminationPlane, IlluminationSettings, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS,
-    SOLID_SPANS, SeenSurface,
+    Cosine, IlluminationPlane, IlluminationSettings, IlluminationTextures, IlluminationVolume, MAX_MAGNIFICATION, SHADOW_SLACK_TEXELS, SOLID_SPANS, SeenSurface,
 };
-pub use transport::{
-    CacheOutcome, DirectionGrid, LightTransportTable, TRANSPORT_CACHE_VERSION, TransportBuild, TransportError, TransportStats,
-    Transported,
-};
+pub use transport::{CacheOutcome, DirectionGrid, LightTransportTable, TRANSPORT_CACHE_VERSION, TransportBuild, TransportError, TransportStats, Transported};

@@ -152,9 +152,9 @@ impl IlluminationTextures {
         let (volumes, scale) = lit_triangles(table, mesh, world_from_object, light);
         let axis = volumes.iter().map(|b| b.flux * b.mean_direction()).sum::<Vec3>().try_normalize()?;
         let (u, v) = axis.any_orthonormal_pair();
-        let corners = receivers.instance_bounds().flat_map(|(lo, hi)| {
-            (0..8).map(move |i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
-        });
+        let corners = receivers
+            .instance_bounds()
+            .flat_map(|(lo, hi)| (0..8).map(move |i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2])));
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for c in corners {
             let q = Vec3::new(c.dot(u), c.dot(v), c.dot(axis));
@@ -301,8 +301,15 @@ impl IlluminationTextures {
         // Each step enters a neighbouring texel: at most two sides' worth of them.
         for _ in 0..2 * self.size + 2 {
             let Some(index) = self.index(cell) else { return false };
-            let exit = [0, 1]
-                .map(|k| if across[k] > 0.0 { (cell[k] + 1.0 - q[k]) / across[k] } else if across[k] < 0.0 { (cell[k] - q[k]) / across[k] } else { f32::INFINITY });
+            let exit = [0, 1].map(|k| {
+                if across[k] > 0.0 {
+                    (cell[k] + 1.0 - q[k]) / across[k]
+                } else if across[k] < 0.0 {
+                    (cell[k] - q[k]) / across[k]
+                } else {
+                    f32::INFINITY
+                }
+            });
             let leave = exit[0].min(exit[1]).min(to_top);
             // The point's own texel: whether it is the surface seen there, by its own
             // slope; others: whether the light crosses a solid span, with the flat slack.

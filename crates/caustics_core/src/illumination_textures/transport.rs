@@ -374,9 +374,11 @@ impl LightTransportTable {
         bytes.extend_from_slice(&self.build.ior.to_le_bytes());
         bytes.extend_from_slice(&self.build.grid.side.to_le_bytes());
         bytes.extend_from_slice(&(self.normals.len() as u64).to_le_bytes());
-        let floats = self.normals.iter().flat_map(|n| n.to_array()).chain(
-            self.entries.iter().flat_map(|e| [e.exit.to_array(), e.direction.to_array()].concat().into_iter().chain([e.transmittance])),
-        );
+        let floats = self
+            .normals
+            .iter()
+            .flat_map(|n| n.to_array())
+            .chain(self.entries.iter().flat_map(|e| [e.exit.to_array(), e.direction.to_array()].concat().into_iter().chain([e.transmittance])));
         for f in floats {
             bytes.extend_from_slice(&f.to_le_bytes());
         }

@@ -113,7 +113,13 @@ impl ThinBeam {
         let start = (local_from_world.transform_point3(origin) + 0.5) * cells - 0.5;
         let per_alpha = local_from_world.transform_vector3(ray) * cells;
         let along = per_alpha.abs();
-        let axis = if along.x >= along.y && along.x >= along.z { 0 } else if along.y >= along.z { 1 } else { 2 };
+        let axis = if along.x >= along.y && along.x >= along.z {
+            0
+        } else if along.y >= along.z {
+            1
+        } else {
+            2
+        };
         let ends = (start[axis], start[axis] + volume.depth * per_alpha[axis]);
         let (lo, hi) = (ends.0.min(ends.1), ends.0.max(ends.1));
         if !(start.is_finite() && per_alpha.is_finite() && hi > lo) {
@@ -283,9 +289,9 @@ impl BeamGrid {
     /// The source and summed direction at a point of the unit cube, interpolated
     /// trilinearly between cell centres (clamped to the outer cells' centres).
     pub fn lookup(&self, local: Vec3) -> (Vec3, Vec3) {
-        self.corners(local).iter().fold((Vec3::ZERO, Vec3::ZERO), |(source, direction), &(index, w)| {
-            (source + w * self.source[index], direction + w * self.direction[index])
-        })
+        self.corners(local)
+            .iter()
+            .fold((Vec3::ZERO, Vec3::ZERO), |(source, direction), &(index, w)| (source + w * self.source[index], direction + w * self.direction[index]))
     }
 
     /// Radiance scattered towards the eye along the eye ray from `eye` to `end`:

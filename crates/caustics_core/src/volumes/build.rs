@@ -151,20 +151,13 @@ impl VertexRay {
 fn vertex_ray(light: &Light, interaction: &SpecularInteraction, ior: Option<f32>, p: Vec3, n: Vec3) -> VertexRay {
     let (l, irradiance) = light.incident(p);
     match interaction {
-        SpecularInteraction::Reflect => {
-            VertexRay::Ray { direction: reflect(l, n).normalize_or(l), fresnel: 1.0, irradiance, incident: l }
-        }
+        SpecularInteraction::Reflect => VertexRay::Ray { direction: reflect(l, n).normalize_or(l), fresnel: 1.0, irradiance, incident: l },
         SpecularInteraction::Refract { .. } => {
             let ior = ior.unwrap_or(1.0);
             // The inside (index `ior`) is opposite the normal (see SpecularInteraction).
             let eta = if l.dot(n) < 0.0 { 1.0 / ior } else { ior };
             match refract(l, n, eta).direction() {
-                Some(direction) => VertexRay::Ray {
-                    direction,
-                    fresnel: 1.0 - fresnel_reflectance(l.dot(n), eta),
-                    irradiance,
-                    incident: l,
-                },
+                Some(direction) => VertexRay::Ray { direction, fresnel: 1.0 - fresnel_reflectance(l.dot(n), eta), irradiance, incident: l },
                 None => VertexRay::TotalInternalReflection { irradiance, incident: l },
             }
         }
@@ -294,11 +287,7 @@ fn local_slab(v: [Vec3; 3], r: [Vec3; 3], hits: [Option<(Vec3, Vec3)>; 3]) -> Op
     }
     let offsets = hits.iter().flatten().map(|&(point, _)| normal.dot(point));
     let margin = SLAB_MARGIN * deepest;
-    let slab = SurfaceSlab {
-        normal,
-        near: offsets.clone().fold(f32::INFINITY, f32::min) - margin,
-        far: offsets.fold(f32::NEG_INFINITY, f32::max) + margin,
-    };
+    let slab = SurfaceSlab { normal, near: offsets.clone().fold(f32::INFINITY, f32::min) - margin, far: offsets.fold(f32::NEG_INFINITY, f32::max) + margin };
     let (mut first, mut last) = (f32::INFINITY, 0.0f32);
     for j in 0..3 {
         first = first.min(crossing((normal, slab.near), j)?);
@@ -331,11 +320,7 @@ fn cut_to_slab(shape: BoundingShape, slab: &SurfaceSlab) -> BoundingShape {
 fn area_coefficients(v: [Vec3; 3], r: [Vec3; 3]) -> Vec3 {
     let (k1, k2) = (v[1] - v[0], v[2] - v[0]);
     let (l1, l2) = (r[1] - r[0], r[2] - r[0]);
-    Vec3::new(
-        k1.z * k2.x - k1.x * k2.z,
-        k1.z * l2.x - k1.x * l2.z + l1.z * k2.x - l1.x * k2.z,
-        l1.z * l2.x - l1.x * l2.z,
-    )
+    Vec3::new(k1.z * k2.x - k1.x * k2.z, k1.z * l2.x - k1.x * l2.z + l1.z * k2.x - l1.x * k2.z, l1.z * l2.x - l1.x * l2.z)
 }
 
 /// Vertex and ray of one mesh vertex in a frame: the ray scaled to `r_y = 1` and the
@@ -384,12 +369,7 @@ pub fn build_generator_volumes(
         &own_fans
     };
     let two_sided = sides.lit_from_behind(interaction);
-    let rays: Vec<VertexRay> = mesh
-        .positions()
-        .par_iter()
-        .zip(mesh.normals().par_iter())
-        .map(|(&p, &n)| vertex_ray(light, interaction, ior, p, n))
-        .collect();
+    let rays: Vec<VertexRay> = mesh.positions().par_iter().zip(mesh.normals().par_iter()).map(|(&p, &n)| vertex_ray(light, interaction, ior, p, n)).collect();
     let shadowed: Vec<bool> = match occluders {
         Some(occluders) => mesh.positions().par_iter().map(|&p| occluders.hides(light, p)).collect(),
         None => Vec::new(),
@@ -410,21 +390,8 @@ pub fn build_generator_volumes(
         })
         .sum::<Vec3>()
         .try_normalize();
-    let context = TriangleContext {
-        mesh,
-        fans,
-        rays: &rays,
-        shadowed: &shadowed,
-        hits: &hits,
-        two_sided,
-        slicing_axis,
-        light,
-        color,
-        depth_bounds,
-        settings,
-    };
-    let results: Vec<(Option<CausticVolume>, BuildStats)> =
-        (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
+    let context = TriangleContext { mesh, fans, rays: &rays, shadowed: &shadowed, hits: &hits, two_sided, slicing_axis, light, color, depth_bounds, settings };
+    let results: Vec<(Option<CausticVolume>, BuildStats)> = (0..mesh.triangles().len()).into_par_iter().map(|t| context.volume(t)).collect();
     let mut stats = BuildStats::default();
     out.reserve(results.len());
     for (volume, s) in results {
@@ -454,14 +421,12 @@ struct TriangleContext<'a> {
 impl TriangleContext<'_> {
     /// The caustic volume of triangle `t`, or why there is none.
     fn volume(&self, t: usize) -> (Option<CausticVolume>, BuildStats) {
-        let TriangleContext { mesh, fans, rays, shadowed, hits, two_sided, slicing_axis, light, color, depth_bounds: (lo, hi), settings } =
-            *self;
+        let TriangleContext { mesh, fans, rays, shadowed, hits, two_sided, slicing_axis, light, color, depth_bounds: (lo, hi), settings } = *self;
         let tri = mesh.triangles()[t];
         let p = mesh.corners(t);
         let mut stats = BuildStats::default();
         let cross = (p[1] - p[0]).cross(p[2] - p[0]);
-        let longest =
-            (p[1] - p[0]).length_squared().max((p[2] - p[0]).length_squared()).max((p[2] - p[1]).length_squared());
+        let longest = (p[1] - p[0]).length_squared().max((p[2] - p[0]).length_squared()).max((p[2] - p[1]).length_squared());
         if cross.length_squared() <= (1e-12 * longest) * longest || !cross.is_finite() {
             stats.degenerate = 1;
             return (None, stats);
@@ -512,8 +477,7 @@ impl TriangleContext<'_> {
         // Slice along the generator's shared axis where it fits this triangle, so that
         // neighbours pair their rays identically and their volumes leave no gaps or
         // overlaps; otherwise along the triangle's own normal, as §3.2 does.
-        let shared = slicing_axis
-            .filter(|&a| unit.iter().all(|u| u.dot(a) >= SHARED_AXIS_MIN_COS) && normal.dot(a) >= SHARED_AXIS_MIN_COS);
+        let shared = slicing_axis.filter(|&a| unit.iter().all(|u| u.dot(a) >= SHARED_AXIS_MIN_COS) && normal.dot(a) >= SHARED_AXIS_MIN_COS);
         let y = shared.unwrap_or(normal);
         // The origin is the vertex lowest along y, so the whole triangle lies at y ≥ 0.
         let lowest = (0..3).min_by(|&i, &j| p[i].dot(y).total_cmp(&p[j].dot(y))).unwrap_or(0);
@@ -665,12 +629,7 @@ pub fn build_scene_volumes(scene: &Scene, settings: &VolumeSettings) -> super::V
 /// [`build_scene_volumes`] for the generators `drawn(index)` picks; the others only
 /// shadow them (another technique draws them).
 pub fn build_drawn_volumes(scene: &Scene, settings: &VolumeSettings, drawn: impl Fn(usize) -> bool) -> super::VolumeSet {
-    let bounds = scene
-        .receivers
-        .iter()
-        .map(|r| r.mesh.bounds())
-        .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
-        .unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let bounds = scene.receivers.iter().map(|r| r.mesh.bounds()).reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).unwrap_or((Vec3::ZERO, Vec3::ZERO));
     let mut volumes = Vec::new();
     let mut stats = BuildStats::default();
     let others = |g: usize| scene.generators.iter().enumerate().filter(move |(i, _)| *i != g).map(|(_, o)| o.mesh.clone());
@@ -721,9 +680,7 @@ pub fn occluders_of(receivers: impl Iterator<Item = TriMesh>, other_generators: 
 /// (red, green, blue, each with its own index) for a dispersive refractor.
 pub fn channels(interaction: &SpecularInteraction, color: Vec3) -> Vec<(Option<f32>, Vec3)> {
     match interaction {
-        SpecularInteraction::Refract { dispersion: Some(d), .. } => {
-            (0..3).map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c])).collect()
-        }
+        SpecularInteraction::Refract { dispersion: Some(d), .. } => (0..3).map(|c| (Some(d.ior(RGB_WAVELENGTHS_UM[c])), color * Vec3::AXES[c])).collect(),
         SpecularInteraction::Refract { ior, dispersion: None } => vec![(Some(*ior), color)],
         SpecularInteraction::Reflect => vec![(None, color)],
     }

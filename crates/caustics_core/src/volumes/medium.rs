@@ -141,13 +141,7 @@ fn quadratic_roots(a: f32, b: f32, c: f32) -> [f32; 2] {
 /// attenuation is integrated over the piece, along which `dₑ + dₛ` grows linearly
 /// (exactly so with the midpoint's ray), rather than taken at its midpoint: a piece
 /// down the length of a beam may be metres long.
-pub fn in_scattered_radiance(
-    volumes: &[CausticVolume],
-    eye: Vec3,
-    end: Vec3,
-    medium: &MediumBox,
-    settings: &VolumeSettings,
-) -> Vec3 {
+pub fn in_scattered_radiance(volumes: &[CausticVolume], eye: Vec3, end: Vec3, medium: &MediumBox, settings: &VolumeSettings) -> Vec3 {
     let length = (end - eye).length();
     if length.is_nan() || length <= 0.0 || length.is_infinite() {
         return Vec3::ZERO;

@@ -358,8 +358,7 @@ impl CausticVolume {
             return None;
         }
         let lambda = beta / sum;
-        let inside =
-            (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
+        let inside = (0..3).all(|i| if self.owned_edges[i] { lambda[i] >= -EDGE_EPSILON } else { lambda[i] > EDGE_EPSILON });
         inside.then_some(lambda)
     }
 
@@ -522,17 +521,14 @@ struct VolumeGrid {
 impl VolumeGrid {
     fn new(boxes: &[(Vec3, Vec3)]) -> Self {
         let finite = boxes.iter().filter(|(a, b)| a.is_finite() && b.is_finite());
-        let (lo, hi) = finite.fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(l, h), (a, b)| {
-            (l.min(*a), h.max(*b))
-        });
+        let (lo, hi) = finite.fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(l, h), (a, b)| (l.min(*a), h.max(*b)));
         if boxes.is_empty() || !(lo.cmple(hi).all()) {
             return Self::default();
         }
         // Cells about as large as a typical volume's bounds along each axis (so that a
         // volume lands in a few cells), at most 8 cells per volume in all.
         let extent = (hi - lo).max(Vec3::splat(1e-6));
-        let mut sizes: [Vec<f32>; 3] =
-            std::array::from_fn(|i| boxes.iter().map(|(a, b)| b[i] - a[i]).filter(|e| e.is_finite()).collect());
+        let mut sizes: [Vec<f32>; 3] = std::array::from_fn(|i| boxes.iter().map(|(a, b)| b[i] - a[i]).filter(|e| e.is_finite()).collect());
         let median = Vec3::from_array(std::array::from_fn(|i| {
             let v = &mut sizes[i];
             let mid = v.len() / 2;

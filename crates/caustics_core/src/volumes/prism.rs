@@ -16,20 +16,8 @@ pub struct BoundingShape {
 }
 
 /// The twelve triangles of a hexahedron with the corner layout of [`BoundingShape`].
-pub const HEXAHEDRON_TRIANGLES: [[u32; 3]; 12] = [
-    [0, 1, 2],
-    [0, 2, 3],
-    [4, 6, 5],
-    [4, 7, 6],
-    [0, 4, 5],
-    [0, 5, 1],
-    [1, 5, 6],
-    [1, 6, 2],
-    [2, 6, 7],
-    [2, 7, 3],
-    [3, 7, 4],
-    [3, 4, 0],
-];
+pub const HEXAHEDRON_TRIANGLES: [[u32; 3]; 12] =
+    [[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6], [0, 4, 5], [0, 5, 1], [1, 5, 6], [1, 6, 2], [2, 6, 7], [2, 7, 3], [3, 7, 4], [3, 4, 0]];
 
 impl BoundingShape {
     /// No shape: every corner at the origin, so that it rasterises no pixel.
