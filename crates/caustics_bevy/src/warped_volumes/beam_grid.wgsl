@@ -7,7 +7,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
-#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, sample_volume}
+#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, sample_on_ray}
 
 // One medium's grid (`GpuBeamGrid` in `render.rs`).
 struct Grid {
@@ -252,8 +252,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                     let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
                     let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
                     let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)) / f32(split * split);
-                    let p = v.origin.xyz + v.axis_x.xyz * dot(beam.lambda, x) + v.axis_y.xyz * alpha + v.axis_z.xyz * dot(beam.lambda, z);
-                    let s = sample_volume(v, p, settings.intensity_mode, settings.max_magnification);
+                    let s = sample_on_ray(v, beam.lambda, alpha, settings.intensity_mode, settings.max_magnification);
                     if !s.inside {
                         continue;
                     }

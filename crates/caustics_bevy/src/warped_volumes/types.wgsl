@@ -105,16 +105,32 @@ struct VolumeSample {
     depth: f32,
 }
 
+// No light: a point outside the volume, or in its shadow.
+fn unlit() -> VolumeSample {
+    var s: VolumeSample;
+    s.inside = false;
+    return s;
+}
+
 // `CausticVolume::sample` (`VolumeSettings`' mode and cap): irradiance on the slicing plane and the interpolated ray.
 fn sample_volume(v: CausticVolume, world: vec3<f32>, intensity_mode: u32, max_magnification: f32) -> VolumeSample {
     let p = to_local(v, world);
     let bary = barycentric(v, p);
     if bary.w == 0.0 {
-        var outside: VolumeSample;
-        outside.inside = false;
-        return outside;
+        return unlit();
     }
     return sample_inside(v, p, bary.xyz, intensity_mode, max_magnification);
+}
+
+// `CausticVolume::sample_on_ray`: `sample_volume` at barycentric `lambda` (each above
+// the fill rule's margin) in the caustic triangle at depth `alpha`, which lies inside
+// wherever 0 ≤ α ≤ depth and it is above the generator triangle.
+fn sample_on_ray(v: CausticVolume, lambda: vec3<f32>, alpha: f32, intensity_mode: u32, max_magnification: f32) -> VolumeSample {
+    let p = vec3(dot(lambda, v.vertex_x.xyz + alpha * v.ray_x.xyz), alpha, dot(lambda, v.vertex_z.xyz + alpha * v.ray_z.xyz));
+    if !(alpha >= 0.0 && alpha <= v.origin.w && height(v, p) >= 0.0) {
+        return unlit();
+    }
+    return sample_inside(v, p, lambda, intensity_mode, max_magnification);
 }
 
 // `sample_volume` at a local point `p` found inside, with barycentric coordinates `lambda`.

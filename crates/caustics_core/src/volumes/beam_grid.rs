@@ -217,11 +217,12 @@ impl BeamGrid {
 
     /// Adds one volume's beam: each of its [`deposit_split`]² thin beams
     /// ([`ThinBeam`]) at every layer it crosses ([`ThinBeam::layer`]), where that
-    /// sample lies lit inside the volume ([`CausticVolume::sample`]): its source times
-    /// the beam volume it stands for (the thin beam's cross-section in the caustic
-    /// triangle's plane times the α spent in the layer, exact for parallel rays: a
-    /// prism between two parallel planes holds `A·Δα` along any of its rays) to the
-    /// cells around it ([`Self::corners_at`]), and its direction to the lowest of them.
+    /// sample is lit ([`CausticVolume::sample_on_ray`]: it lies inside by
+    /// construction): its source times the beam volume it stands for (the thin beam's
+    /// cross-section in the caustic triangle's plane times the α spent in the layer,
+    /// exact for parallel rays: a prism between two parallel planes holds `A·Δα` along
+    /// any of its rays) to the cells around it ([`Self::corners_at`]), and its
+    /// direction to the lowest of them.
     /// [`Self::gather_directions`] must follow.
     fn deposit(&mut self, volume: &CausticVolume, settings: &VolumeSettings) {
         let (cell, cell_volume) = self.cell();
@@ -242,8 +243,7 @@ impl BeamGrid {
                 }
                 let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
                 let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs() / (split * split) as f32;
-                let p = volume.origin + volume.axes[0] * beam.lambda.dot(x) + volume.axes[1] * alpha + volume.axes[2] * beam.lambda.dot(z);
-                let Some(s) = volume.sample(p, settings) else {
+                let Some(s) = volume.sample_on_ray(beam.lambda, alpha, settings) else {
                     continue;
                 };
                 let beam_length = s.ray.length();

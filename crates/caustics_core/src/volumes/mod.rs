@@ -391,6 +391,19 @@ impl CausticVolume {
         self.sample_inside(local, lambda, settings)
     }
 
+    /// [`Self::sample`] at the point with barycentric coordinates λ (each above the
+    /// fill rule's margin) in the caustic triangle at depth α, which lies inside
+    /// wherever `0 ≤ α ≤ depth` and it is above the generator triangle: the deposit's
+    /// thin beams know both, so they skip the point-in-volume test.
+    #[inline]
+    pub fn sample_on_ray(&self, lambda: Vec3, alpha: f32, settings: &VolumeSettings) -> Option<VolumeSample> {
+        let local = Vec3::new(lambda.dot(self.vertex_x + alpha * self.ray_x), alpha, lambda.dot(self.vertex_z + alpha * self.ray_z));
+        if !(alpha >= 0.0 && alpha <= self.depth && self.height(local) >= 0.0) {
+            return None;
+        }
+        self.sample_inside(local, lambda, settings)
+    }
+
     /// [`Self::sample`] at a local point already found inside, with barycentric
     /// coordinates λ.
     fn sample_inside(&self, local: Vec3, lambda: Vec3, settings: &VolumeSettings) -> Option<VolumeSample> {
