@@ -7,6 +7,7 @@
 //! differ by orders of magnitude. Times are only ever read beside the adapter's name.
 
 use bevy::diagnostic::DiagnosticsStore;
+use bevy::render::render_resource::{ComputePass, ComputePipeline};
 
 /// The prefixes of the caustics passes' spans: every technique's passes, the
 /// projections into the irradiance buffer, the composite and the volumetric pass.
@@ -19,6 +20,18 @@ pub const MAIN_OPAQUE_SPAN: &str = "main_opaque_pass_3d";
 /// passes' ([`CAUSTIC_SPANS`]).
 pub fn is_caustic_span(span: &str) -> bool {
     CAUSTIC_SPANS.iter().any(|p| span.starts_with(p))
+}
+
+/// Dispatches `anchor` (an empty kernel under the bind groups already set) first in a
+/// compute pass while timestamps are recorded. Lavapipe writes a compute pass's first
+/// timestamp at the pass's first barrier and runs each dispatch at once (it bins only
+/// draws), so a pass that follows other compute work would time without its first
+/// dispatch; the barrier between `anchor` and that dispatch puts the timestamp before it.
+pub fn anchor_first_timestamp(pass: &mut ComputePass, recording: bool, anchor: Option<&ComputePipeline>) {
+    if let (true, Some(anchor)) = (recording, anchor) {
+        pass.set_pipeline(anchor);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
 }
 
 /// One pass's GPU work in one frame, summed over every span of that name in the frame

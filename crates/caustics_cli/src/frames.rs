@@ -395,7 +395,9 @@ fn write_outputs(out: &Path, adapter: &str, (width, height): (u32, u32), rows: &
         "# Frame cost as the work grows\n\nAdapter: {adapter}. {width} × {height}, the mean of {MEASURED_FRAMES} frames in steady state. \
          GPU times are this adapter's; shader invocations (pipeline statistics) carry to any GPU. \
          The frame's wall time is the whole `App::update` in the headless renderer, CPU and GPU: on lavapipe it also \
-         holds GPU work the timestamps miss (they can read under a millisecond for a compute pass that adds seconds).\n\n\
+         holds GPU work the timestamps miss (lavapipe writes a compute pass's first timestamp at its first barrier, so a pass whose \
+         first dispatch follows other compute work times without that dispatch; the plugin's compute passes that can follow \
+         other compute work dispatch an empty kernel first, so that they are timed whole).\n\n\
          | technique and scene | size range | GPU time ∝ size^k | caustics / main pass (GPU time) | caustics / main pass (fragments) | plugin CPU (main + render) | frame wall time |\n|---|---|---|---|---|---|---|\n"
     );
     let series = |cost: fn(&FrameCost) -> f64| -> Vec<Series> {

@@ -151,6 +151,7 @@ fn the_frame_bench_counts_and_times_every_pass_of_moving_generators_and_the_plug
     // Every pass of the turning ball's maps is remade, timed and counted every frame; the
     // rippled pool's volumes run a few fragments a receiver pixel, seen at a slant.
     let (pass_header, passes) = table("frames-passes.csv");
+    let lavapipe = std::fs::read_to_string(dir.join("frames.md")).unwrap().contains("llvmpipe");
     let at = |name: &str| pass_header.iter().position(|h| h == name).unwrap_or_else(|| panic!("no column {name}: {pass_header:?}"));
     for row in &rows {
         let (scene, size) = (family(row).1, row[column("size")].clone());
@@ -180,6 +181,13 @@ fn the_frame_bench_counts_and_times_every_pass_of_moving_generators_and_the_plug
             );
             assert!(number(row, "volumes_splatted") > 0.0 && splatted > 0.05, "{row:?}");
             assert!(fragments + splatted <= 4.0, "{row:?}");
+            // The shafts' deposit, one dispatch after the build's, is timed whole: lavapipe
+            // (which writes a compute pass's first timestamp at its first barrier) read it
+            // under a millisecond before an empty dispatch went first in its pass.
+            let deposit = pass("caustics/shaft_deposit");
+            assert!(figure(deposit, "compute_invocations") > 0.0, "{deposit:?}");
+            let floor = if lavapipe { 1.0 } else { 0.0 };
+            assert!(figure(deposit, "gpu_ms") > floor, "{deposit:?}");
         }
     }
     let md = std::fs::read_to_string(dir.join("frames.md")).unwrap();

@@ -5,6 +5,7 @@ use super::{PoolRipples, PoolSurface};
 use crate::CausticTechnique;
 use crate::components::{CausticGenerator, GeneratorInteraction, InvalidCausticParams};
 use crate::cpu_time::timed;
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, ViewBindGroups, write_changed};
 use crate::irradiance::{ActiveCausticTechniques, ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
@@ -173,8 +174,10 @@ impl PoolGpu {
 #[derive(Resource)]
 pub(super) struct ConvolutionPipelines {
     compute_layout: KeptLayout,
-    /// `[heights, terms, convolve]`.
+    /// `ripple_heights`, `convolution_terms`, `convolve`, `deficit_ratios`, `lift`.
     compute: [CachedComputePipelineId; 5],
+    /// The empty `anchor` of [`anchor_first_timestamp`], under the same layout.
+    anchor: CachedComputePipelineId,
     project_layouts: [KeptLayout; 2],
     project_shader: Handle<Shader>,
     fullscreen: FullscreenShader,
@@ -413,6 +416,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
     let kernels = ["ripple_heights", "convolution_terms", "convolve", "deficit_ratios", "lift"];
     let compute = crate::irradiance::compute_pipelines(&cache, "pool", &compute_layout, &shader, kernels);
+    let [anchor] = crate::irradiance::compute_pipelines(&cache, "pool", &compute_layout, &shader, ["anchor"]);
     let project_layout = |multisampled: bool| {
         BindGroupLayoutDescriptor::new(
             if multisampled { "pool_project_layout_msaa" } else { "pool_project_layout" },
@@ -430,6 +434,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
     commands.insert_resource(ConvolutionPipelines {
         compute_layout: KeptLayout::new(compute_layout),
         compute,
+        anchor,
         project_layouts: [project_layout(false), project_layout(true)].map(KeptLayout::new),
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
         fullscreen: fullscreen.clone(),
@@ -464,17 +469,19 @@ fn compute_floor_irradiance(
     let Some(kernels) = pipelines.compute.map(|id| cache.get_compute_pipeline(id)).into_iter().collect::<Option<Vec<_>>>() else {
         return;
     };
+    let pools: Vec<_> =
+        gpu.0.values().filter(|buffers| buffers.computes).filter_map(|buffers| Some((buffers.compute.current()?, buffers.uniform.get()))).collect();
     // No pools: no pass (and no span in the GPU timings).
-    if gpu.0.values().all(|buffers| buffers.compute.current().is_none() || !buffers.computes) {
+    if pools.is_empty() {
         return;
     }
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_convolution"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/convolution");
-    for buffers in gpu.0.values().filter(|buffers| buffers.computes) {
-        let Some(bind_group) = buffers.compute.current() else { continue };
-        let uniform = buffers.uniform.get();
+    pass.set_bind_group(0, pools[0].0, &[]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.anchor));
+    for (bind_group, uniform) in pools {
         pass.set_bind_group(0, bind_group, &[]);
         for pipeline in &kernels {
             pass.set_pipeline(pipeline);

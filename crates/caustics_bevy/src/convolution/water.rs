@@ -9,6 +9,7 @@
 use super::PoolSurface;
 use super::render::{GpuPool, GpuWaves, ripple_waves, write_waves};
 use crate::cpu_time::timed;
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::{MeshVertices, MovesOnGpu, WriteMeshVertices};
 use crate::report::PassRecorder;
@@ -56,8 +57,8 @@ struct GpuWaters {
 #[derive(Resource)]
 struct WaterPipelines {
     layout: KeptLayout,
-    /// `ripple_heights`, `write_vertices`.
-    pipelines: [CachedComputePipelineId; 2],
+    /// `ripple_heights`, `write_vertices`, and the empty `anchor` of [`anchor_first_timestamp`].
+    pipelines: [CachedComputePipelineId; 3],
 }
 
 pub(super) fn build(app: &mut App) {
@@ -89,7 +90,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "convolution.wgsl");
-    let pipelines = crate::irradiance::compute_pipelines(&cache, "pool_water", &layout, &shader, ["ripple_heights", "write_vertices"]);
+    let pipelines = crate::irradiance::compute_pipelines(&cache, "pool_water", &layout, &shader, ["ripple_heights", "write_vertices", "anchor"]);
     commands.insert_resource(WaterPipelines { layout: KeptLayout::new(layout), pipelines });
 }
 
@@ -159,7 +160,7 @@ fn prepare_waters(
 
 /// The heights of every moving pool, then its vertices from them.
 fn move_waters(mut ctx: RenderContext, waters: Res<GpuWaters>, pipelines: Res<WaterPipelines>, cache: Res<PipelineCache>, recorder: Res<PassRecorder>) {
-    let [heights, write] = pipelines.pipelines.map(|id| cache.get_compute_pipeline(id));
+    let [heights, write, anchor] = pipelines.pipelines.map(|id| cache.get_compute_pipeline(id));
     let (Some(heights), Some(write), false) = (heights, write, waters.dispatches.is_empty()) else {
         return;
     };
@@ -167,6 +168,8 @@ fn move_waters(mut ctx: RenderContext, waters: Res<GpuWaters>, pipelines: Res<Wa
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("pool_water"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/pool_water");
+    pass.set_bind_group(0, &waters.dispatches[0].0, &[]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), anchor);
     for (bind_group, texels) in &waters.dispatches {
         pass.set_bind_group(0, bind_group, &[]);
         for pipeline in [heights, write] {

@@ -2,6 +2,7 @@
 //! and its projection into every view each frame.
 
 use super::render::{COUNTERS_PER_VIEW, CausticMapPipelines, CausticMapsGpu, Groups, KERNELS, Kernel, MeshDraw};
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::{ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
 use bevy::prelude::*;
@@ -114,6 +115,8 @@ pub(super) fn make_caustic_maps(
         for stage in view.dispatches.chunk_by(|a, b| a.kernel.stage() == b.kernel.stage()) {
             let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some(stage[0].kernel.stage()), ..default() });
             let span = diagnostics.pass_span(&mut pass, stage[0].kernel.stage());
+            pass.set_bind_group(0, &view.compute_bind_group, &[view.step_offsets[stage[0].step]]);
+            anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.anchor));
             for dispatch in stage {
                 let kernel = KERNELS.iter().position(|(k, _)| *k == dispatch.kernel).unwrap_or(0);
                 pass.set_pipeline(compute[kernel]);

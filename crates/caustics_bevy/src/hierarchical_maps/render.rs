@@ -272,6 +272,8 @@ pub(super) struct CausticMapPipelines {
     /// The indirect arguments, bound for `write_args` alone.
     args_layout: KeptLayout,
     pub(super) compute: [CachedComputePipelineId; 6],
+    /// The empty `anchor` of [`crate::gpu_work::anchor_first_timestamp`], under `compute_layout`.
+    pub(super) anchor: CachedComputePipelineId,
     pub(super) project_layouts: [KeptLayout; 2],
     pub(super) project_shader: Handle<Shader>,
     pub(super) fullscreen: FullscreenShader,
@@ -584,6 +586,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
             ..default()
         })
     });
+    let [anchor] = crate::irradiance::compute_pipelines(&cache, "caustic_map", &compute_layout, &shader, ["anchor"]);
     let project_layout = |multisampled: bool| {
         BindGroupLayoutDescriptor::new(
             if multisampled { "caustic_map_project_layout_msaa" } else { "caustic_map_project_layout" },
@@ -604,6 +607,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
         compute_layout: KeptLayout::new(compute_layout),
         args_layout: KeptLayout::new(args_layout),
         compute,
+        anchor,
         project_layouts: [project_layout(false), project_layout(true)].map(KeptLayout::new),
         project_shader: bevy::asset::load_embedded_asset!(asset_server.as_ref(), "project.wgsl"),
         fullscreen: fullscreen.clone(),

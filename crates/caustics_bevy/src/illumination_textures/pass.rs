@@ -2,6 +2,7 @@
 //! change, and their projection into every view each frame.
 
 use super::render::{IlluminationPipelines, IlluminationTexturesGpu};
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::{ProjectionContext, ProjectionView};
 use crate::report::PassRecorder;
 use bevy::prelude::*;
@@ -35,8 +36,9 @@ pub(super) fn draw_illumination_textures(
         encoder.clear_buffer(&frame.seen, 0, None);
         let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("illumination_see"), timestamp_writes: None });
         let span = diagnostics.pass_span(&mut pass, "illumination_textures/see");
-        pass.set_pipeline(see);
         pass.set_bind_group(0, &frame.see_bind_group, &[]);
+        anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.see_anchor));
+        pass.set_pipeline(see);
         let groups = frame.textures.width().div_ceil(8);
         pass.dispatch_workgroups(groups, groups, 1);
         span.end(&mut pass);

@@ -175,6 +175,8 @@ impl IlluminationTexturesGpu {
 pub(super) struct IlluminationPipelines {
     see_layout: KeptLayout,
     pub(super) see: CachedComputePipelineId,
+    /// The empty `anchor` of [`crate::gpu_work::anchor_first_timestamp`], under `see`'s layout.
+    pub(super) see_anchor: CachedComputePipelineId,
     draw_layout: KeptLayout,
     pub(super) draw: CachedRenderPipelineId,
     format: TextureFormat,
@@ -252,7 +254,7 @@ fn init_pipelines(
         ),
     );
     let see_shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "seen.wgsl");
-    let [see] = crate::irradiance::compute_pipelines(&cache, "illumination", &see_layout, &see_shader, ["see"]);
+    let [see, see_anchor] = crate::irradiance::compute_pipelines(&cache, "illumination", &see_layout, &see_shader, ["see", "anchor"]);
     let draw_layout = BindGroupLayoutDescriptor::new(
         "illumination_draw_layout",
         &BindGroupLayoutEntries::sequential(
@@ -299,6 +301,7 @@ fn init_pipelines(
     commands.insert_resource(IlluminationPipelines {
         see_layout: KeptLayout::new(see_layout),
         see,
+        see_anchor,
         draw_layout: KeptLayout::new(draw_layout),
         draw,
         format,

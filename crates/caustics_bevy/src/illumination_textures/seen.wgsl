@@ -78,3 +78,8 @@ fn see(@builtin(global_invocation_id) id: vec3<u32>) {
     atomicMax(&seen[0], ~ordered(depth));
     atomicMax(&seen[1], ordered(depth));
 }
+
+// Does nothing: dispatched first under the see pass's bindings while timestamps are recorded,
+// so that lavapipe times the pass whole (`gpu_work::anchor_first_timestamp`).
+@compute @workgroup_size(1)
+fn anchor() {}

@@ -5,6 +5,7 @@
 //! built on the mesh asset; its top level holds the instance by the entity's `Aabb`,
 //! which bounds every shape the surface takes. Nothing goes through the CPU.
 
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::MeshVertices;
 use bevy::platform::collections::HashMap;
@@ -29,10 +30,11 @@ struct GpuRefitJob {
     vertex: UVec4,
 }
 
-/// The refit's kernels (triangles, nodes) and their layout.
+/// The refit's kernels (triangles, nodes, and the empty `anchor` of
+/// [`anchor_first_timestamp`]) and their layout.
 pub(crate) struct BvhRefitPipelines {
     layout: KeptLayout,
-    pipelines: [CachedComputePipelineId; 2],
+    pipelines: [CachedComputePipelineId; 3],
 }
 
 impl BvhRefitPipelines {
@@ -47,7 +49,7 @@ impl BvhRefitPipelines {
         );
         let shader = bevy::asset::load_embedded_asset!(asset_server, "bvh_refit.wgsl");
         Self {
-            pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes"]),
+            pipelines: super::compute_pipelines(cache, "caustic_bvh", &layout, &shader, ["refit_triangles", "refit_nodes", "anchor"]),
             layout: KeptLayout::new(layout),
         }
     }
@@ -187,11 +189,15 @@ impl BvhRefit {
         !self.dispatches.is_empty()
     }
 
-    /// The planned refit in `pass`: each mesh's triangles, then its levels, deepest first.
-    pub fn dispatch(&mut self, pass: &mut ComputePass, pipelines: &BvhRefitPipelines, cache: &PipelineCache) {
-        let (Some(triangles), Some(nodes)) = (cache.get_compute_pipeline(pipelines.pipelines[0]), cache.get_compute_pipeline(pipelines.pipelines[1])) else {
+    /// The planned refit in `pass`: each mesh's triangles, then its levels, deepest first
+    /// (after [`anchor_first_timestamp`] while timestamps are `recording`).
+    pub fn dispatch(&mut self, pass: &mut ComputePass, pipelines: &BvhRefitPipelines, cache: &PipelineCache, recording: bool) {
+        let [triangles, nodes, anchor] = pipelines.pipelines.map(|id| cache.get_compute_pipeline(id));
+        let (Some(triangles), Some(nodes), Some(first)) = (triangles, nodes, self.dispatches.first()) else {
             return;
         };
+        pass.set_bind_group(0, &first.bind_group, &[first.triangles.0]);
+        anchor_first_timestamp(pass, recording, anchor);
         for dispatch in self.dispatches.drain(..) {
             pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.triangles.0]);
             pass.set_pipeline(triangles);

@@ -7,6 +7,7 @@
 
 use super::{OceanModes, OceanWaves};
 use crate::cpu_time::timed;
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout};
 use crate::mesh_vertices::MeshVertices;
 use crate::mesh_vertices::MovesOnGpu;
@@ -83,8 +84,8 @@ struct GpuOceans {
 #[derive(Resource)]
 struct OceanPipelines {
     layout: KeptLayout,
-    /// Spectrum, FFT stage, vertices.
-    pipelines: [CachedComputePipelineId; 3],
+    /// Spectrum, FFT stage, vertices, and the empty `anchor` of [`anchor_first_timestamp`].
+    pipelines: [CachedComputePipelineId; 4],
 }
 
 pub(super) fn build(app: &mut App) {
@@ -128,7 +129,7 @@ fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, cache:
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "waves.wgsl");
-    let pipelines = crate::irradiance::compute_pipelines(&cache, "ocean_waves", &layout, &shader, ["spectrum", "fft_stage", "write_vertices"]);
+    let pipelines = crate::irradiance::compute_pipelines(&cache, "ocean_waves", &layout, &shader, ["spectrum", "fft_stage", "write_vertices", "anchor"]);
     commands.insert_resource(OceanPipelines { layout: KeptLayout::new(layout), pipelines });
 }
 
@@ -258,7 +259,7 @@ fn prepare_oceans(
 /// The spectrum into fields 0, the FFT stages alternating 0 → 1 and 1 → 0 (an even
 /// number of them: the result lands in fields 0), then the vertices from fields 0.
 fn animate_waves(mut ctx: RenderContext, oceans: Res<GpuOceans>, pipelines: Res<OceanPipelines>, cache: Res<PipelineCache>, recorder: Res<PassRecorder>) {
-    let [spectrum, stage, write] = pipelines.pipelines.map(|id| cache.get_compute_pipeline(id));
+    let [spectrum, stage, write, anchor] = pipelines.pipelines.map(|id| cache.get_compute_pipeline(id));
     let (Some(spectrum), Some(stage), Some(write), false) = (spectrum, stage, write, oceans.dispatches.is_empty()) else {
         return;
     };
@@ -266,6 +267,8 @@ fn animate_waves(mut ctx: RenderContext, oceans: Res<GpuOceans>, pipelines: Res<
     let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.command_encoder().begin_compute_pass(&ComputePassDescriptor { label: Some("ocean_waves"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/ocean_waves");
+    pass.set_bind_group(0, &oceans.dispatches[0].bind_groups[0], &[oceans.dispatches[0].offsets[0]]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), anchor);
     for ocean in &oceans.dispatches {
         let (n, last) = (ocean.resolution, ocean.offsets.len() - 1);
         pass.set_pipeline(spectrum);

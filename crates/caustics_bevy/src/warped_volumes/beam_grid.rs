@@ -10,6 +10,7 @@ use super::ShaftIntegral;
 use super::compute::VolumeBuild;
 use super::render::{ExtractedVolumeSettings, ViewSeesMedium, VolumeBuffers};
 use crate::gpu_budget::{largest_binding, mib};
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::kept_bind_group::{KeptBindGroup, KeptLayout, write_changed};
 use crate::irradiance::{ExtractedMedia, GpuMedium, MAX_MEDIA};
 use crate::report::PassRecorder;
@@ -78,6 +79,9 @@ pub(super) struct BeamGridPipelines {
     deposit: CachedComputePipelineId,
     resolve_layout: KeptLayout,
     resolve: CachedComputePipelineId,
+    /// `anchor`, an empty kernel ([`anchor_first_timestamp`]), under the deposit's and
+    /// the resolve's layouts.
+    anchors: [CachedComputePipelineId; 2],
     pub march_layouts: [KeptLayout; 2],
     shader: Handle<Shader>,
     fullscreen: FullscreenShader,
@@ -110,18 +114,20 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             ),
         ),
     );
-    // `beam_grid.wgsl`'s entry point `entry`, under the shader def of its name.
-    let kernel = |entry: &'static str, layout: &BindGroupLayoutDescriptor| {
+    // `beam_grid.wgsl`'s entry point `entry`, under the shader def `def`.
+    let kernel = |entry: &'static str, def: &'static str, layout: &BindGroupLayoutDescriptor| {
         cache.queue_compute_pipeline(ComputePipelineDescriptor {
             label: Some(format!("caustic_shaft_{entry}").into()),
             layout: vec![layout.clone()],
             shader: shader.clone(),
-            shader_defs: vec![entry.to_uppercase().into()],
+            shader_defs: vec![def.into()],
             entry_point: Some(entry.into()),
             ..default()
         })
     };
-    let (deposit, resolve) = (kernel("deposit", &deposit_layout), kernel("resolve", &resolve_layout));
+    let deposit = kernel("deposit", "DEPOSIT", &deposit_layout);
+    let resolve = kernel("resolve", "RESOLVE", &resolve_layout);
+    let anchors = [kernel("anchor", "DEPOSIT", &deposit_layout), kernel("anchor", "RESOLVE", &resolve_layout)];
     let march_layouts = [false, true].map(|multisampled| {
         BindGroupLayoutDescriptor::new(
             "caustic_shaft_march_layout",
@@ -142,6 +148,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         deposit,
         resolve_layout: KeptLayout::new(resolve_layout),
         resolve,
+        anchors,
         march_layouts: march_layouts.map(KeptLayout::new),
         shader,
         fullscreen: fullscreen.clone(),
@@ -332,15 +339,17 @@ pub(super) fn deposit_beams(
     let encoder = ctx.command_encoder();
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_deposit"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/shaft_deposit");
-    pass.set_pipeline(deposit);
     pass.set_bind_group(0, &deposit_group, &[]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.anchors[0]));
+    pass.set_pipeline(deposit);
     pass.dispatch_workgroups(deposit_groups, 1, 1);
     span.end(&mut pass);
     drop(pass);
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_resolve"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/shaft_resolve");
-    pass.set_pipeline(resolve);
     pass.set_bind_group(0, &resolve_group, &[]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.anchors[1]));
+    pass.set_pipeline(resolve);
     pass.dispatch_workgroups(resolve_groups, 1, 1);
     span.end(&mut pass);
     drop(pass);

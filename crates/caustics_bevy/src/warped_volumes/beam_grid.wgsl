@@ -269,6 +269,12 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
 }
 #endif
 
+// Does nothing: dispatched first under the deposit's or the resolve's bindings while
+// timestamps are recorded, so that lavapipe times that pass whole
+// (`gpu_work::anchor_first_timestamp`).
+@compute @workgroup_size(1)
+fn anchor() {}
+
 #ifdef RESOLVE
 @group(0) @binding(0) var<storage, read> counters: array<u32>;
 @group(0) @binding(1) var<uniform> grids: Grids;

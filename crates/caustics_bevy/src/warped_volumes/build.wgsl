@@ -864,3 +864,9 @@ fn triangle_volumes(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local
         }
     }
 }
+
+// Does nothing, under the build's bindings: dispatched first while timestamps are
+// recorded, so that lavapipe times the first job's vertex rays
+// (`gpu_work::anchor_first_timestamp`).
+@compute @workgroup_size(1)
+fn anchor() {}

@@ -3,14 +3,15 @@
 //! ocean): the generators' vertices as this frame draws them, read from Bevy's own
 //! vertex buffers (copied only for a mesh without normals, whose smooth normals are
 //! made here), their topology (uploaded when it changes), the lights and the
-//! occluders' BVH. One job per generator, light and colour channel runs three
-//! dispatches (vertex rays, slicing axis, triangle volumes) that append the volumes
+//! occluders' BVH. One job per generator, light and colour channel runs four
+//! dispatches (vertex rays, slicing axis, vertex fans, triangle volumes) that append the volumes
 //! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
 //! indirect draw; the counts of what was dropped go back to the main world.
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
 use super::render::{GpuCausticVolume, VolumeBuffers, WordsReadback};
 use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
+use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
 use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
 use crate::irradiance::mesh_bvhs::InstancedBvhBuffer;
@@ -217,12 +218,12 @@ impl VolumeBuild {
     }
 }
 
-/// The build's pipelines (vertex rays, slicing axis, vertex fans, triangle volumes) and
-/// layout, and the occluders' refit.
+/// The build's pipelines (vertex rays, slicing axis, vertex fans, triangle volumes, and
+/// the empty `anchor` of [`anchor_first_timestamp`]) and layout, and the occluders' refit.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {
     layout: KeptLayout,
-    pipelines: [CachedComputePipelineId; 4],
+    pipelines: [CachedComputePipelineId; 5],
     refit: BvhRefitPipelines,
 }
 
@@ -247,8 +248,13 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         ),
     );
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "build.wgsl");
-    let pipelines =
-        crate::irradiance::compute_pipelines(&cache, "caustic_volume", &layout, &shader, ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes"]);
+    let pipelines = crate::irradiance::compute_pipelines(
+        &cache,
+        "caustic_volume",
+        &layout,
+        &shader,
+        ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes", "anchor"],
+    );
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
@@ -486,13 +492,15 @@ pub(super) fn build_volumes(
     if build.refit.is_planned() {
         let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_occluder_refit"), ..default() });
         let span = diagnostics.pass_span(&mut pass, "caustics/occluder_refit");
-        build.refit.dispatch(&mut pass, &pipelines.refit, &cache);
+        build.refit.dispatch(&mut pass, &pipelines.refit, &cache, diagnostics.is_some());
         span.end(&mut pass);
         recorder.record("occluder refit");
     }
     encoder.copy_buffer_to_buffer(empty, 0, counters, 0, empty.size());
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
+    pass.set_bind_group(0, &build.dispatches[0].bind_group, &[build.dispatches[0].offset]);
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[4]));
     for dispatch in &build.dispatches {
         pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
         pass.set_pipeline(kernels[0]);
