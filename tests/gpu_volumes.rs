@@ -196,17 +196,26 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     renderer.world_mut().insert_resource(marched);
     let grid_image = render(&mut renderer, 3);
     save(&grid_image, "gpu_volumes_medium_grid.png");
-    // The marched grid's CPU twin over the image, every pixel's three channels.
-    let marched_twin = |medium_box: MediumBox, volumes: &[CausticVolume]| -> Vec<f32> {
-        let mut grid = BeamGrid::new(medium_box, marched.shaft_grid);
-        grid.deposit_all(volumes, &settings.core());
-        (0..SIZE * SIZE)
+    // The marched grid's CPU twin over the image, every pixel's three channels, on a
+    // grid `longest` cells long, its thin beams in bundles or each alone; and how many
+    // went in bundles.
+    let grid_twin_of = |medium_box: MediumBox, volumes: &[CausticVolume], longest: u32, bundles: bool| -> (Vec<f32>, usize) {
+        let mut grid = BeamGrid::new(medium_box, longest);
+        let joined = if bundles {
+            grid.deposit_all(volumes, &settings.core())
+        } else {
+            grid.deposit_each(volumes, &settings.core());
+            0
+        };
+        let image = (0..SIZE * SIZE)
             .flat_map(|i| {
                 let floor = to_core(world_at(i % SIZE, i / SIZE));
                 grid.in_scattered_radiance(floor + caustics_core::glam::Vec3::Y * 5.0, floor, marched.shaft_steps).to_array()
             })
-            .collect()
+            .collect();
+        (image, joined)
     };
+    let marched_twin = |medium_box: MediumBox, volumes: &[CausticVolume]| grid_twin_of(medium_box, volumes, marched.shaft_grid, true).0;
     let grid_twin = marched_twin(medium_box, &set.volumes);
     let gpu_grid = added(&grid_image);
     let (against_twin, against_exact) = (relative_l2(&gpu_grid, &grid_twin), relative_l2(&gpu_grid, &cpu));
@@ -223,6 +232,20 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("shafts of one hue in a grey medium: relative L2 {against_grey_twin:.2e} from the twin");
     assert!(against_grey_twin < 0.01, "GPU and CPU beam grids differ in a grey medium: relative L2 {against_grey_twin}");
     renderer.world_mut().entity_mut(medium_entity).insert(medium);
+    // Cells wider than the water's triangles: beams entering a cell together go as one
+    // bundle. The GPU's bundles against the twin's, nearer them than each beam alone.
+    let coarse = WarpedVolumesSettings { shaft_grid: 24, ..marched };
+    renderer.world_mut().insert_resource(coarse);
+    let bundled = added(&render(&mut renderer, 3));
+    let ((bundled_twin, joined), (each_twin, _)) = (grid_twin_of(medium_box, &set.volumes, 24, true), grid_twin_of(medium_box, &set.volumes, 24, false));
+    let (against_bundles, against_each) = (relative_l2(&bundled, &bundled_twin), relative_l2(&bundled, &each_twin));
+    eprintln!(
+        "shafts from bundles ({joined} of {} beams): relative L2 {against_bundles:.2e} from the twin, {against_each:.2e} from each beam alone",
+        set.volumes.len()
+    );
+    assert!(2 * joined > set.volumes.len(), "{joined} of {} beams in bundles", set.volumes.len());
+    assert!(against_bundles < 0.01 && against_bundles < 0.5 * against_each, "bundled shafts: {against_bundles} from the twin, {against_each} from each beam");
+    renderer.world_mut().insert_resource(marched);
     // Dispersive water: a volume a colour channel, each of its own hue, so the grid adds
     // three channels of light where one hue needs one; every channel against the twin.
     let dispersive = CausticGenerator {

@@ -230,3 +230,77 @@ fn shafts_under_rippled_water_match_the_tracers_photon_beams() {
     assert!(error < 0.015, "relative L2 {error}, tracer noise {noise}");
     assert!((total(&exact) / total(&traced) - 1.0).abs() < 0.01, "the shafts' light differs from the tracer's");
 }
+
+/// Water under a slanted sun whose triangles are finer than the grid's cells, its
+/// medium's box and a view from the water: the bench's ocean of 256² (`Some(256)`) or a
+/// rippled pool of 128², 8 m across and 2 m deep.
+fn fine_water(ocean: Option<usize>) -> (Scene, MediumBox, PinholeCamera) {
+    let (water, size, depth) = match ocean {
+        Some(resolution) => {
+            let spectrum = OceanSpectrum::new(&OceanSettings {
+                resolution,
+                size: 12.0,
+                wind_speed: 7.0,
+                wind_direction: Vec2::X,
+                amplitude: 4e-3,
+                ..OceanSettings::default()
+            })
+            .unwrap();
+            (spectrum.evaluate(0.0).mesh().transformed(&Affine3A::from_translation(Vec3::Y * 3.0)), 12.0, 3.0)
+        }
+        None => {
+            let waves = |x: f32, z: f32| {
+                (
+                    0.02 * (4.0 * x + 0.3).sin() * (3.0 * z).cos(),
+                    0.08 * (4.0 * x + 0.3).cos() * (3.0 * z).cos(),
+                    -0.06 * (4.0 * x + 0.3).sin() * (3.0 * z).sin(),
+                )
+            };
+            let normal = |x: f32, z: f32| Vec3::new(-waves(x, z).1, 1.0, -waves(x, z).2).normalize();
+            (TriMesh::heightfield(129, 8.0, |x, z| 2.0 + waves(x, z).0, normal).unwrap(), 8.0, 2.0)
+        }
+    };
+    let scene = Scene {
+        lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(0.35, -1.0, 0.2).normalize(), irradiance: 1.0 })],
+        generators: vec![Generator::new(water, SpecularInteraction::Refract { ior: 1.333, dispersion: None })],
+        receivers: vec![floor(size, 0.0)],
+    };
+    let medium = MediumBox {
+        world_from_local: Affine3A::from_scale_rotation_translation(Vec3::new(size, depth, size), Quat::IDENTITY, Vec3::Y * (0.5 * depth)),
+        coefficients: MediumCoefficients { scattering: 0.06, absorption: Vec3::new(0.3, 0.1, 0.05), asymmetry: 0.6 },
+    };
+    let camera = PinholeCamera {
+        position: Vec3::new(-0.375 * size, 0.5 * depth, 0.375 * size),
+        look_at: Vec3::new(0.05 * size, 0.15 * depth, -0.05 * size),
+        up: Vec3::Y,
+        fov_y: 0.8,
+        width: 48,
+        height: 27,
+    };
+    (scene, medium, camera)
+}
+
+#[test]
+fn bundles_of_thin_beams_keep_the_shafts_of_each_beam() {
+    // Narrow beams entering the grid through one cell go as one bundle, whose spread
+    // stands for theirs: most of the fine water's beams, and shafts within 1.5 % of
+    // each beam deposited alone.
+    for ocean in [None, Some(256)] {
+        let (scene, medium, camera) = fine_water(ocean);
+        let settings = VolumeSettings::default();
+        let volumes = build_scene_volumes(&scene, &settings).volumes;
+        let mut each = BeamGrid::new(medium, 96);
+        each.deposit_each(&volumes, &settings);
+        let mut bundled = BeamGrid::new(medium, 96);
+        let joined = bundled.deposit_all(&volumes, &settings);
+        let alone = footprint_image(&camera, 2, &|o, e| each.in_scattered_radiance(o, e, 256));
+        let merged = footprint_image(&camera, 2, &|o, e| bundled.in_scattered_radiance(o, e, 256));
+        let error = relative_l2(&merged, &alone);
+        let total = |g: &BeamGrid| g.source.iter().sum::<Vec3>();
+        let flux = ((total(&bundled) - total(&each)) / total(&each)).abs().max_element();
+        eprintln!("{ocean:?}: {joined} of {} beams in bundles, shafts within {error:.4} of each beam's, the grid's light within {flux:.4}", volumes.len());
+        assert!(joined as f32 > 0.8 * volumes.len() as f32, "{joined} of {} beams in bundles", volumes.len());
+        assert!(error < 0.015, "{ocean:?}: bundled shafts differ by {error}");
+        assert!(flux < 0.005, "{ocean:?}: the bundles' light differs by {flux}");
+    }
+}

@@ -56,12 +56,32 @@ const CELL_BYTES: u64 = 32;
 /// directions whose lowest corner the cell is.
 const FIXED_CELL_BYTES: u64 = 24;
 
+/// Twenty words a bundle of beams (`BUNDLE_WORDS` in `beam_grid.wgsl`), and one in the
+/// list of the slots taken.
+const BUNDLE_BYTES: u64 = 84;
+
+/// The bundles' hash table: a slot for each volume or cell, whichever is fewer, as a
+/// power of two from 2¹⁰ to 2¹⁶ (a surface's beams enter about one layer of cells:
+/// 96² on the default grid). Beams that find no slot go one by one.
+fn bundle_slots(volumes: u64, cells: u64) -> u64 {
+    volumes.min(cells).next_power_of_two().clamp(1 << 10, 1 << 16)
+}
+
+/// The bytes of a table of `slots` bundles: theirs, and the count of those taken.
+fn bundle_bytes(slots: u64) -> u64 {
+    slots * BUNDLE_BYTES + 4
+}
+
 /// Render world: the grids of this frame's media and whether they need a deposit.
 #[derive(Resource, Default)]
 pub(super) struct BeamGridBuffers {
     pub cells: Option<Buffer>,
     /// What the deposit adds to, and `resolve` turns into `cells`.
     fixed: Option<Buffer>,
+    /// The bundles of thin beams ([`caustics_core::volumes::BeamGrid::deposit_all`])
+    /// and, per volume, the media whose bundle its beam joined.
+    bundles: Option<Buffer>,
+    joined: Option<Buffer>,
     /// The cells along a box's longest side when fewer than asked for fit (warned once).
     clamped: Option<u32>,
     pub grids: UniformBuffer<GpuBeamGrids>,
@@ -76,7 +96,9 @@ pub(super) struct BeamGridBuffers {
 #[derive(Resource)]
 pub(super) struct BeamGridPipelines {
     deposit_layout: KeptLayout,
-    deposit: CachedComputePipelineId,
+    /// The deposit's kernels in the order they run: the bundles counted, joined, the
+    /// other beams deposited, the bundles deposited.
+    deposit: [CachedComputePipelineId; 4],
     resolve_layout: KeptLayout,
     resolve: CachedComputePipelineId,
     /// `anchor`, an empty kernel ([`anchor_first_timestamp`]), under the deposit's and
@@ -98,6 +120,8 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<super::render::GpuVolumeSettings>(false),
                 uniform_buffer::<GpuBeamGrids>(false),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
             ),
         ),
@@ -125,7 +149,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
             ..default()
         })
     };
-    let deposit = kernel("deposit", "DEPOSIT", &deposit_layout);
+    let deposit = ["count_bundles", "join_bundles", "deposit", "deposit_bundles"].map(|entry| kernel(entry, "DEPOSIT", &deposit_layout));
     let resolve = kernel("resolve", "RESOLVE", &resolve_layout);
     let anchors = [kernel("anchor", "DEPOSIT", &deposit_layout), kernel("anchor", "RESOLVE", &resolve_layout)];
     let march_layouts = [false, true].map(|multisampled| {
@@ -260,18 +284,28 @@ pub(super) fn prepare_grids(
     let hue = build.hue.filter(|_| media.0.iter().all(GpuMedium::is_grey));
     gpu.hue = hue.map_or(Vec4::ZERO, |h| Vec4::new(h.x, h.y, h.z, 1.0));
     grids.deposit |= build.builds_this_frame() || grids.layout != layout;
+    let buffer = |label, size| {
+        Some(device.create_buffer(&BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        }))
+    };
     let bytes = u64::from(first) * CELL_BYTES;
     if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
-        let buffer = |label, size| {
-            Some(device.create_buffer(&BufferDescriptor {
-                label: Some(label),
-                size,
-                usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }))
-        };
         grids.cells = buffer("caustic_shaft_grid", bytes);
         grids.fixed = buffer("caustic_shaft_grid_fixed", u64::from(first) * FIXED_CELL_BYTES);
+        grids.deposit = true;
+    }
+    let capacity = volumes.capacity();
+    let table = bundle_bytes(bundle_slots(capacity, u64::from(first)));
+    if grids.bundles.as_ref().is_none_or(|b| b.size() != table) {
+        grids.bundles = buffer("caustic_shaft_bundles", table);
+        grids.deposit = true;
+    }
+    if grids.joined.as_ref().is_none_or(|b| b.size() != 4 * capacity.max(1)) {
+        grids.joined = buffer("caustic_shaft_joined", 4 * capacity.max(1));
         grids.deposit = true;
     }
     grids.layout = layout;
@@ -279,10 +313,12 @@ pub(super) fn prepare_grids(
     write_changed(&mut grids.grids, gpu, &device, &queue);
 }
 
-/// Adds every volume's beam to the fixed-point grids, sixteen invocations a volume, then
-/// turns them into floats, one invocation a cell, and clears them for the next deposit
-/// (a new buffer starts cleared), when [`prepare_grids`] asked for it (after the
-/// build: the same frame's volumes).
+/// Adds every volume's beam to the fixed-point grids, then turns them into floats, one
+/// invocation a cell, and clears them for the next deposit (a new buffer starts
+/// cleared), when [`prepare_grids`] asked for it (after the build: the same frame's
+/// volumes). The narrow beams that enter the grid through one cell go as one bundle
+/// (counted, then joined, one invocation a volume; deposited eight invocations a
+/// bundle), the others sixteen invocations a volume.
 pub(super) fn deposit_beams(
     mut ctx: RenderContext,
     mut grids: ResMut<BeamGridBuffers>,
@@ -292,22 +328,37 @@ pub(super) fn deposit_beams(
     recorder: Res<PassRecorder>,
 ) {
     let grids = &mut *grids;
-    let (true, Some(deposit), Some(resolve), Some(cells), Some(fixed), Some(buffer), Some(counters), Some(settings), Some(uniform)) = (
+    let (
+        true,
+        Some(deposit),
+        Some(resolve),
+        Some(cells),
+        Some(fixed),
+        Some(bundles),
+        Some(joined),
+        Some(buffer),
+        Some(counters),
+        Some(settings),
+        Some(uniform),
+    ) = (
         grids.deposit,
-        cache.get_compute_pipeline(pipelines.deposit),
+        pipelines.deposit.iter().map(|id| cache.get_compute_pipeline(*id)).collect::<Option<Vec<_>>>(),
         cache.get_compute_pipeline(pipelines.resolve),
         grids.cells.as_ref(),
         grids.fixed.as_ref(),
+        grids.bundles.as_ref(),
+        grids.joined.as_ref(),
         volumes.volumes.as_ref(),
         volumes.counters.as_ref(),
         volumes.settings.buffer(),
         grids.grids.buffer(),
-    ) else {
+    )
+    else {
         return;
     };
     let device = ctx.render_device();
     let layout = pipelines.deposit_layout.get(&cache);
-    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into()];
+    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into(), bundles.into(), joined.into()];
     let deposit_group = grids.kept[0].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_deposit_bind_group",
@@ -318,6 +369,8 @@ pub(super) fn deposit_beams(
                 settings.as_entire_binding(),
                 uniform.as_entire_binding(),
                 fixed.as_entire_binding(),
+                bundles.as_entire_binding(),
+                joined.as_entire_binding(),
             )),
         )
     });
@@ -330,9 +383,12 @@ pub(super) fn deposit_beams(
             &BindGroupEntries::sequential((counters.as_entire_binding(), uniform.as_entire_binding(), fixed.as_entire_binding(), cells.as_entire_binding())),
         )
     });
-    // At most one workgroup for four volumes the buffer holds (`VOLUME_LANES`), and 64
-    // cells a workgroup; each strides over the rest.
-    let deposit_groups = volumes.capacity().div_ceil(4).clamp(1, 65535) as u32;
+    // At most one workgroup for four volumes the buffer holds (`VOLUME_LANES`), eight
+    // bundles (`BUNDLE_LANES`), and 64 volumes or cells a workgroup; each strides over
+    // the rest.
+    let groups = |items: u64| items.clamp(1, 65535) as u32;
+    let volume_groups = groups(volumes.capacity().div_ceil(64));
+    let deposit_groups = [volume_groups, volume_groups, groups(volumes.capacity().div_ceil(4)), groups((bundles.size() / BUNDLE_BYTES).div_ceil(8))];
     let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
@@ -341,8 +397,10 @@ pub(super) fn deposit_beams(
     let span = diagnostics.pass_span(&mut pass, "caustics/shaft_deposit");
     pass.set_bind_group(0, &deposit_group, &[]);
     anchor_first_timestamp(&mut pass, diagnostics.is_some(), cache.get_compute_pipeline(pipelines.anchors[0]));
-    pass.set_pipeline(deposit);
-    pass.dispatch_workgroups(deposit_groups, 1, 1);
+    for (kernel, groups) in deposit.iter().zip(deposit_groups) {
+        pass.set_pipeline(kernel);
+        pass.dispatch_workgroups(groups, 1, 1);
+    }
     span.end(&mut pass);
     drop(pass);
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_shaft_resolve"), ..default() });
@@ -354,6 +412,7 @@ pub(super) fn deposit_beams(
     span.end(&mut pass);
     drop(pass);
     encoder.clear_buffer(fixed, 0, None);
+    encoder.clear_buffer(bundles, 0, None);
     grids.deposit = false;
     recorder.record("shaft deposit");
 }

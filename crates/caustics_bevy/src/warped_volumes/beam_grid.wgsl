@@ -84,6 +84,12 @@ fn grid_corner(g: Grid, corners: GridCorners, corner: u32) -> GridCorner {
 @group(0) @binding(2) var<uniform> settings: VolumeSettings;
 @group(0) @binding(3) var<uniform> grids: Grids;
 @group(0) @binding(4) var<storage, read_write> fixed: array<atomic<u32>>;
+// The bundles (`BeamBundle`): a hash table of `BUNDLE_WORDS` a slot, keyed by the entry
+// cell's index in `fixed` plus one (0: empty), a power of two of them; then how many
+// slots are taken, and which, in the order they were.
+@group(0) @binding(5) var<storage, read_write> bundles: array<atomic<u32>>;
+// Per volume, bit m: its beam in medium m joined a bundle (`join_bundles`).
+@group(0) @binding(6) var<storage, read_write> joined: array<u32>;
 
 // `caustics_core::volumes::{MAX_DEPOSIT_LAYERS, MAX_DEPOSIT_SPLIT}`.
 const MAX_DEPOSIT_LAYERS: u32 = 1024u;
@@ -218,6 +224,377 @@ fn spread(g: Grid, grid_point: vec3<f32>, axis: u32, source: vec3<f32>, directio
     }
 }
 
+// `caustics_core::volumes::{MAX_BUNDLE_BEAMS, MAX_BUNDLED_SPLIT, MAX_BUNDLE_REACH}`.
+const MAX_BUNDLE_BEAMS: u32 = 1024u;
+const MAX_BUNDLED_SPLIT: u32 = 6u;
+const MAX_BUNDLE_REACH: f32 = 4.0;
+
+// A bundle's words: key, flags (atomic or), the beams counted with the flags, the
+// beams added, then `BeamBundle`'s sums in fixed point, each `BUNDLE_SCALE` units to one
+// (the beams' start and end, in layers, `BUNDLE_LAYER_SCALE`; their source in the
+// grid's units, `fixed_units`).
+const BUNDLE_WORDS: u32 = 20u;
+const BUNDLE_FLAGS: u32 = 1u;
+const BUNDLE_COUNTED: u32 = 2u;
+const BUNDLE_ADDED: u32 = 3u;
+const BUNDLE_ACROSS: u32 = 4u;  // two words, then the slope's two
+const BUNDLE_MOMENTS: u32 = 8u;  // across², across·slope, slope²
+const BUNDLE_START: u32 = 11u;  // start, end
+const BUNDLE_SOURCE: u32 = 13u;  // rgb
+const BUNDLE_LENGTH: u32 = 16u;  // world length a layer over a cell's edge
+const BUNDLE_DIRECTION: u32 = 17u;  // xyz
+const BUNDLE_SCALE: f32 = 65536.0;
+const BUNDLE_LAYER_SCALE: f32 = 1024.0;
+const NO_BUNDLE: u32 = 0xffffffffu;
+
+// The table's slots (`bundle_slots` in `beam_grid.rs`: its words are `BUNDLE_WORDS + 1`
+// a slot and one).
+fn bundle_slots() -> u32 {
+    return (arrayLength(&bundles) - 1u) / (BUNDLE_WORDS + 1u);
+}
+
+// The word that counts the slots taken, which the list of them follows.
+fn bundle_list() -> u32 {
+    return bundle_slots() * BUNDLE_WORDS;
+}
+
+// `value` units, rounded, added to the signed number at bundle word `word`.
+fn add_to_bundle(word: u32, value: f32) {
+    atomicAdd(&bundles[word], bitcast<u32>(i32(floor(clamp(value, -2.1e9, 2.1e9) + 0.5))));
+}
+
+fn bundle_word(word: u32) -> f32 {
+    return f32(bitcast<i32>(atomicLoad(&bundles[word])));
+}
+
+// The slot of the bundle keyed `key`, inserted where `insert` and missing; `NO_BUNDLE`
+// where it is missing or the table is full along its probe (then its beams go one by
+// one).
+fn bundle_slot(key: u32, insert: bool) -> u32 {
+    let mask = bundle_slots() - 1u;
+    var slot = (key * 2654435761u) & mask;
+    for (var probe = 0u; probe < 32u; probe++) {
+        var k = atomicLoad(&bundles[slot * BUNDLE_WORDS]);
+        if k == 0u && insert {
+            let swap = atomicCompareExchangeWeak(&bundles[slot * BUNDLE_WORDS], 0u, key);
+            k = select(swap.old_value, key, swap.exchanged);
+            if swap.exchanged {
+                let list = bundle_list();
+                atomicStore(&bundles[list + 1u + atomicAdd(&bundles[list], 1u)], slot);
+            }
+        }
+        if k == key {
+            return slot;
+        }
+        if k == 0u {
+            return NO_BUNDLE;
+        }
+        slot = (slot + 1u) & mask;
+    }
+    return NO_BUNDLE;
+}
+
+// `BundledBeam`: `found` false for none.
+struct BundledBeam {
+    found: bool,
+    key: u32,
+    flags: u32,
+    across: vec2<f32>,
+    slope: vec2<f32>,
+    width: vec3<f32>,
+    start: f32,
+    end: f32,
+    source: vec3<f32>,
+    length: f32,
+    direction: vec3<f32>,
+}
+
+// `BeamGrid::bundled_beam`, in grid `g` of medium `medium` (`units` its fixed units).
+fn bundled_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, units: f32) -> BundledBeam {
+    var m: BundledBeam;
+    m.found = false;
+    if deposit_split(v, g.cell.x) > MAX_BUNDLED_SPLIT {
+        return m;
+    }
+    let beam = thin_beam(v, g, local_from_world, 1u, 0u);
+    if beam.count == 0u {
+        return m;
+    }
+    let axis = beam.axis;
+    let rate = abs(beam.per_alpha[axis]);
+    let forward = beam.per_alpha[axis] > 0.0;
+    let sign = select(-1.0, 1.0, forward);
+    let entry = select(beam.first + i32(beam.count) - 1, beam.first, forward);
+    m.start = (beam.start[axis] - (f32(entry) - 0.5 * sign)) * sign;
+    let a = (axis + 1u) % 3u;
+    let b = (axis + 2u) % 3u;
+    m.slope = vec2(beam.per_alpha[a], beam.per_alpha[b]) / rate;
+    let at_start = vec2(beam.start[a], beam.start[b]) - m.start * m.slope;
+    let cells = vec3<f32>(g.size.xyz);
+    let across = clamp(floor(at_start + 0.5 * m.slope + 0.5), vec2(0.0), vec2(cells[a], cells[b]) - 1.0);
+    let alpha = 0.5 * v.origin.w;
+    let s = sample_on_ray(v, beam.lambda, alpha, settings.intensity_mode, settings.max_magnification);
+    if !s.inside {
+        return m;
+    }
+    let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
+    let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
+    let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x));
+    let beam_length = length(s.ray);
+    m.source = v.color.rgb * (s.plane_irradiance * beam_length * area / (rate * g.cell.y) * units);
+    let sum = m.source.x + m.source.y + m.source.z;
+    if !(sum > 0.0 && sum <= 3.0e38 && rate > 0.0 && rate <= 3.0e38) {
+        return m;
+    }
+    // The caustic triangle's own spread across the axis (its sides² over 36).
+    var corner_at: array<vec2<f32>, 3>;
+    var corner_slope: array<vec2<f32>, 3>;
+    for (var i = 0u; i < 3u; i++) {
+        let origin = v.origin.xyz + v.axis_x.xyz * v.vertex_x[i] + v.axis_z.xyz * v.vertex_z[i];
+        let ray = v.axis_x.xyz * v.ray_x[i] + v.axis_y.xyz + v.axis_z.xyz * v.ray_z[i];
+        let o = ((local_from_world * vec4(origin, 1.0)).xyz + 0.5) * cells - 0.5;
+        let r = (local_from_world * vec4(ray, 0.0)).xyz * cells;
+        corner_slope[i] = vec2(r[a], r[b]) / rate;
+        corner_at[i] = vec2(o[a], o[b]) - m.start * corner_slope[i];
+    }
+    m.width = vec3(0.0);
+    for (var i = 0u; i < 3u; i++) {
+        let j = (i + 1u) % 3u;
+        let da = corner_at[i] - corner_at[j];
+        let db = corner_slope[i] - corner_slope[j];
+        m.width += vec3(dot(da, da), dot(da, db), dot(db, db)) / 36.0;
+    }
+    var cell = vec3(0u);
+    cell[axis] = u32(entry);
+    cell[a] = u32(across.x);
+    cell[b] = u32(across.y);
+    let hue = vec3<u32>(v.color.rgb >= vec3(0.5 * max(v.color.r, max(v.color.g, v.color.b))));
+    m.key = g.size.w + (cell.z * g.size.y + cell.y) * g.size.x + cell.x + 1u;
+    m.flags = (1u << (2u * axis + select(0u, 1u, forward))) | (1u << (6u + hue.x + 2u * hue.y + 4u * hue.z));
+    m.across = at_start - across;
+    m.end = m.start + v.origin.w * rate;
+    m.length = beam_length / rate / g.cell.x;
+    m.direction = s.ray / beam_length;
+    m.found = true;
+    return m;
+}
+
+// `BeamBundle::merges`, from its flags and the beams counted.
+fn bundle_merges(slot: u32) -> bool {
+    let flags = atomicLoad(&bundles[slot * BUNDLE_WORDS + BUNDLE_FLAGS]);
+    let count = atomicLoad(&bundles[slot * BUNDLE_WORDS + BUNDLE_COUNTED]);
+    return count >= 2u && count <= MAX_BUNDLE_BEAMS && countOneBits(flags & 0x3fu) == 1u && countOneBits(flags >> 6u) == 1u;
+}
+
+// The build's kept flux and medium `m`'s grid's fixed units.
+fn medium_units(m: u32) -> f32 {
+    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
+    return fixed_units(grids.grids[m], flux);
+}
+
+// One invocation a volume: each of its beams that could join a bundle inserts the
+// bundle and adds its flags and itself to the count (`BeamGrid::deposit_all`'s first
+// loop).
+@compute @workgroup_size(64)
+fn count_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    for (var index = id.x; index < counters[1]; index += groups.x * 64u) {
+        let v = volumes[index];
+        for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
+            let member = bundled_beam(v, grids.grids[m], settings.media[m].local_from_world, medium_units(m));
+            if !member.found {
+                continue;
+            }
+            let slot = bundle_slot(member.key, true);
+            if slot != NO_BUNDLE {
+                atomicOr(&bundles[slot * BUNDLE_WORDS + BUNDLE_FLAGS], member.flags);
+                atomicAdd(&bundles[slot * BUNDLE_WORDS + BUNDLE_COUNTED], 1u);
+            }
+        }
+    }
+}
+
+// One invocation a volume: each of its beams whose bundle merges joins it, and the
+// volume's bit of each medium it joined one in is set in `joined`
+// (`BeamGrid::deposit_all`'s second loop).
+@compute @workgroup_size(64)
+fn join_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    for (var index = id.x; index < counters[1]; index += groups.x * 64u) {
+        let v = volumes[index];
+        var mask = 0u;
+        for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
+            let member = bundled_beam(v, grids.grids[m], settings.media[m].local_from_world, medium_units(m));
+            if !member.found {
+                continue;
+            }
+            let slot = bundle_slot(member.key, false);
+            if slot != NO_BUNDLE && bundle_merges(slot) {
+                add_to_its_bundle(slot, member);
+                mask |= 1u << m;
+            }
+        }
+        joined[index] = mask;
+    }
+}
+
+// Adds a member to its bundle (`BeamBundle::add`).
+fn add_to_its_bundle(slot: u32, m: BundledBeam) {
+    let at = slot * BUNDLE_WORDS;
+    atomicAdd(&bundles[at + BUNDLE_ADDED], 1u);
+    add_to_bundle(at + BUNDLE_ACROSS, m.across.x * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_ACROSS + 1u, m.across.y * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_ACROSS + 2u, m.slope.x * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_ACROSS + 3u, m.slope.y * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_MOMENTS, (dot(m.across, m.across) + m.width.x) * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_MOMENTS + 1u, (dot(m.across, m.slope) + m.width.y) * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_MOMENTS + 2u, (dot(m.slope, m.slope) + m.width.z) * BUNDLE_SCALE);
+    add_to_bundle(at + BUNDLE_START, m.start * BUNDLE_LAYER_SCALE);
+    add_to_bundle(at + BUNDLE_START + 1u, m.end * BUNDLE_LAYER_SCALE);
+    for (var k = 0u; k < 3u; k++) {
+        add_to_bundle(at + BUNDLE_SOURCE + k, m.source[k]);
+        add_to_bundle(at + BUNDLE_DIRECTION + k, m.direction[k] * BUNDLE_SCALE);
+    }
+    add_to_bundle(at + BUNDLE_LENGTH, m.length * BUNDLE_SCALE);
+}
+
+// ∫ tent from −∞ to x.
+fn ramp(x: f32) -> f32 {
+    if x <= -1.0 {
+        return 0.0;
+    }
+    if x <= 0.0 {
+        return 0.5 * (x + 1.0) * (x + 1.0);
+    }
+    if x <= 1.0 {
+        return 1.0 - 0.5 * (1.0 - x) * (1.0 - x);
+    }
+    return 1.0;
+}
+
+// `bundle_weight`: cell `i`'s share along one axis of a bundle's points within
+// `reach` of `mean`.
+fn bundle_weight(mean: f32, reach: f32, i: i32) -> f32 {
+    let x = mean - f32(i);
+    if reach > 1.0e-3 {
+        return (ramp(x + reach) - ramp(x - reach)) / (2.0 * reach);
+    }
+    return max(1.0 - abs(x), 0.0);
+}
+
+// `bundle_cells`: the first and last cells (past the edges too) they may light.
+fn bundle_cells(mean: f32, reach: f32) -> vec2<i32> {
+    return vec2(i32(floor(mean - reach)), i32(floor(mean + reach)) + 1);
+}
+
+// Invocations that share one bundle's layers (a few tens).
+const BUNDLE_LANES: u32 = 8u;
+
+// Eight bundles a workgroup at a time, from the list of slots taken, eight invocations
+// sharing each bundle's layers: a bundle that merges adds its light layer by layer
+// (`BeamGrid::deposit_bundle`).
+@compute @workgroup_size(64)
+fn deposit_bundles(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+    let one_hue = grids.hue.w > 0.0;
+    let channels = select(3u, 1u, one_hue);
+    let list = bundle_list();
+    let taken = atomicLoad(&bundles[list]);
+    let per_group = 64u / BUNDLE_LANES;
+    let lane = local % BUNDLE_LANES;
+    for (var listed = group.x * per_group + local / BUNDLE_LANES; listed < taken; listed += groups.x * per_group) {
+        let slot = atomicLoad(&bundles[list + 1u + listed]);
+        let at = slot * BUNDLE_WORDS;
+        let key = atomicLoad(&bundles[at]);
+        let n = f32(atomicLoad(&bundles[at + BUNDLE_ADDED]));
+        if key == 0u || n == 0.0 || !bundle_merges(slot) {
+            continue;
+        }
+        let cell_index = key - 1u;
+        var m = 0u;
+        while m < 3u && cell_index >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
+            m++;
+        }
+        let g = grids.grids[m];
+        let size = g.size.xyz;
+        let local = cell_index - g.size.w;
+        let entry_cell = vec3(local % size.x, (local / size.x) % size.y, local / (size.x * size.y));
+        let route = firstTrailingBit(atomicLoad(&bundles[at + BUNDLE_FLAGS]) & 0x3fu);
+        let axis = route / 2u;
+        let forward = route % 2u == 1u;
+        let a = (axis + 1u) % 3u;
+        let b = (axis + 2u) % 3u;
+        let p = vec2(bundle_word(at + BUNDLE_ACROSS), bundle_word(at + BUNDLE_ACROSS + 1u)) / (BUNDLE_SCALE * n);
+        let d = vec2(bundle_word(at + BUNDLE_ACROSS + 2u), bundle_word(at + BUNDLE_ACROSS + 3u)) / (BUNDLE_SCALE * n);
+        let var_p = bundle_word(at + BUNDLE_MOMENTS) / (BUNDLE_SCALE * n) - dot(p, p);
+        let cov = bundle_word(at + BUNDLE_MOMENTS + 1u) / (BUNDLE_SCALE * n) - dot(p, d);
+        let var_d = bundle_word(at + BUNDLE_MOMENTS + 2u) / (BUNDLE_SCALE * n) - dot(d, d);
+        let start = bundle_word(at + BUNDLE_START) / (BUNDLE_LAYER_SCALE * n);
+        let end = bundle_word(at + BUNDLE_START + 1u) / (BUNDLE_LAYER_SCALE * n);
+        let path = bundle_word(at + BUNDLE_LENGTH) / (BUNDLE_SCALE * n) * g.cell.x;
+        let source = vec3(bundle_word(at + BUNDLE_SOURCE), bundle_word(at + BUNDLE_SOURCE + 1u), bundle_word(at + BUNDLE_SOURCE + 2u));
+        let summed = vec3(bundle_word(at + BUNDLE_DIRECTION), bundle_word(at + BUNDLE_DIRECTION + 1u), bundle_word(at + BUNDLE_DIRECTION + 2u));
+        let direction = summed / max(length(summed), 1.0e-30);
+        let sigma_t = settings.media[m].extinction.xyz;
+        let centre = vec2(f32(entry_cell[a]), f32(entry_cell[b]));
+        let first = i32(floor(max(start, 0.0)));
+        let last = min(i32(ceil(end)), first + i32(MAX_DEPOSIT_LAYERS));
+        for (var k = first + i32(lane); k < last; k += i32(BUNDLE_LANES)) {
+            let layer = i32(entry_cell[axis]) + select(-k, k, forward);
+            if layer < 0 || layer >= i32(size[axis]) {
+                break;
+            }
+            let lo = max(start, f32(k));
+            let hi = min(end, f32(k) + 1.0);
+            if !(hi > lo) {
+                continue;
+            }
+            let t = 0.5 * (lo + hi);
+            let mean = centre + p + d * t;
+            if !(all(mean >= vec2(-0.5)) && all(mean <= vec2(f32(size[a]), f32(size[b])) - 0.5)) {
+                continue;
+            }
+            let reach = min(sqrt(1.5 * max(var_p + 2.0 * t * cov + t * t * var_d, 0.0)), MAX_BUNDLE_REACH);
+            let light = source * exp(-sigma_t * (path * (t - start))) * (hi - lo);
+            let flat = select(light, vec3(light.x + light.y + light.z, 0.0, 0.0), one_hue);
+            var c = vec3(0u);
+            c[axis] = u32(layer);
+            let edge = vec2(i32(size[a]) - 1, i32(size[b]) - 1);
+            let ra = bundle_cells(mean.x, reach);
+            let rb = bundle_cells(mean.y, reach);
+            for (var i = ra.x; i <= ra.y; i++) {
+                let w_i = bundle_weight(mean.x, reach, i);
+                if w_i <= 0.0 {
+                    continue;
+                }
+                c[a] = u32(clamp(i, 0, edge.x));
+                for (var j = rb.x; j <= rb.y; j++) {
+                    c[b] = u32(clamp(j, 0, edge.y));
+                    let w = w_i * bundle_weight(mean.y, reach, j);
+                    let cell = g.size.w + (c.z * size.y + c.y) * size.x + c.x;
+                    for (var ch = 0u; ch < channels; ch++) {
+                        add(cell * FIXED_WORDS + ch, w * flat[ch]);
+                    }
+                }
+            }
+            // The direction to lowest corners, every other cell, whose eight cells
+            // cover those lit.
+            let first_corner = clamp(vec2(ra.x, rb.x), vec2(0), edge);
+            let last_corner = clamp(vec2(ra.y, rb.y), vec2(0), edge);
+            let corners = (last_corner - first_corner) / 2 + 1;
+            let share = direction * ((light.x + light.y + light.z) / f32(corners.x * corners.y));
+            c[axis] = min(u32(layer), max(size[axis], 2u) - 2u);
+            for (var i = first_corner.x; i <= last_corner.x; i += 2) {
+                c[a] = u32(min(i, max(edge.x - 1, 0)));
+                for (var j = first_corner.y; j <= last_corner.y; j += 2) {
+                    c[b] = u32(min(j, max(edge.y - 1, 0)));
+                    let cell = g.size.w + (c.z * size.y + c.y) * size.x + c.x;
+                    for (var k3 = 0u; k3 < 3u; k3++) {
+                        add(cell * FIXED_WORDS + DIRECTION_WORD + k3, share[k3]);
+                    }
+                }
+            }
+        }
+    }
+}
+
 // Invocations that share one volume's samples: a beam finer than a cell has one a
 // layer it crosses, a few tens, so a workgroup takes four volumes at a time.
 const VOLUME_LANES: u32 = 16u;
@@ -237,6 +614,10 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
             let medium = settings.media[m];
             let g = grids.grids[m];
             let units = fixed_units(g, flux);
+            // A beam that joined a bundle goes with it (`deposit_bundles`).
+            if (joined[index] & (1u << m)) != 0u {
+                continue;
+            }
             let sigma_t = medium.extinction.xyz;
             let split = deposit_split(v, g.cell.x);
             let cells = vec3<f32>(g.size.xyz);

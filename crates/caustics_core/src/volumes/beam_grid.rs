@@ -19,11 +19,18 @@
 //! gathers the eight cells below it ([`BeamGrid::gather_directions`]): the sum over
 //! the samples that lit the cell, at three adds a sample where a spread took
 //! twenty-four. The march samples the grid trilinearly.
+//!
+//! A fine generator's beams are far more than the grid's cells: the deposit merges
+//! the narrow beams that enter the grid through one cell into a bundle (the moments of
+//! their rays across the axis, each ray's own triangle included) and adds the bundle
+//! layer by layer over a box of the bundle's mean and spread
+//! ([`BeamGrid::deposit_all`]), so that its work past the grid's resolution grows with
+//! the cells the beams enter, not with the triangles.
 
 use super::medium::MediumBox;
 use super::{CausticVolume, VolumeSettings};
 use crate::optics::henyey_greenstein;
-use glam::{Affine3A, UVec3, Vec3};
+use glam::{Affine3A, UVec3, Vec2, Vec3};
 
 /// The most layers one thin beam of the deposit adds to.
 pub const MAX_DEPOSIT_LAYERS: u32 = 1024;
@@ -151,6 +158,107 @@ impl ThinBeam {
     }
 }
 
+/// The most beams one bundle of the deposit merges; a cell entered by more deposits
+/// them one by one.
+pub const MAX_BUNDLE_BEAMS: u32 = 1024;
+/// The widest beam a bundle takes: its caustic triangles' sides at most this many
+/// cells ([`deposit_split`]).
+pub const MAX_BUNDLED_SPLIT: u32 = 6;
+/// How far a bundle's light reaches either side of its mean across its axis, at most,
+/// in cells.
+pub const MAX_BUNDLE_REACH: f32 = 4.0;
+
+/// The weight of cell `i` along one axis (centres at whole numbers) of a bundle's
+/// points there: uniform within `reach` of their mean `mean`, each point spread over
+/// the two cells around it as a single beam's sample is (the tent between cell
+/// centres), so that a bundle of `reach` 0 spreads as one point. Over
+/// [`bundle_cells`] the weights sum to one; a cell past the grid's edge gives its
+/// weight to the outer cell.
+fn bundle_weight(mean: f32, reach: f32, i: i32) -> f32 {
+    // ∫ tent from −∞ to x.
+    let ramp = |x: f32| match x {
+        x if x <= -1.0 => 0.0,
+        x if x <= 0.0 => 0.5 * (x + 1.0) * (x + 1.0),
+        x if x <= 1.0 => 1.0 - 0.5 * (1.0 - x) * (1.0 - x),
+        _ => 1.0,
+    };
+    let x = mean - i as f32;
+    if reach > 1.0e-3 { (ramp(x + reach) - ramp(x - reach)) / (2.0 * reach) } else { (1.0 - x.abs()).max(0.0) }
+}
+
+/// The cells, past the grid's edges too, that a bundle's points within `reach` of
+/// `mean` may light along one axis.
+fn bundle_cells(mean: f32, reach: f32) -> std::ops::RangeInclusive<i32> {
+    (mean - reach).floor() as i32..=(mean + reach).floor() as i32 + 1
+}
+
+/// One narrow beam as a bundle member ([`BeamGrid::deposit_all`]), in grid
+/// coordinates about its bundle's entry cell: `t` counts layers along the beam's axis
+/// from the face it enters that cell's layer by, `across` is where its central ray
+/// lies there on the two other axes, `slope` how far it moves across a layer.
+#[derive(Clone, Copy, Debug)]
+struct BundledBeam {
+    /// The entry cell's index.
+    key: usize,
+    /// Which way along which axis it runs (bit `2·axis + forward`) and its colour's
+    /// strongest channels (bit `6 + mask`): a bundle merges only beams of one each.
+    flags: u32,
+    across: Vec2,
+    slope: Vec2,
+    /// Its caustic triangle's variance across the axis, `x + 2t·y + t²·z`.
+    width: Vec3,
+    /// Its `t` at the generator and where it ends.
+    start: f32,
+    end: f32,
+    /// Its source per layer, before extinction.
+    source: Vec3,
+    /// World length of its path per layer.
+    length: f32,
+    /// Its direction, for the phase function.
+    direction: Vec3,
+}
+
+/// The narrow beams that enter the grid in one cell: their count, the
+/// union of their flags, and the sums of their [`BundledBeam`]s and of the moments
+/// that give their spread across the axis at each layer
+/// (`Var(across + t·slope)`).
+#[derive(Clone, Copy, Debug, Default)]
+struct BeamBundle {
+    flags: u32,
+    count: u32,
+    across: Vec2,
+    slope: Vec2,
+    across_squared: f32,
+    across_slope: f32,
+    slope_squared: f32,
+    start: f32,
+    end: f32,
+    source: Vec3,
+    length: f32,
+    direction: Vec3,
+}
+
+impl BeamBundle {
+    /// Whether its beams go as one: two or more (up to [`MAX_BUNDLE_BEAMS`]) running
+    /// one way, of one colour.
+    fn merges(&self) -> bool {
+        (2..=MAX_BUNDLE_BEAMS).contains(&self.count) && (self.flags & 0x3f).count_ones() == 1 && (self.flags >> 6).count_ones() == 1
+    }
+
+    fn add(&mut self, m: &BundledBeam) {
+        self.across += m.across;
+        self.slope += m.slope;
+        self.across_squared += m.across.length_squared() + m.width.x;
+        self.across_slope += m.across.dot(m.slope) + m.width.y;
+        self.slope_squared += m.slope.length_squared() + m.width.z;
+        self.start += m.start;
+        self.end += m.end;
+        self.source += m.source;
+        self.length += m.length;
+        self.direction += m.direction;
+    }
+}
+
 /// The steps of a march `length` long through cells whose smallest edge is `cell`:
 /// one a cell, from 1 to `max_steps`.
 pub fn march_steps(length: f32, cell: f32, max_steps: u32) -> u32 {
@@ -188,12 +296,175 @@ impl BeamGrid {
         cell_of(&self.medium, self.size)
     }
 
-    /// Adds every volume's beam to the grid, then gathers the directions.
-    pub fn deposit_all(&mut self, volumes: &[CausticVolume], settings: &VolumeSettings) {
+    /// Adds every volume's beam to the grid, then gathers the directions: narrow beams
+    /// (at most [`MAX_BUNDLED_SPLIT`] cells wide) that enter the grid in the same cell,
+    /// running the same way in the same colour, as one bundle ([`BeamBundle`]), the
+    /// others one by one. Returns how many beams went into bundles.
+    pub fn deposit_all(&mut self, volumes: &[CausticVolume], settings: &VolumeSettings) -> usize {
+        let members: Vec<Option<BundledBeam>> = volumes.iter().map(|v| self.bundled_beam(v, settings)).collect();
+        let mut bundles = std::collections::BTreeMap::<usize, BeamBundle>::new();
+        for m in members.iter().flatten() {
+            let b = bundles.entry(m.key).or_default();
+            b.flags |= m.flags;
+            b.count += 1;
+        }
+        let mut bundled = 0;
+        for (volume, member) in volumes.iter().zip(&members) {
+            match member.as_ref().filter(|m| bundles[&m.key].merges()) {
+                Some(m) => {
+                    bundles.get_mut(&m.key).expect("counted above").add(m);
+                    bundled += 1;
+                }
+                None => self.deposit(volume, settings),
+            }
+        }
+        for (key, bundle) in bundles.iter().filter(|(_, b)| b.merges()) {
+            self.deposit_bundle(*key, bundle);
+        }
+        self.gather_directions();
+        bundled
+    }
+
+    /// Adds every volume's beam to the grid one by one (the reference the bundles of
+    /// [`Self::deposit_all`] are held to), then gathers the directions.
+    pub fn deposit_each(&mut self, volumes: &[CausticVolume], settings: &VolumeSettings) {
         for volume in volumes {
             self.deposit(volume, settings);
         }
         self.gather_directions();
+    }
+
+    /// `volume`'s beam as a bundle's member: none where it is wider than
+    /// [`MAX_BUNDLED_SPLIT`] cells somewhere, crosses no layer, or is unlit at its
+    /// middle. Its source per layer is taken at its middle: constant along the beam
+    /// for [`IntensityMode::Conserving`](super::IntensityMode) (the caustic triangle's
+    /// flux times the beam's length), up to the magnification cap.
+    fn bundled_beam(&self, volume: &CausticVolume, settings: &VolumeSettings) -> Option<BundledBeam> {
+        let (cell, cell_volume) = self.cell();
+        if deposit_split(volume, cell) > MAX_BUNDLED_SPLIT {
+            return None;
+        }
+        let local_from_world = self.medium.world_from_local.inverse();
+        let beam = ThinBeam::new(volume, 1, 0, &local_from_world, self.size).filter(|b| b.count > 0)?;
+        let axis = beam.axis;
+        let rate = beam.per_alpha[axis].abs();
+        let forward = beam.per_alpha[axis] > 0.0;
+        let sign = if forward { 1.0 } else { -1.0 };
+        let entry = if forward { beam.first } else { beam.first + beam.count as i32 - 1 };
+        // Layers counted from the face the beam enters the entry layer by.
+        let start = (beam.start[axis] - (entry as f32 - 0.5 * sign)) * sign;
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let slope = Vec2::new(beam.per_alpha[a], beam.per_alpha[b]) / rate;
+        let at_start = Vec2::new(beam.start[a], beam.start[b]) - start * slope;
+        let size = self.size.as_vec3();
+        let across = (at_start + 0.5 * slope + 0.5).floor().clamp(Vec2::ZERO, Vec2::new(size[a], size[b]) - 1.0);
+        let alpha = 0.5 * volume.depth;
+        let s = volume.sample_on_ray(beam.lambda, alpha, settings)?;
+        let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
+        let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs();
+        let beam_length = s.ray.length();
+        let source = volume.color * (s.plane_irradiance * beam_length * area / (rate * cell_volume));
+        if !(source.is_finite() && source.element_sum() > 0.0 && rate.is_finite() && rate > 0.0) {
+            return None;
+        }
+        let mut cell_at = UVec3::ZERO;
+        cell_at[axis] = entry as u32;
+        cell_at[a] = across.x as u32;
+        cell_at[b] = across.y as u32;
+        // The caustic triangle's own spread across the axis: a triangle's variance is
+        // the sum of its squared sides over 36, here quadratic in t.
+        let cells = self.size.as_vec3();
+        let corner = |i: usize| {
+            let origin = volume.origin + volume.axes[0] * volume.vertex_x[i] + volume.axes[2] * volume.vertex_z[i];
+            let ray = volume.axes[0] * volume.ray_x[i] + volume.axes[1] + volume.axes[2] * volume.ray_z[i];
+            let (o, r) = ((local_from_world.transform_point3(origin) + 0.5) * cells - 0.5, local_from_world.transform_vector3(ray) * cells);
+            let slope = Vec2::new(r[a], r[b]) / rate;
+            (Vec2::new(o[a], o[b]) - start * slope, slope)
+        };
+        let corners = [corner(0), corner(1), corner(2)];
+        let mut width = Vec3::ZERO;
+        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
+            let (da, db) = (corners[i].0 - corners[j].0, corners[i].1 - corners[j].1);
+            width += Vec3::new(da.length_squared(), da.dot(db), db.length_squared()) / 36.0;
+        }
+        let hue = volume.color.cmpge(Vec3::splat(0.5 * volume.color.max_element())).bitmask();
+        Some(BundledBeam {
+            key: ((cell_at.z * self.size.y + cell_at.y) * self.size.x + cell_at.x) as usize,
+            flags: 1 << (2 * axis as u32 + forward as u32) | 1 << (6 + hue),
+            across: at_start - across,
+            slope,
+            width,
+            start,
+            end: start + volume.depth * rate,
+            source,
+            length: beam_length / rate,
+            direction: s.ray / beam_length,
+        })
+    }
+
+    /// Adds a bundle's beams as one: at each layer its source, dimmed along the mean
+    /// path, over the cells its members' points cover there (a box with their mean and
+    /// spread, [`bundle_weight`], in place of each point's four cells), and its mean
+    /// direction to the lowest cell around the mean.
+    fn deposit_bundle(&mut self, key: usize, bundle: &BeamBundle) {
+        let size = self.size;
+        let entry_cell = UVec3::new(key as u32 % size.x, (key as u32 / size.x) % size.y, key as u32 / (size.x * size.y));
+        let route = bundle.flags.trailing_zeros();
+        let (axis, forward) = ((route / 2) as usize, route % 2 == 1);
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let n = bundle.count as f32;
+        let (p, d) = (bundle.across / n, bundle.slope / n);
+        let var_p = bundle.across_squared / n - p.length_squared();
+        let cov = bundle.across_slope / n - p.dot(d);
+        let var_d = bundle.slope_squared / n - d.length_squared();
+        let (start, end, length) = (bundle.start / n, bundle.end / n, bundle.length / n);
+        let direction = bundle.direction.normalize_or_zero();
+        let sigma_t = self.medium.coefficients.extinction();
+        let centre = Vec2::new(entry_cell[a] as f32, entry_cell[b] as f32);
+        let first = start.max(0.0).floor() as i32;
+        let last = (end.ceil() as i32).min(first + MAX_DEPOSIT_LAYERS as i32);
+        for k in first..last {
+            let layer = entry_cell[axis] as i32 + if forward { k } else { -k };
+            if layer < 0 || layer >= size[axis] as i32 {
+                break;
+            }
+            let (lo, hi) = (start.max(k as f32), end.min(k as f32 + 1.0));
+            if !(hi > lo) {
+                continue;
+            }
+            let t = 0.5 * (lo + hi);
+            let mean = centre + p + d * t;
+            if !(mean.cmpge(Vec2::splat(-0.5)).all() && mean.cmple(Vec2::new(size[a] as f32, size[b] as f32) - 0.5).all()) {
+                continue;
+            }
+            let reach = (1.5 * (var_p + 2.0 * t * cov + t * t * var_d).max(0.0)).sqrt().min(MAX_BUNDLE_REACH);
+            let source = bundle.source * (-sigma_t * (length * (t - start))).exp() * (hi - lo);
+            let mut c = UVec3::ZERO;
+            c[axis] = layer as u32;
+            let (last_a, last_b) = (size[a] as i32 - 1, size[b] as i32 - 1);
+            for i in bundle_cells(mean.x, reach) {
+                let w_i = bundle_weight(mean.x, reach, i);
+                for j in bundle_cells(mean.y, reach).filter(|_| w_i > 0.0) {
+                    (c[a], c[b]) = (i.clamp(0, last_a) as u32, j.clamp(0, last_b) as u32);
+                    self.source[((c.z * size.y + c.y) * size.x + c.x) as usize] += w_i * bundle_weight(mean.y, reach, j) * source;
+                }
+            }
+            // The direction to lowest corners, every other cell, whose eight cells
+            // cover those lit.
+            let corners = |mean: f32, last: i32| {
+                let cells = bundle_cells(mean, reach);
+                let (lo, hi) = ((*cells.start()).clamp(0, last), (*cells.end()).clamp(0, last));
+                (lo..=hi).step_by(2).map(move |i| i.min((last - 1).max(0)) as u32)
+            };
+            let share = direction * (source.element_sum() / (corners(mean.x, last_a).count() * corners(mean.y, last_b).count()) as f32);
+            c[axis] = (layer as u32).min(size[axis].max(2) - 2);
+            for i in corners(mean.x, last_a) {
+                for j in corners(mean.y, last_b) {
+                    (c[a], c[b]) = (i, j);
+                    self.deposited[((c.z * size.y + c.y) * size.x + c.x) as usize] += share;
+                }
+            }
+        }
     }
 
     /// Each cell's direction: the sum of those deposited at the eight cells `c − o`,
@@ -321,5 +592,27 @@ impl BeamGrid {
             radiance += source * (-c.extinction() * (t - enter)).exp() * (c.scattering * phase * dt);
         }
         radiance
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{bundle_cells, bundle_weight};
+
+    #[test]
+    fn a_bundles_weights_sum_to_one_and_narrow_to_one_points() {
+        for (mean, reach) in [(3.3, 0.0), (3.3, 0.7), (3.5, 2.5), (3.0, 1.0), (0.2, 1.4), (-0.4, 0.9)] {
+            let weights: Vec<(i32, f32)> = bundle_cells(mean, reach).map(|i| (i, bundle_weight(mean, reach, i))).collect();
+            let sum: f32 = weights.iter().map(|(_, w)| w).sum();
+            let centre: f32 = weights.iter().map(|(i, w)| *i as f32 * w).sum();
+            assert!((sum - 1.0).abs() < 1e-5 && (centre - mean).abs() < 1e-4, "{mean} ± {reach}: {weights:?}");
+            assert!(
+                bundle_weight(mean, reach, bundle_cells(mean, reach).start() - 1) == 0.0
+                    && bundle_weight(mean, reach, bundle_cells(mean, reach).end() + 1) == 0.0
+            );
+        }
+        // No spread: the two cells around the point, as a single beam's sample.
+        let lit: Vec<(i32, f32)> = bundle_cells(3.3, 0.0).map(|i| (i, bundle_weight(3.3, 0.0, i))).filter(|(_, w)| *w > 0.0).collect();
+        assert!(lit.len() == 2 && (lit[0].0, lit[1].0) == (3, 4) && (lit[0].1 - 0.7).abs() < 1e-5, "{lit:?}");
     }
 }
