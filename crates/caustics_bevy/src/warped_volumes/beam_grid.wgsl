@@ -343,7 +343,9 @@ fn bundled_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, units:
     let beam_length = length(s.ray);
     m.source = v.color.rgb * (s.plane_irradiance * beam_length * area / (rate * g.cell.y) * units);
     let sum = m.source.x + m.source.y + m.source.z;
-    if !(sum > 0.0 && sum <= 3.0e38 && rate > 0.0 && rate <= 3.0e38) {
+    m.end = m.start + v.origin.w * rate;
+    let bound = f32(MAX_DEPOSIT_LAYERS);
+    if !(sum > 0.0 && sum <= 3.0e38 && rate > 0.0 && rate <= 3.0e38 && abs(m.start) <= bound && abs(m.end) <= bound) {
         return m;
     }
     // The caustic triangle's own spread across the axis (its sides² over 36).
@@ -372,7 +374,6 @@ fn bundled_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, units:
     m.key = g.size.w + (cell.z * g.size.y + cell.y) * g.size.x + cell.x + 1u;
     m.flags = (1u << (2u * axis + select(0u, 1u, forward))) | (1u << (6u + hue.x + 2u * hue.y + 4u * hue.z));
     m.across = at_start - across;
-    m.end = m.start + v.origin.w * rate;
     m.length = beam_length / rate / g.cell.x;
     m.direction = s.ray / beam_length;
     m.found = true;

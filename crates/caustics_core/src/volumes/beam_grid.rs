@@ -367,6 +367,12 @@ impl BeamGrid {
         if !(source.is_finite() && source.element_sum() > 0.0 && rate.is_finite() && rate > 0.0) {
             return None;
         }
+        // A beam from far outside the grid goes alone (the GPU sums starts and ends in
+        // fixed point).
+        let end = start + volume.depth * rate;
+        if !(start.abs() <= MAX_DEPOSIT_LAYERS as f32 && end.abs() <= MAX_DEPOSIT_LAYERS as f32) {
+            return None;
+        }
         let mut cell_at = UVec3::ZERO;
         cell_at[axis] = entry as u32;
         cell_at[a] = across.x as u32;
@@ -395,7 +401,7 @@ impl BeamGrid {
             slope,
             width,
             start,
-            end: start + volume.depth * rate,
+            end,
             source,
             length: beam_length / rate,
             direction: s.ray / beam_length,
