@@ -104,19 +104,18 @@ fn footprint_image(camera: &PinholeCamera, sub: u32, radiance: &(dyn Fn(Vec3, Ve
         .collect()
 }
 
+/// The bench's sea, 12 m across, `resolution`² cells, 3 m up.
+fn bench_sea(resolution: usize) -> TriMesh {
+    let spectrum =
+        OceanSpectrum::new(&OceanSettings { resolution, size: 12.0, wind_speed: 7.0, wind_direction: Vec2::X, amplitude: 4e-3, ..OceanSettings::default() })
+            .unwrap();
+    spectrum.evaluate(0.0).mesh().transformed(&Affine3A::from_translation(Vec3::Y * 3.0))
+}
+
 #[test]
 fn ocean_shafts_from_the_grid_are_within_five_percent_of_the_exact_integral() {
     // The bench's ocean: 12 m of sea 3 m deep under a slanted sun, seen from the water.
-    let spectrum = OceanSpectrum::new(&OceanSettings {
-        resolution: 32,
-        size: 12.0,
-        wind_speed: 7.0,
-        wind_direction: Vec2::X,
-        amplitude: 4e-3,
-        ..OceanSettings::default()
-    })
-    .unwrap();
-    let sea = spectrum.evaluate(0.0).mesh().transformed(&Affine3A::from_translation(Vec3::Y * 3.0));
+    let sea = bench_sea(32);
     let scene = Scene {
         lights: vec![Light::white(LightKind::Directional { direction: Vec3::new(0.35, -1.0, 0.2).normalize(), irradiance: 1.0 })],
         generators: vec![Generator::new(sea, SpecularInteraction::Refract { ior: 1.333, dispersion: None })],
@@ -236,18 +235,7 @@ fn shafts_under_rippled_water_match_the_tracers_photon_beams() {
 /// rippled pool of 128², 8 m across and 2 m deep.
 fn fine_water(ocean: Option<usize>) -> (Scene, MediumBox, PinholeCamera) {
     let (water, size, depth) = match ocean {
-        Some(resolution) => {
-            let spectrum = OceanSpectrum::new(&OceanSettings {
-                resolution,
-                size: 12.0,
-                wind_speed: 7.0,
-                wind_direction: Vec2::X,
-                amplitude: 4e-3,
-                ..OceanSettings::default()
-            })
-            .unwrap();
-            (spectrum.evaluate(0.0).mesh().transformed(&Affine3A::from_translation(Vec3::Y * 3.0)), 12.0, 3.0)
-        }
+        Some(resolution) => (bench_sea(resolution), 12.0, 3.0),
         None => {
             let waves = |x: f32, z: f32| {
                 (
