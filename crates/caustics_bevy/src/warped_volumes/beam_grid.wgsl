@@ -138,17 +138,34 @@ struct ThinBeam {
     count: u32,
 }
 
+// `caustic_area`: the area of the caustic triangle at depth `alpha`.
+fn caustic_area(v: CausticVolume, alpha: f32) -> f32 {
+    let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
+    let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
+    return 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x));
+}
+
+// `grid_ray`: the blend of the volume's rays by `lambda` in a grid's coordinates.
+struct GridRay {
+    start: vec3<f32>,
+    per_alpha: vec3<f32>,
+}
+
+fn grid_ray(v: CausticVolume, lambda: vec3<f32>, local_from_world: mat4x4<f32>, cells: vec3<f32>) -> GridRay {
+    let origin = v.origin.xyz + v.axis_x.xyz * dot(lambda, v.vertex_x.xyz) + v.axis_z.xyz * dot(lambda, v.vertex_z.xyz);
+    let ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
+    return GridRay(((local_from_world * vec4(origin, 1.0)).xyz + 0.5) * cells - 0.5, (local_from_world * vec4(ray, 0.0)).xyz * cells);
+}
+
 // `ThinBeam::new` (`count` 0 for none).
 fn thin_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, split: u32, k: u32) -> ThinBeam {
     var beam: ThinBeam;
     beam.count = 0u;
     beam.lambda = deposit_barycentric(split, k);
-    let lambda = beam.lambda;
-    let origin = v.origin.xyz + v.axis_x.xyz * dot(lambda, v.vertex_x.xyz) + v.axis_z.xyz * dot(lambda, v.vertex_z.xyz);
-    let ray = v.axis_x.xyz * dot(lambda, v.ray_x.xyz) + v.axis_y.xyz + v.axis_z.xyz * dot(lambda, v.ray_z.xyz);
     let cells = vec3<f32>(g.size.xyz);
-    beam.start = ((local_from_world * vec4(origin, 1.0)).xyz + 0.5) * cells - 0.5;
-    beam.per_alpha = (local_from_world * vec4(ray, 0.0)).xyz * cells;
+    let ray = grid_ray(v, beam.lambda, local_from_world, cells);
+    beam.start = ray.start;
+    beam.per_alpha = ray.per_alpha;
     let along = abs(beam.per_alpha);
     beam.axis = select(select(2u, 1u, along.y >= along.z), 0u, along.x >= along.y && along.x >= along.z);
     let a = beam.start[beam.axis];
@@ -337,27 +354,24 @@ fn bundled_beam(v: CausticVolume, g: Grid, local_from_world: mat4x4<f32>, units:
     if !s.inside {
         return m;
     }
-    let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
-    let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
-    let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x));
     let beam_length = length(s.ray);
-    m.source = v.color.rgb * (s.plane_irradiance * beam_length * area / (rate * g.cell.y) * units);
+    // `thin_beam` keeps only rays that move across the grid: `rate` is positive.
+    m.source = v.color.rgb * (s.plane_irradiance * beam_length * caustic_area(v, alpha) / (rate * g.cell.y) * units);
     let sum = m.source.x + m.source.y + m.source.z;
     m.end = m.start + v.origin.w * rate;
     let bound = f32(MAX_DEPOSIT_LAYERS);
-    if !(sum > 0.0 && sum <= 3.0e38 && rate > 0.0 && rate <= 3.0e38 && abs(m.start) <= bound && abs(m.end) <= bound) {
+    if !(sum > 0.0 && sum <= 3.0e38 && abs(m.start) <= bound && abs(m.end) <= bound) {
         return m;
     }
     // The caustic triangle's own spread across the axis (its sides² over 36).
     var corner_at: array<vec2<f32>, 3>;
     var corner_slope: array<vec2<f32>, 3>;
     for (var i = 0u; i < 3u; i++) {
-        let origin = v.origin.xyz + v.axis_x.xyz * v.vertex_x[i] + v.axis_z.xyz * v.vertex_z[i];
-        let ray = v.axis_x.xyz * v.ray_x[i] + v.axis_y.xyz + v.axis_z.xyz * v.ray_z[i];
-        let o = ((local_from_world * vec4(origin, 1.0)).xyz + 0.5) * cells - 0.5;
-        let r = (local_from_world * vec4(ray, 0.0)).xyz * cells;
-        corner_slope[i] = vec2(r[a], r[b]) / rate;
-        corner_at[i] = vec2(o[a], o[b]) - m.start * corner_slope[i];
+        var lambda = vec3(0.0);
+        lambda[i] = 1.0;
+        let r = grid_ray(v, lambda, local_from_world, cells);
+        corner_slope[i] = vec2(r.per_alpha[a], r.per_alpha[b]) / rate;
+        corner_at[i] = vec2(r.start[a], r.start[b]) - m.start * corner_slope[i];
     }
     m.width = vec3(0.0);
     for (var i = 0u; i < 3u; i++) {
@@ -631,9 +645,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                         continue;
                     }
                     let alpha = layer.alpha;
-                    let x = v.vertex_x.xyz + alpha * v.ray_x.xyz;
-                    let z = v.vertex_z.xyz + alpha * v.ray_z.xyz;
-                    let area = 0.5 * abs((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)) / f32(split * split);
+                    let area = caustic_area(v, alpha) / f32(split * split);
                     let s = sample_on_ray(v, beam.lambda, alpha, settings.intensity_mode, settings.max_magnification);
                     if !s.inside {
                         continue;

@@ -87,6 +87,21 @@ pub fn deposit_barycentric(split: u32, k: u32) -> Vec3 {
     Vec3::new(1.0 - u - w, u, w)
 }
 
+/// The area of `volume`'s caustic triangle at depth α (§3.4's `|A(α)|`).
+fn caustic_area(volume: &CausticVolume, alpha: f32) -> f32 {
+    let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
+    0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs()
+}
+
+/// The blend of `volume`'s vertex rays by barycentric weights λ in the coordinates of
+/// a grid of `cells` over a box with `local_from_world` (cell centres at whole
+/// numbers): the ray at `α = 0`, and how far it moves per unit of α.
+fn grid_ray(volume: &CausticVolume, lambda: Vec3, local_from_world: &Affine3A, cells: Vec3) -> (Vec3, Vec3) {
+    let origin = volume.origin + volume.axes[0] * lambda.dot(volume.vertex_x) + volume.axes[2] * lambda.dot(volume.vertex_z);
+    let ray = volume.axes[0] * lambda.dot(volume.ray_x) + volume.axes[1] + volume.axes[2] * lambda.dot(volume.ray_z);
+    ((local_from_world.transform_point3(origin) + 0.5) * cells - 0.5, local_from_world.transform_vector3(ray) * cells)
+}
+
 /// One thin beam of a volume's deposit, in the coordinates of a grid whose cell
 /// centres lie at whole numbers: the barycentric blend of the volume's rays that is its
 /// central ray ([`deposit_barycentric`]), that ray `q(α) = start + α·per_alpha`, the
@@ -114,11 +129,8 @@ impl ThinBeam {
     /// across the grid or is not finite.
     pub fn new(volume: &CausticVolume, split: u32, k: u32, local_from_world: &Affine3A, size: UVec3) -> Option<Self> {
         let lambda = deposit_barycentric(split, k);
-        let origin = volume.origin + volume.axes[0] * lambda.dot(volume.vertex_x) + volume.axes[2] * lambda.dot(volume.vertex_z);
-        let ray = volume.axes[0] * lambda.dot(volume.ray_x) + volume.axes[1] + volume.axes[2] * lambda.dot(volume.ray_z);
         let cells = size.as_vec3();
-        let start = (local_from_world.transform_point3(origin) + 0.5) * cells - 0.5;
-        let per_alpha = local_from_world.transform_vector3(ray) * cells;
+        let (start, per_alpha) = grid_ray(volume, lambda, local_from_world, cells);
         let along = per_alpha.abs();
         let axis = if along.x >= along.y && along.x >= along.z {
             0
@@ -356,15 +368,14 @@ impl BeamGrid {
         let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
         let slope = Vec2::new(beam.per_alpha[a], beam.per_alpha[b]) / rate;
         let at_start = Vec2::new(beam.start[a], beam.start[b]) - start * slope;
-        let size = self.size.as_vec3();
-        let across = (at_start + 0.5 * slope + 0.5).floor().clamp(Vec2::ZERO, Vec2::new(size[a], size[b]) - 1.0);
+        let cells = self.size.as_vec3();
+        let across = (at_start + 0.5 * slope + 0.5).floor().clamp(Vec2::ZERO, Vec2::new(cells[a], cells[b]) - 1.0);
         let alpha = 0.5 * volume.depth;
         let s = volume.sample_on_ray(beam.lambda, alpha, settings)?;
-        let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
-        let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs();
         let beam_length = s.ray.length();
-        let source = volume.color * (s.plane_irradiance * beam_length * area / (rate * cell_volume));
-        if !(source.is_finite() && source.element_sum() > 0.0 && rate.is_finite() && rate > 0.0) {
+        // `ThinBeam::new` keeps only rays that move across the grid: `rate` is positive.
+        let source = volume.color * (s.plane_irradiance * beam_length * caustic_area(volume, alpha) / (rate * cell_volume));
+        if !(source.is_finite() && source.element_sum() > 0.0) {
             return None;
         }
         // A beam from far outside the grid goes alone (the GPU sums starts and ends in
@@ -379,11 +390,8 @@ impl BeamGrid {
         cell_at[b] = across.y as u32;
         // The caustic triangle's own spread across the axis: a triangle's variance is
         // the sum of its squared sides over 36, here quadratic in t.
-        let cells = self.size.as_vec3();
         let corner = |i: usize| {
-            let origin = volume.origin + volume.axes[0] * volume.vertex_x[i] + volume.axes[2] * volume.vertex_z[i];
-            let ray = volume.axes[0] * volume.ray_x[i] + volume.axes[1] + volume.axes[2] * volume.ray_z[i];
-            let (o, r) = ((local_from_world.transform_point3(origin) + 0.5) * cells - 0.5, local_from_world.transform_vector3(ray) * cells);
+            let (o, r) = grid_ray(volume, Vec3::AXES[i], &local_from_world, cells);
             let slope = Vec2::new(r[a], r[b]) / rate;
             (Vec2::new(o[a], o[b]) - start * slope, slope)
         };
@@ -518,8 +526,7 @@ impl BeamGrid {
                 if !(((q + 0.5) / cells - 0.5).abs().max_element() <= 0.5) {
                     continue;
                 }
-                let (x, z) = (volume.vertex_x + alpha * volume.ray_x, volume.vertex_z + alpha * volume.ray_z);
-                let area = 0.5 * ((x.y - x.x) * (z.z - z.x) - (z.y - z.x) * (x.z - x.x)).abs() / (split * split) as f32;
+                let area = caustic_area(volume, alpha) / (split * split) as f32;
                 let Some(s) = volume.sample_on_ray(beam.lambda, alpha, settings) else {
                     continue;
                 };
