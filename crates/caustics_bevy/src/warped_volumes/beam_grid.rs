@@ -383,12 +383,11 @@ pub(super) fn deposit_beams(
             &BindGroupEntries::sequential((counters.as_entire_binding(), uniform.as_entire_binding(), fixed.as_entire_binding(), cells.as_entire_binding())),
         )
     });
-    // At most one workgroup for four volumes the buffer holds (`VOLUME_LANES`), eight
-    // bundles (`BUNDLE_LANES`), and 64 volumes or cells a workgroup; each strides over
-    // the rest.
+    // At most one workgroup for 64 volumes, bundles or cells the buffers hold; each
+    // strides over the rest.
     let groups = |items: u64| items.clamp(1, 65535) as u32;
     let volume_groups = groups(volumes.capacity().div_ceil(64));
-    let deposit_groups = [volume_groups, volume_groups, groups(volumes.capacity().div_ceil(4)), groups((bundles.size() / BUNDLE_BYTES).div_ceil(8))];
+    let deposit_groups = [volume_groups, volume_groups, volume_groups, groups((bundles.size() / BUNDLE_BYTES).div_ceil(64))];
     let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();

@@ -500,21 +500,15 @@ fn bundle_cells(mean: f32, reach: f32) -> vec2<i32> {
     return vec2(i32(floor(mean - reach)), i32(floor(mean + reach)) + 1);
 }
 
-// Invocations that share one bundle's layers (a few tens).
-const BUNDLE_LANES: u32 = 8u;
-
-// Eight bundles a workgroup at a time, from the list of slots taken, eight invocations
-// sharing each bundle's layers: a bundle that merges adds its light layer by layer
-// (`BeamGrid::deposit_bundle`).
+// One invocation a bundle, from the list of slots taken: a bundle that merges adds its
+// light layer by layer (`BeamGrid::deposit_bundle`).
 @compute @workgroup_size(64)
-fn deposit_bundles(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
+fn deposit_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
     let list = bundle_list();
     let taken = atomicLoad(&bundles[list]);
-    let per_group = 64u / BUNDLE_LANES;
-    let lane = local % BUNDLE_LANES;
-    for (var listed = group.x * per_group + local / BUNDLE_LANES; listed < taken; listed += groups.x * per_group) {
+    for (var listed = id.x; listed < taken; listed += groups.x * 64u) {
         let slot = atomicLoad(&bundles[list + 1u + listed]);
         let at = slot * BUNDLE_WORDS;
         let key = atomicLoad(&bundles[at]);
@@ -551,7 +545,7 @@ fn deposit_bundles(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgro
         let centre = vec2(f32(entry_cell[a]), f32(entry_cell[b]));
         let first = i32(floor(max(start, 0.0)));
         let last = min(i32(ceil(end)), first + i32(MAX_DEPOSIT_LAYERS));
-        for (var k = first + i32(lane); k < last; k += i32(BUNDLE_LANES)) {
+        for (var k = first; k < last; k++) {
             let layer = i32(entry_cell[axis]) + select(-k, k, forward);
             if layer < 0 || layer >= i32(size[axis]) {
                 break;
@@ -610,55 +604,89 @@ fn deposit_bundles(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgro
     }
 }
 
-// Invocations that share one volume's samples: a beam finer than a cell has one a
-// layer it crosses, a few tens, so a workgroup takes four volumes at a time.
-const VOLUME_LANES: u32 = 16u;
+// A volume split into more thin beams than this goes to its workgroup's queue
+// (`wide`), whose invocations share out its thin beams, so that no invocation is
+// left with a wide beam's thousands of samples.
+const QUEUED_BEAMS: u32 = 8u;
 
-// Four volumes a workgroup at a time (the build's count in `counters[1]`), sixteen
-// invocations sharing each thin beam's layers; `BeamGrid::deposit` per medium.
-// Integer adds: the sums do not depend on the order the GPU runs them in.
+// The beams of this workgroup's volumes queued for all its invocations to share:
+// volume index · 4 + medium.
+var<workgroup> wide: array<u32, 256>;
+var<workgroup> queued: atomic<u32>;
+
+// Thin beams `first`, `first + stride`, … of volume `index`'s beam in medium `m`, every
+// layer each crosses (`BeamGrid::deposit`).
+fn deposit_thin_beams(index: u32, m: u32, first: u32, stride: u32) {
+    let v = volumes[index];
+    let medium = settings.media[m];
+    let g = grids.grids[m];
+    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
+    let units = fixed_units(g, flux);
+    let sigma_t = medium.extinction.xyz;
+    let split = deposit_split(v, g.cell.x);
+    let cells = vec3<f32>(g.size.xyz);
+    for (var k = first; k < split * split; k += stride) {
+        let beam = thin_beam(v, g, medium.local_from_world, split, k);
+        for (var j = 0u; j < beam.count; j++) {
+            let layer = beam_layer(beam, v.origin.w, j);
+            let local = (layer.grid_point + 0.5) / cells - 0.5;
+            if !layer.found || !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
+                continue;
+            }
+            let alpha = layer.alpha;
+            let area = caustic_area(v, alpha) / f32(split * split);
+            let s = sample_on_ray(v, beam.lambda, alpha, settings.intensity_mode, settings.max_magnification);
+            if !s.inside {
+                continue;
+            }
+            let beam_length = length(s.ray);
+            let source = v.color.rgb * exp(-sigma_t * (s.depth * beam_length)) * (s.plane_irradiance * beam_length * area * layer.d_alpha / g.cell.y * units);
+            if any(source != source) || any(abs(source) > vec3(3.0e38)) {
+                continue;
+            }
+            spread(g, layer.grid_point, beam.axis, source, s.ray / beam_length * (source.x + source.y + source.z));
+        }
+    }
+}
+
+// One invocation a volume (the build's count in `counters[1]`), each of its beams that
+// did not join a bundle laid down layer by layer; a beam split into more than
+// `QUEUED_BEAMS` thin ones is queued for the whole workgroup. One invocation walks a
+// narrow beam's few tens of layers: on a GPU that runs invocations in lockstep groups
+// the layers would keep more of them busy, but the volume's setup (its load, its thin
+// beam) would be repeated in every one. Integer adds: the sums do not depend on the
+// order the GPU runs them in.
 @compute @workgroup_size(64)
 fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let count = counters[1];
-    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
-    let per_group = 64u / VOLUME_LANES;
-    let lane = local % VOLUME_LANES;
-    for (var index = group.x * per_group + local / VOLUME_LANES; index < count; index += groups.x * per_group) {
-        let v = volumes[index];
-        for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
-            let medium = settings.media[m];
-            let g = grids.grids[m];
-            let units = fixed_units(g, flux);
-            // A beam that joined a bundle goes with it (`deposit_bundles`).
-            if (joined[index] & (1u << m)) != 0u {
-                continue;
-            }
-            let sigma_t = medium.extinction.xyz;
-            let split = deposit_split(v, g.cell.x);
-            let cells = vec3<f32>(g.size.xyz);
-            for (var k = 0u; k < split * split; k++) {
-                let beam = thin_beam(v, g, medium.local_from_world, split, k);
-                for (var j = lane; j < beam.count; j += VOLUME_LANES) {
-                    let layer = beam_layer(beam, v.origin.w, j);
-                    let local = (layer.grid_point + 0.5) / cells - 0.5;
-                    if !layer.found || !(max(abs(local.x), max(abs(local.y), abs(local.z))) <= 0.5) {
-                        continue;
-                    }
-                    let alpha = layer.alpha;
-                    let area = caustic_area(v, alpha) / f32(split * split);
-                    let s = sample_on_ray(v, beam.lambda, alpha, settings.intensity_mode, settings.max_magnification);
-                    if !s.inside {
-                        continue;
-                    }
-                    let beam_length = length(s.ray);
-                    let source = v.color.rgb * exp(-sigma_t * (s.depth * beam_length)) * (s.plane_irradiance * beam_length * area * layer.d_alpha / g.cell.y * units);
-                    if any(source != source) || any(abs(source) > vec3(3.0e38)) {
-                        continue;
-                    }
-                    spread(g, layer.grid_point, beam.axis, source, s.ray / beam_length * (source.x + source.y + source.z));
+    let media = min(settings.medium_count, 4u);
+    for (var base = group.x * 64u; base < count; base += groups.x * 64u) {
+        if local == 0u {
+            atomicStore(&queued, 0u);
+        }
+        workgroupBarrier();
+        let index = base + local;
+        if index < count {
+            for (var m = 0u; m < media; m++) {
+                // A beam that joined a bundle goes with it (`deposit_bundles`).
+                if (joined[index] & (1u << m)) != 0u {
+                    continue;
+                }
+                let split = deposit_split(volumes[index], grids.grids[m].cell.x);
+                if split * split > QUEUED_BEAMS {
+                    wide[atomicAdd(&queued, 1u)] = index * 4u + m;
+                } else {
+                    deposit_thin_beams(index, m, 0u, 1u);
                 }
             }
         }
+        workgroupBarrier();
+        let n = atomicLoad(&queued);
+        for (var q = 0u; q < n; q++) {
+            let item = wide[q];
+            deposit_thin_beams(item / 4u, item % 4u, local, 64u);
+        }
+        workgroupBarrier();
     }
 }
 #endif
