@@ -19,7 +19,10 @@ use bevy::prelude::*;
 use bevy::render::{
     diagnostic::RecordDiagnostics,
     render_resource::{
-        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, texture_depth_2d, texture_depth_2d_multisampled, uniform_buffer},
+        binding_types::{
+            sampler, storage_buffer_read_only_sized, storage_buffer_sized, texture_3d, texture_depth_2d, texture_depth_2d_multisampled, texture_storage_3d,
+            uniform_buffer,
+        },
         *,
     },
     renderer::{RenderContext, RenderDevice, RenderQueue},
@@ -31,7 +34,8 @@ use caustics_core::params::MediumCoefficients;
 use caustics_core::volumes::{MediumBox, cell_of, grid_size};
 
 /// `Grid` in `beam_grid.wgsl`: one medium's cells (xyz) and the first one's index (w);
-/// a cell's smallest world edge (x) and world volume (y).
+/// a cell's smallest world edge (x) and world volume (y), and the grid's first layer in
+/// the march's textures (z).
 #[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuGrid {
     size: UVec4,
@@ -48,9 +52,10 @@ pub(super) struct GpuBeamGrids {
     max_steps: u32,
 }
 
-/// Eight words a cell as the march reads it: source and summed direction (where every
-/// volume shares a hue, the first four only: the direction and the source's sum).
-const CELL_BYTES: u64 = 32;
+/// The march's textures: source and summed direction (where every volume shares a hue,
+/// the first only: the direction and the source's sum), in half floats that the
+/// sampler filters trilinearly.
+const GRID_TEXTURE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
 /// Six words a cell as the deposit adds to it, in 32-bit fixed point: the source and the
 /// directions whose lowest corner the cell is.
@@ -75,13 +80,17 @@ fn bundle_bytes(slots: u64) -> u64 {
 /// Render world: the grids of this frame's media and whether they need a deposit.
 #[derive(Resource, Default)]
 pub(super) struct BeamGridBuffers {
-    pub cells: Option<Buffer>,
-    /// What the deposit adds to, and `resolve` turns into `cells`.
+    /// The march's two textures, every grid stacked along z from its first layer.
+    pub textures: Option<[TextureView; 2]>,
+    /// What the deposit adds to, and `resolve` turns into `textures`.
     fixed: Option<Buffer>,
     /// The bundles of thin beams ([`caustics_core::volumes::BeamGrid::deposit_all`])
     /// and, per volume, the media whose bundle its beam joined.
     bundles: Option<Buffer>,
     joined: Option<Buffer>,
+    /// The grids' cells together, and the textures' size.
+    cells: u32,
+    extent: Extent3d,
     /// The cells along a box's longest side when fewer than asked for fit (warned once).
     clamped: Option<u32>,
     pub grids: UniformBuffer<GpuBeamGrids>,
@@ -105,11 +114,19 @@ pub(super) struct BeamGridPipelines {
     /// the resolve's layouts.
     anchors: [CachedComputePipelineId; 2],
     pub march_layouts: [KeptLayout; 2],
+    /// The march's trilinear filter, clamped at the edges.
+    pub sampler: Sampler,
     shader: Handle<Shader>,
     fullscreen: FullscreenShader,
 }
 
-pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServer>, fullscreen: Res<FullscreenShader>, cache: Res<PipelineCache>) {
+pub(super) fn init_pipelines(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    fullscreen: Res<FullscreenShader>,
+    cache: Res<PipelineCache>,
+    device: Res<RenderDevice>,
+) {
     let shader = bevy::asset::load_embedded_asset!(asset_server.as_ref(), "beam_grid.wgsl");
     let deposit_layout = BindGroupLayoutDescriptor::new(
         "caustic_shaft_deposit_layout",
@@ -131,10 +148,10 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         &BindGroupLayoutEntries::sequential(
             ShaderStages::COMPUTE,
             (
-                storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<GpuBeamGrids>(false),
                 storage_buffer_read_only_sized(false, None),
-                storage_buffer_sized(false, None),
+                texture_storage_3d(GRID_TEXTURE_FORMAT, StorageTextureAccess::WriteOnly),
+                texture_storage_3d(GRID_TEXTURE_FORMAT, StorageTextureAccess::WriteOnly),
             ),
         ),
     );
@@ -162,6 +179,9 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
                     uniform_buffer::<super::render::GpuVolumeSettings>(false),
                     uniform_buffer::<GpuBeamGrids>(false),
                     storage_buffer_read_only_sized(false, None),
+                    texture_3d(TextureSampleType::Float { filterable: true }),
+                    texture_3d(TextureSampleType::Float { filterable: true }),
+                    sampler(SamplerBindingType::Filtering),
                     if multisampled { texture_depth_2d_multisampled() } else { texture_depth_2d() },
                 ),
             ),
@@ -174,6 +194,12 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         resolve,
         anchors,
         march_layouts: march_layouts.map(KeptLayout::new),
+        sampler: device.create_sampler(&SamplerDescriptor {
+            label: Some("caustic_shaft_grid_sampler"),
+            mag_filter: FilterMode::Linear,
+            min_filter: FilterMode::Linear,
+            ..default()
+        }),
         shader,
         fullscreen: fullscreen.clone(),
     });
@@ -221,27 +247,31 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
 }
 
 /// The grids over `media`, `longest` cells along each box's longest side, their
-/// layout (to tell when it changes) and their cells together.
-fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(GpuMedium, UVec4)>, u32) {
+/// layout (to tell when it changes), their cells together and the textures' size (the
+/// grids stacked along z).
+fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(GpuMedium, UVec4)>, u32, UVec3) {
     let mut gpu = GpuBeamGrids { max_steps, ..default() };
     let mut layout = Vec::new();
     let mut first = 0u32;
+    let mut extent = UVec3::ZERO;
     for (grid, medium) in gpu.grids.iter_mut().zip(&media.0) {
         let world_from_local = glam::Affine3A::from_mat4(glam::Mat4::from_cols_array(&medium.local_from_world.inverse().to_cols_array()));
         let coefficients = MediumCoefficients { scattering: 0.0, absorption: glam::Vec3::ZERO, asymmetry: 0.0 };
         let core = MediumBox { world_from_local, coefficients };
         let size = grid_size(&core, longest);
         let (edge, volume) = cell_of(&core, size);
-        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, 0.0, 0.0) };
+        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, extent.z as f32, 0.0) };
         layout.push((*medium, grid.size));
         first += size.x * size.y * size.z;
+        extent = UVec3::new(extent.x.max(size.x), extent.y.max(size.y), extent.z + size.z);
     }
-    (gpu, layout, first)
+    (gpu, layout, first, extent)
 }
 
 /// Lays the grids out over this frame's media (cells along each box's longest side:
 /// [`super::WarpedVolumesSettings::shaft_grid`], fewer where the deposit's fixed-point
-/// cells would pass what the adapter binds, with a warning) and marks a deposit when
+/// cells would pass what the adapter binds or the stacked grids its largest 3D
+/// texture, with a warning) and marks a deposit when
 /// the volumes are built this frame or the layout changed; none while no view shows
 /// shafts.
 #[expect(clippy::too_many_arguments)]
@@ -261,10 +291,11 @@ pub(super) fn prepare_grids(
         return;
     }
     let bindable = largest_binding(&device);
+    let largest_texture = device.limits().max_texture_dimension_3d;
     let mut longest = settings.shaft_grid.max(2);
-    let (mut gpu, layout, first) = loop {
+    let (mut gpu, layout, first, extent) = loop {
         let laid = lay_out(&media, longest, settings.shaft_steps.max(1));
-        if u64::from(laid.2) * FIXED_CELL_BYTES <= bindable || longest <= 2 {
+        if (u64::from(laid.2) * FIXED_CELL_BYTES <= bindable && laid.3.max_element() <= largest_texture) || longest <= 2 {
             break laid;
         }
         longest -= longest / 8 + 1;
@@ -272,8 +303,8 @@ pub(super) fn prepare_grids(
     let clamped = (longest < settings.shaft_grid).then_some(longest);
     if clamped.is_some() && grids.clamped != clamped {
         warn!(
-            "bevy_caustics: the light shafts' grids of {} media at WarpedVolumesSettings::shaft_grid = {} cells need more than this adapter binds ({}): \
-             they are laid out at {longest} cells along each box's longest side",
+            "bevy_caustics: the light shafts' grids of {} media at WarpedVolumesSettings::shaft_grid = {} cells need more than this adapter binds ({}) \
+             or its 3D textures hold ({largest_texture} texels a side): they are laid out at {longest} cells along each box's longest side",
             media.0.len(),
             settings.shaft_grid,
             mib(bindable)
@@ -292,10 +323,26 @@ pub(super) fn prepare_grids(
             mapped_at_creation: false,
         }))
     };
-    let bytes = u64::from(first) * CELL_BYTES;
-    if grids.cells.as_ref().is_none_or(|b| b.size() != bytes) {
-        grids.cells = buffer("caustic_shaft_grid", bytes);
-        grids.fixed = buffer("caustic_shaft_grid_fixed", u64::from(first) * FIXED_CELL_BYTES);
+    let size = Extent3d { width: extent.x.max(1), height: extent.y.max(1), depth_or_array_layers: extent.z.max(1) };
+    if grids.extent != size || grids.cells != first {
+        let texture = |label| {
+            device
+                .create_texture(&TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: TextureDimension::D3,
+                    format: GRID_TEXTURE_FORMAT,
+                    usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                })
+                .create_view(&TextureViewDescriptor::default())
+        };
+        grids.textures = Some([texture("caustic_shaft_grid_light"), texture("caustic_shaft_grid_directions")]);
+        grids.fixed = buffer("caustic_shaft_grid_fixed", u64::from(first.max(1)) * FIXED_CELL_BYTES);
+        grids.cells = first;
+        grids.extent = size;
         grids.deposit = true;
     }
     let capacity = volumes.capacity();
@@ -313,12 +360,12 @@ pub(super) fn prepare_grids(
     write_changed(&mut grids.grids, gpu, &device, &queue);
 }
 
-/// Adds every volume's beam to the fixed-point grids, then turns them into floats, one
-/// invocation a cell, and clears them for the next deposit (a new buffer starts
-/// cleared), when [`prepare_grids`] asked for it (after the build: the same frame's
-/// volumes). The narrow beams that enter the grid through one cell go as one bundle
-/// (counted, then joined, one invocation a volume; deposited eight invocations a
-/// bundle), the others sixteen invocations a volume.
+/// Adds every volume's beam to the fixed-point grids, then turns them into the march's
+/// half-float textures, one invocation a cell, and clears them for the next deposit (a
+/// new buffer starts cleared), when [`prepare_grids`] asked for it (after the build:
+/// the same frame's volumes). The narrow beams that enter the grid through one cell go
+/// as one bundle (counted, then joined, one invocation a volume; deposited one
+/// invocation a bundle), the others one invocation a volume, or a workgroup a wide one.
 pub(super) fn deposit_beams(
     mut ctx: RenderContext,
     mut grids: ResMut<BeamGridBuffers>,
@@ -332,7 +379,7 @@ pub(super) fn deposit_beams(
         true,
         Some(deposit),
         Some(resolve),
-        Some(cells),
+        Some([light, directions]),
         Some(fixed),
         Some(bundles),
         Some(joined),
@@ -344,7 +391,7 @@ pub(super) fn deposit_beams(
         grids.deposit,
         pipelines.deposit.iter().map(|id| cache.get_compute_pipeline(*id)).collect::<Option<Vec<_>>>(),
         cache.get_compute_pipeline(pipelines.resolve),
-        grids.cells.as_ref(),
+        grids.textures.as_ref(),
         grids.fixed.as_ref(),
         grids.bundles.as_ref(),
         grids.joined.as_ref(),
@@ -375,12 +422,12 @@ pub(super) fn deposit_beams(
         )
     });
     let layout = pipelines.resolve_layout.get(&cache);
-    let bound = [layout.into(), counters.into(), uniform.into(), fixed.into(), cells.into()];
+    let bound = [layout.into(), uniform.into(), fixed.into(), light.into(), directions.into()];
     let resolve_group = grids.kept[1].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_resolve_bind_group",
             layout,
-            &BindGroupEntries::sequential((counters.as_entire_binding(), uniform.as_entire_binding(), fixed.as_entire_binding(), cells.as_entire_binding())),
+            &BindGroupEntries::sequential((uniform.as_entire_binding(), fixed.as_entire_binding(), light, directions)),
         )
     });
     // At most one workgroup for 64 volumes, bundles or cells the buffers hold; each
@@ -388,7 +435,7 @@ pub(super) fn deposit_beams(
     let groups = |items: u64| items.clamp(1, 65535) as u32;
     let volume_groups = groups(volumes.capacity().div_ceil(64));
     let deposit_groups = [volume_groups, volume_groups, volume_groups, groups((bundles.size() / BUNDLE_BYTES).div_ceil(64))];
-    let resolve_groups = (cells.size() / CELL_BYTES).div_ceil(64).clamp(1, 65535) as u32;
+    let resolve_groups = groups(u64::from(grids.cells).div_ceil(64));
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();

@@ -11,8 +11,8 @@
 
 // One medium's grid (`GpuBeamGrid` in `render.rs`).
 struct Grid {
-    size: vec4<u32>,   // xyz: cells, w: the first cell's index in `cells`
-    cell: vec4<f32>,   // x: the smallest world edge of a cell, y: a cell's world volume
+    size: vec4<u32>,   // xyz: cells, w: the first cell's index in `fixed`
+    cell: vec4<f32>,   // x: the smallest world edge of a cell, y: a cell's world volume, z: its first layer in the textures
 }
 
 struct Grids {
@@ -25,7 +25,7 @@ struct Grids {
 // directions of the samples whose lowest corner the cell is, weighted by their light
 // (xyz), each a signed 32-bit fixed-point number (`fixed_units`), so that it adds with
 // one integer atomic where a float add needs a compare-exchange loop. `resolve` turns
-// them into the march's two `vec4<f32>` a cell.
+// them into the march's two half-float 3D textures (`light`, `directions`).
 const FIXED_WORDS: u32 = 6u;
 const DIRECTION_WORD: u32 = 3u;
 
@@ -44,6 +44,10 @@ fn fixed_units(g: Grid, flux: vec3<f32>) -> f32 {
     return select(1.0, clamp(33554432.0 / unit, 1.0e-30, 1.0e30), unit > 0.0);
 }
 
+// The half-float textures' units: 2⁻¹⁶ fixed units of source, 2⁻¹⁹ of direction.
+const SOURCE_SCALE: f32 = 1.52587890625e-5;
+const DIRECTION_SCALE: f32 = 1.9073486328125e-6;
+
 struct GridCorner {
     cell: u32,  // the cell's index in `cells`, all grids together
     weight: f32,
@@ -54,11 +58,6 @@ struct GridCorner {
 struct GridCorners {
     base: vec3<u32>,
     f: vec3<f32>,
-}
-
-// `BeamGrid::corners`: the eight cells around a point of the unit cube.
-fn grid_corners(g: Grid, local: vec3<f32>) -> GridCorners {
-    return grid_corners_at(g, (local + 0.5) * vec3<f32>(g.size.xyz) - 0.5);
 }
 
 // `BeamGrid::corners_at`: the same of a point in grid coordinates (cell centres at
@@ -698,10 +697,10 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
 fn anchor() {}
 
 #ifdef RESOLVE
-@group(0) @binding(0) var<storage, read> counters: array<u32>;
-@group(0) @binding(1) var<uniform> grids: Grids;
-@group(0) @binding(2) var<storage, read> fixed: array<u32>;
-@group(0) @binding(3) var<storage, read_write> cells: array<vec4<f32>>;
+@group(0) @binding(0) var<uniform> grids: Grids;
+@group(0) @binding(1) var<storage, read> fixed: array<u32>;
+@group(0) @binding(2) var light: texture_storage_3d<rgba16float, write>;
+@group(0) @binding(3) var directions: texture_storage_3d<rgba16float, write>;
 
 // A fixed-point word (`add`) as a float.
 fn from_fixed(word: u32) -> f32 {
@@ -715,19 +714,24 @@ fn deposited_direction(cell: u32) -> vec3<f32> {
 }
 
 // One invocation a cell of every grid: its fixed-point words as the march reads them,
-// its direction gathered from the eight cells below it (`BeamGrid::gather_directions`).
-// The deposit's words are cleared after this pass, since a cell reads its neighbours'.
+// its direction gathered from the eight cells below it (`BeamGrid::gather_directions`),
+// each grid at its first layer of the textures. Half floats hold the fixed units
+// scaled down (`SOURCE_SCALE`, `DIRECTION_SCALE`): a channel stays under 2³¹ units, and
+// the eight cells' directions under 2³⁴. The deposit's words are cleared after this
+// pass, since a cell reads its neighbours'.
 @compute @workgroup_size(64)
 fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
-    let total = arrayLength(&cells) / 2u;
+    var total = 0u;
+    for (var m = 0u; m < 4u; m++) {
+        let g = grids.grids[m];
+        total = max(total, g.size.w + g.size.x * g.size.y * g.size.z);
+    }
     for (var cell = id.x; cell < total; cell += groups.x * 64u) {
         var m = 0u;
         while m < 3u && cell >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
             m++;
         }
         let g = grids.grids[m];
-        let units = fixed_units(g, flux);
         let word = cell * FIXED_WORDS;
         let first = g.size.w;
         let at = cell - first;
@@ -740,14 +744,15 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
                 direction += deposited_direction(first + (b.z * g.size.y + b.y) * g.size.x + b.x);
             }
         }
-        // Where every volume shares a hue, one vec4 a cell: the direction and the
+        let texel = vec3<i32>(c + vec3(0u, 0u, u32(g.cell.z)));
+        // Where every volume shares a hue, one texel a cell: the direction and the
         // source's sum, which `lookup` shares out by the hue.
         if grids.hue.w > 0.0 {
-            cells[2u * cell] = vec4(direction, from_fixed(word)) / units;
+            textureStore(light, texel, vec4(direction * DIRECTION_SCALE, from_fixed(word) * SOURCE_SCALE));
             continue;
         }
-        cells[2u * cell] = vec4(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u), 0.0) / units;
-        cells[2u * cell + 1u] = vec4(direction / units, 0.0);
+        textureStore(light, texel, vec4(vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u)) * SOURCE_SCALE, 0.0));
+        textureStore(directions, texel, vec4(direction * DIRECTION_SCALE, 0.0));
     }
 }
 #endif
@@ -756,35 +761,31 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups
 @group(0) @binding(0) var<uniform> view: View;
 @group(0) @binding(1) var<uniform> settings: VolumeSettings;
 @group(0) @binding(2) var<uniform> grids: Grids;
-@group(0) @binding(3) var<storage, read> cells: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> counters: array<u32>;
+@group(0) @binding(4) var light: texture_3d<f32>;
+@group(0) @binding(5) var directions: texture_3d<f32>;
+@group(0) @binding(6) var trilinear: sampler;
 #ifdef MULTISAMPLED
-@group(0) @binding(4) var depth_prepass: texture_depth_multisampled_2d;
+@group(0) @binding(7) var depth_prepass: texture_depth_multisampled_2d;
 #else
-@group(0) @binding(4) var depth_prepass: texture_depth_2d;
+@group(0) @binding(7) var depth_prepass: texture_depth_2d;
 #endif
 
 const PI: f32 = 3.141592653589793;
 
-// `BeamGrid::lookup`: source (xyz) and summed direction, trilinear between cell centres.
+// `BeamGrid::lookup`: source (xyz, in fixed units scaled by `SOURCE_SCALE`) and summed
+// direction, trilinear between cell centres, clamped to the outer cells' centres so
+// that the filter never reads the next grid's layers.
 fn lookup(g: Grid, local: vec3<f32>) -> array<vec3<f32>, 2> {
-    let corners = grid_corners(g, local);
+    let size = vec3<f32>(g.size.xyz);
+    let texel = clamp((local + 0.5) * size - 0.5, vec3(0.0), size - 1.0) + vec3(0.0, 0.0, g.cell.z);
+    let at = (texel + 0.5) / vec3<f32>(textureDimensions(light));
+    let packed = textureSampleLevel(light, trilinear, at, 0.0);
     if grids.hue.w > 0.0 {
-        // One vec4 a cell (`resolve`): half the loads.
-        var packed = vec4(0.0);
-        for (var corner = 0u; corner < 8u; corner++) {
-            let c = grid_corner(g, corners, corner);
-            packed += c.weight * cells[c.cell * 2u];
-        }
+        // One texel a cell (`resolve`): half the samples.
         return array(grids.hue.xyz * packed.w, packed.xyz);
     }
-    var source = vec3(0.0);
-    var direction = vec3(0.0);
-    for (var corner = 0u; corner < 8u; corner++) {
-        let c = grid_corner(g, corners, corner);
-        source += c.weight * cells[c.cell * 2u].xyz;
-        direction += c.weight * cells[c.cell * 2u + 1u].xyz;
-    }
-    return array(source, direction);
+    return array(packed.xyz, textureSampleLevel(directions, trilinear, at, 0.0).xyz);
 }
 
 // `BeamGrid::in_scattered_radiance` at the view's pixel this fragment stands for
@@ -803,9 +804,11 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     if depth > 0.0 {
         len = distance(world_at(view, at, depth), eye);
     }
+    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
     var radiance = vec3(0.0);
     for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
         let medium = settings.media[m];
+        let unscaled = 1.0 / (SOURCE_SCALE * fixed_units(grids.grids[m], flux));
         let t = clip_medium(medium, eye, dir, len);
         if !(t.x < t.y) {
             continue;
@@ -827,7 +830,7 @@ fn march(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
                 let denom = max(1.0 + g * g - 2.0 * g * dot(direction / along, -dir), 1e-12);
                 phase = (1.0 - g * g) / (4.0 * PI * denom * sqrt(denom));
             }
-            radiance += cell[0] * exp(-sigma_t * (s - t.x)) * (c.x * phase * dt);
+            radiance += cell[0] * exp(-sigma_t * (s - t.x)) * (c.x * phase * dt * unscaled);
         }
     }
     return exposed(radiance, view.exposure);
