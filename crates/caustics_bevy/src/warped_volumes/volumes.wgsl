@@ -413,15 +413,20 @@ fn splat_shape(index: u32) -> SplatShape {
     return shape;
 }
 
-// The workgroup's volumes' shapes, and how many of their rows come before each's.
+// A shape of at most this many rows is lit by the invocation that found it, which
+// loads its volume once; taller ones share out their rows (`splat`).
+const OWN_ROWS: u32 = 16u;
+
+// The workgroup's tall shapes, and how many of their rows come before each's.
 var<workgroup> shapes: array<SplatShape, 64>;
 var<workgroup> rows_before: array<u32, 65>;
 
 // The surface pass's small volumes, 64 a workgroup: each invocation finds one volume's
-// shape (`splat_shape`), then the workgroup lights the rows of all of them, every
-// 64th row of the 64 shapes from each invocation's, so that a large shape beside small
-// ones keeps no lanes waiting (the shape's convexity lets a row of pixels meet it
-// between the outermost points of its twelve edges over the row).
+// shape (`splat_shape`) and lights it if it is at most `OWN_ROWS` rows tall; the
+// workgroup then lights the rows of the taller ones, every 64th row from each
+// invocation's, so that a large shape beside small ones keeps no lanes waiting (the
+// shape's convexity lets a row of pixels meet it between the outermost points of its
+// twelve edges over the row).
 @compute @workgroup_size(64)
 fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
     let first_volume = (group.x + group.y * groups.x) * 64u;
@@ -429,7 +434,11 @@ fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) group
         atomicStore(&large[0], 60u);
     }
     let shape = splat_shape(first_volume + lane);
+    let own = shape.rows <= OWN_ROWS;
     shapes[lane] = shape;
+    if own {
+        shapes[lane].rows = 0u;
+    }
     workgroupBarrier();
     if lane == 0u {
         var rows = 0u;
@@ -440,8 +449,14 @@ fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) group
         rows_before[64] = rows;
     }
     workgroupBarrier();
-    let total = rows_before[64];
     var shaded = 0u;
+    if own && shape.rows > 0u {
+        let v = volumes[first_volume + lane];
+        for (var row = 0u; row < shape.rows; row++) {
+            shaded += add_light(v, shape.corner, shape.first.y + i32(row), shape.first.x, shape.last.x);
+        }
+    }
+    let total = rows_before[64];
     var k = 0u;
     for (var row = lane; row < total; row += 64u) {
         // The shape the row belongs to (rows go up, so the search goes on from the last).
