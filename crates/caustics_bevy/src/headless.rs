@@ -357,7 +357,7 @@ impl HeadlessRenderer {
     }
 
     /// [`failed_pipeline`] of the app's render world.
-    fn failed_pipeline(&self) -> Option<String> {
+    pub fn failed_pipeline(&self) -> Option<String> {
         failed_pipeline(self.app.get_sub_app(bevy::render::RenderApp)?.world().get_resource()?)
     }
 }

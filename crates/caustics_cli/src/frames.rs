@@ -222,8 +222,12 @@ fn measure(family: &Family, parameter: u32, bench: &FrameBench) -> Result<FrameC
     let failed = |what: &str| format!("{} on the {} at {size} {}: {what}", family.technique, family.scene, family.unit);
     // Warm up: the first pass, then two frames for its GPU figures to arrive.
     let mut left = None;
-    // Bevy quits the app on a rendering error: nothing after it would be measured.
-    let quit = |renderer: &HeadlessRenderer| renderer.app.should_exit().map(|_| failed("the app quit (a rendering error, logged above)"));
+    // Bevy quits the app on a rendering error: nothing after it would be measured. A
+    // pipeline that did not compile leaves its pass out of every frame.
+    let quit = |renderer: &HeadlessRenderer| {
+        let pipeline = renderer.failed_pipeline().map(|why| failed(&format!("a pipeline failed: {why}")));
+        pipeline.or_else(|| renderer.app.should_exit().map(|_| failed("the app quit (a rendering error, logged above)")))
+    };
     for _ in 0..MAX_WARM_UP {
         renderer.app.update();
         if let Some(error) = quit(&renderer) {
