@@ -49,7 +49,7 @@ const SOURCE_SCALE: f32 = 1.52587890625e-5;
 const DIRECTION_SCALE: f32 = 1.9073486328125e-6;
 
 struct GridCorner {
-    cell: u32,  // the cell's index in `cells`, all grids together
+    cell: u32,  // the cell's index in `fixed`, all grids together
     weight: f32,
 }
 
@@ -60,8 +60,8 @@ struct GridCorners {
     f: vec3<f32>,
 }
 
-// `BeamGrid::corners_at`: the same of a point in grid coordinates (cell centres at
-// whole numbers; the outer cells' centres clamp).
+// `BeamGrid::corners_at`: the eight cells around a point in grid coordinates (cell
+// centres at whole numbers; the outer cells' centres clamp).
 fn grid_corners_at(g: Grid, grid_point: vec3<f32>) -> GridCorners {
     let size = vec3<f32>(g.size.xyz);
     let q = clamp(grid_point, vec3(0.0), size - 1.0);
@@ -75,6 +75,23 @@ fn grid_corner(g: Grid, corners: GridCorners, corner: u32) -> GridCorner {
     let c = corners.base + o;
     let w = select(1.0 - corners.f, corners.f, o == vec3(1u));
     return GridCorner(g.size.w + (c.z * g.size.y + c.y) * g.size.x + c.x, w.x * w.y * w.z);
+}
+
+// A cell's grid (the medium's index) and its place in that grid, from its index in
+// `fixed`, all grids together.
+struct GridCell {
+    m: u32,
+    at: vec3<u32>,
+}
+
+fn grid_cell(cell: u32) -> GridCell {
+    var m = 0u;
+    while m < 3u && cell >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
+        m++;
+    }
+    let size = grids.grids[m].size;
+    let at = cell - size.w;
+    return GridCell(m, vec3(at % size.x, (at / size.x) % size.y, at / (size.x * size.y)));
 }
 
 #ifdef DEPOSIT
@@ -515,15 +532,10 @@ fn deposit_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_wo
         if key == 0u || n == 0.0 || !bundle_merges(slot) {
             continue;
         }
-        let cell_index = key - 1u;
-        var m = 0u;
-        while m < 3u && cell_index >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
-            m++;
-        }
+        let entry = grid_cell(key - 1u);
+        let m = entry.m;
         let g = grids.grids[m];
         let size = g.size.xyz;
-        let local = cell_index - g.size.w;
-        let entry_cell = vec3(local % size.x, (local / size.x) % size.y, local / (size.x * size.y));
         let route = firstTrailingBit(atomicLoad(&bundles[at + BUNDLE_FLAGS]) & 0x3fu);
         let axis = route / 2u;
         let forward = route % 2u == 1u;
@@ -541,11 +553,11 @@ fn deposit_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_wo
         let summed = vec3(bundle_word(at + BUNDLE_DIRECTION), bundle_word(at + BUNDLE_DIRECTION + 1u), bundle_word(at + BUNDLE_DIRECTION + 2u));
         let direction = summed / max(length(summed), 1.0e-30);
         let sigma_t = settings.media[m].extinction.xyz;
-        let centre = vec2(f32(entry_cell[a]), f32(entry_cell[b]));
+        let centre = vec2(f32(entry.at[a]), f32(entry.at[b]));
         let first = i32(floor(max(start, 0.0)));
         let last = min(i32(ceil(end)), first + i32(MAX_DEPOSIT_LAYERS));
         for (var k = first; k < last; k++) {
-            let layer = i32(entry_cell[axis]) + select(-k, k, forward);
+            let layer = i32(entry.at[axis]) + select(-k, k, forward);
             if layer < 0 || layer >= i32(size[axis]) {
                 break;
             }
@@ -615,16 +627,13 @@ const QUEUED_BEAMS: u32 = 64u;
 var<workgroup> wide: array<u32, 256>;
 var<workgroup> queued: atomic<u32>;
 
-// Thin beams `first`, `first + stride`, … of volume `index`'s beam in medium `m`, every
-// layer each crosses (`BeamGrid::deposit`).
-fn deposit_thin_beams(index: u32, m: u32, first: u32, stride: u32) {
-    let v = volumes[index];
+// Thin beams `first`, `first + stride`, … of volume `v`'s beam in medium `m`, split
+// `split`² ways (`deposit_split`), every layer each crosses (`BeamGrid::deposit`).
+fn deposit_thin_beams(v: CausticVolume, m: u32, split: u32, first: u32, stride: u32) {
     let medium = settings.media[m];
     let g = grids.grids[m];
-    let flux = bitcast<vec3<f32>>(vec3(counters[FLUX], counters[FLUX + 1u], counters[FLUX + 2u]));
-    let units = fixed_units(g, flux);
+    let units = medium_units(m);
     let sigma_t = medium.extinction.xyz;
-    let split = deposit_split(v, g.cell.x);
     let cells = vec3<f32>(g.size.xyz);
     for (var k = first; k < split * split; k += stride) {
         let beam = thin_beam(v, g, medium.local_from_world, split, k);
@@ -668,24 +677,26 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         workgroupBarrier();
         let index = base + local;
         if index < count {
+            let v = volumes[index];
             for (var m = 0u; m < media; m++) {
                 // A beam that joined a bundle goes with it (`deposit_bundles`).
                 if (joined[index] & (1u << m)) != 0u {
                     continue;
                 }
-                let split = deposit_split(volumes[index], grids.grids[m].cell.x);
+                let split = deposit_split(v, grids.grids[m].cell.x);
                 if split * split > QUEUED_BEAMS {
                     wide[atomicAdd(&queued, 1u)] = index * 4u + m;
                 } else {
-                    deposit_thin_beams(index, m, 0u, 1u);
+                    deposit_thin_beams(v, m, split, 0u, 1u);
                 }
             }
         }
         workgroupBarrier();
         let n = atomicLoad(&queued);
         for (var q = 0u; q < n; q++) {
-            let item = wide[q];
-            deposit_thin_beams(item / 4u, item % 4u, local, 64u);
+            let v = volumes[wide[q] / 4u];
+            let m = wide[q] % 4u;
+            deposit_thin_beams(v, m, deposit_split(v, grids.grids[m].cell.x), local, 64u);
         }
         workgroupBarrier();
     }
@@ -723,21 +734,13 @@ fn deposited_direction(cell: u32) -> vec3<f32> {
 // pass, since a cell reads its neighbours'.
 @compute @workgroup_size(64)
 fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    var total = 0u;
-    for (var m = 0u; m < 4u; m++) {
-        let g = grids.grids[m];
-        total = max(total, g.size.w + g.size.x * g.size.y * g.size.z);
-    }
+    let total = arrayLength(&fixed) / FIXED_WORDS;
     for (var cell = id.x; cell < total; cell += groups.x * 64u) {
-        var m = 0u;
-        while m < 3u && cell >= grids.grids[m + 1u].size.w && grids.grids[m + 1u].size.w != 0u {
-            m++;
-        }
-        let g = grids.grids[m];
+        let place = grid_cell(cell);
+        let g = grids.grids[place.m];
         let word = cell * FIXED_WORDS;
         let first = g.size.w;
-        let at = cell - first;
-        let c = vec3(at % g.size.x, (at / g.size.x) % g.size.y, at / (g.size.x * g.size.y));
+        let c = place.at;
         var direction = vec3(0.0);
         for (var corner = 0u; corner < 8u; corner++) {
             let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);

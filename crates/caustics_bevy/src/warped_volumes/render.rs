@@ -875,7 +875,9 @@ fn prepare_shaft_bind_groups(
             continue;
         };
         let mut kept = shafts.as_mut().map(|s| std::mem::take(&mut s.kept)).unwrap_or_default();
-        let bind_group = match (pipelines.shafts, prepass.normal_view(), buffers.volumes.as_ref(), grids.grids.buffer(), grids.textures.as_ref()) {
+        let bindings =
+            (pipelines.shafts, prepass.normal_view(), buffers.volumes.as_ref(), grids.grids.buffer(), grids.textures.as_ref(), buffers.counters.as_ref());
+        let bind_group = match bindings {
             (ShaftPipeline::Exact(_), Some(normal), Some(volumes), ..) => {
                 let layout = layouts.layout(true, pipelines.multisampled).get(&cache);
                 let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
@@ -884,11 +886,7 @@ fn prepare_shaft_bind_groups(
                     device.create_bind_group("caustic_volumes_bind_group", layout, &BindGroupEntries::sequential(entries))
                 })
             }
-            (ShaftPipeline::March(_), .., Some(grid), Some([light, directions])) => {
-                let Some(counters) = buffers.counters.as_ref() else {
-                    commands.entity(entity).remove::<ViewShaftBindGroup>();
-                    continue;
-                };
+            (ShaftPipeline::March(_), .., Some(grid), Some([light, directions]), Some(counters)) => {
                 let layout = march.march_layouts[pipelines.multisampled as usize].get(&cache);
                 let bound = [layout.into(), view_buffer.into(), settings.into(), grid.into(), counters.into(), light.into(), directions.into(), depth.into()];
                 kept.get(&bound, || {
