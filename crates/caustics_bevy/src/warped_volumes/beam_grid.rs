@@ -61,9 +61,9 @@ const GRID_TEXTURE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 /// directions whose lowest corner the cell is.
 const FIXED_CELL_BYTES: u64 = 24;
 
-/// Twenty words a bundle of beams (`BUNDLE_WORDS` in `beam_grid.wgsl`), and one in the
+/// Nineteen words a bundle of beams (`BUNDLE_WORDS` in `beam_grid.wgsl`), and one in the
 /// list of the slots taken.
-const BUNDLE_BYTES: u64 = 84;
+const BUNDLE_BYTES: u64 = 80;
 
 /// The bundles' hash table: a slot for each volume or cell, whichever is fewer, as a
 /// power of two from 2¹⁰ to 2¹⁶ (a surface's beams enter about one layer of cells:
@@ -85,9 +85,9 @@ pub(super) struct BeamGridBuffers {
     /// What the deposit adds to, and `resolve` turns into `textures`.
     fixed: Option<Buffer>,
     /// The bundles of thin beams ([`caustics_core::volumes::BeamGrid::deposit_all`])
-    /// and, per volume, the media whose bundle its beam joined.
+    /// and, per volume and medium, the slot of the bundle its beam went to.
     bundles: Option<Buffer>,
-    joined: Option<Buffer>,
+    bundle_of: Option<Buffer>,
     /// The grids' cells together, and the textures' size.
     cells: u32,
     extent: Extent3d,
@@ -105,9 +105,9 @@ pub(super) struct BeamGridBuffers {
 #[derive(Resource)]
 pub(super) struct BeamGridPipelines {
     deposit_layout: KeptLayout,
-    /// The deposit's kernels in the order they run: the bundles counted, joined, the
-    /// other beams deposited, the bundles deposited.
-    deposit: [CachedComputePipelineId; 4],
+    /// The deposit's kernels in the order they run: the bundles gathered, the beams
+    /// of those that do not merge deposited, the bundles deposited.
+    deposit: [CachedComputePipelineId; 3],
     resolve_layout: KeptLayout,
     resolve: CachedComputePipelineId,
     /// `anchor`, an empty kernel ([`anchor_first_timestamp`]), under the deposit's and
@@ -166,7 +166,7 @@ pub(super) fn init_pipelines(
             ..default()
         })
     };
-    let deposit = ["count_bundles", "join_bundles", "deposit", "deposit_bundles"].map(|entry| kernel(entry, "DEPOSIT", &deposit_layout));
+    let deposit = ["gather_bundles", "deposit", "deposit_bundles"].map(|entry| kernel(entry, "DEPOSIT", &deposit_layout));
     let resolve = kernel("resolve", "RESOLVE", &resolve_layout);
     let anchors = [kernel("anchor", "DEPOSIT", &deposit_layout), kernel("anchor", "RESOLVE", &resolve_layout)];
     let march_layouts = [false, true].map(|multisampled| {
@@ -351,8 +351,9 @@ pub(super) fn prepare_grids(
         grids.bundles = buffer("caustic_shaft_bundles", table);
         grids.deposit = true;
     }
-    if grids.joined.as_ref().is_none_or(|b| b.size() != 4 * capacity.max(1)) {
-        grids.joined = buffer("caustic_shaft_joined", 4 * capacity.max(1));
+    let bundle_of = 4 * MAX_MEDIA as u64 * capacity.max(1);
+    if grids.bundle_of.as_ref().is_none_or(|b| b.size() != bundle_of) {
+        grids.bundle_of = buffer("caustic_shaft_bundle_of", bundle_of);
         grids.deposit = true;
     }
     grids.layout = layout;
@@ -364,8 +365,8 @@ pub(super) fn prepare_grids(
 /// half-float textures, one invocation a cell, and clears them for the next deposit (a
 /// new buffer starts cleared), when [`prepare_grids`] asked for it (after the build:
 /// the same frame's volumes). The narrow beams that enter the grid through one cell go
-/// as one bundle (counted, then joined, one invocation a volume; deposited one
-/// invocation a bundle), the others one invocation a volume, or a workgroup a wide one.
+/// as one bundle (gathered one invocation a volume, deposited one invocation a
+/// bundle), the others one invocation a volume, or a workgroup a wide one.
 pub(super) fn deposit_beams(
     mut ctx: RenderContext,
     mut grids: ResMut<BeamGridBuffers>,
@@ -382,7 +383,7 @@ pub(super) fn deposit_beams(
         Some([light, directions]),
         Some(fixed),
         Some(bundles),
-        Some(joined),
+        Some(bundle_of),
         Some(buffer),
         Some(counters),
         Some(settings),
@@ -394,7 +395,7 @@ pub(super) fn deposit_beams(
         grids.textures.as_ref(),
         grids.fixed.as_ref(),
         grids.bundles.as_ref(),
-        grids.joined.as_ref(),
+        grids.bundle_of.as_ref(),
         volumes.volumes.as_ref(),
         volumes.counters.as_ref(),
         volumes.settings.buffer(),
@@ -405,7 +406,7 @@ pub(super) fn deposit_beams(
     };
     let device = ctx.render_device();
     let layout = pipelines.deposit_layout.get(&cache);
-    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into(), bundles.into(), joined.into()];
+    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into(), bundles.into(), bundle_of.into()];
     let deposit_group = grids.kept[0].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_deposit_bind_group",
@@ -417,7 +418,7 @@ pub(super) fn deposit_beams(
                 uniform.as_entire_binding(),
                 fixed.as_entire_binding(),
                 bundles.as_entire_binding(),
-                joined.as_entire_binding(),
+                bundle_of.as_entire_binding(),
             )),
         )
     });
@@ -434,7 +435,7 @@ pub(super) fn deposit_beams(
     // strides over the rest.
     let groups = |items: u64| items.clamp(1, 65535) as u32;
     let volume_groups = groups(volumes.capacity().div_ceil(64));
-    let deposit_groups = [volume_groups, volume_groups, volume_groups, groups((bundles.size() / BUNDLE_BYTES).div_ceil(64))];
+    let deposit_groups = [volume_groups, volume_groups, groups((bundles.size() / BUNDLE_BYTES).div_ceil(64))];
     let resolve_groups = groups(u64::from(grids.cells).div_ceil(64));
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();

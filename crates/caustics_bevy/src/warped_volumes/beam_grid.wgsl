@@ -104,8 +104,9 @@ fn grid_cell(cell: u32) -> GridCell {
 // cell's index in `fixed` plus one (0: empty), a power of two of them; then how many
 // slots are taken, and which, in the order they were.
 @group(0) @binding(5) var<storage, read_write> bundles: array<atomic<u32>>;
-// Per volume, bit m: its beam in medium m joined a bundle (`join_bundles`).
-@group(0) @binding(6) var<storage, read_write> joined: array<u32>;
+// Per volume, four words: the slot of the bundle its beam in medium m went to
+// (`gather_bundles`), or `NO_BUNDLE`.
+@group(0) @binding(6) var<storage, read_write> bundle_of: array<u32>;
 
 // `caustics_core::volumes::{MAX_DEPOSIT_LAYERS, MAX_DEPOSIT_SPLIT}`.
 const MAX_DEPOSIT_LAYERS: u32 = 1024u;
@@ -262,20 +263,18 @@ const MAX_BUNDLE_BEAMS: u32 = 1024u;
 const MAX_BUNDLED_SPLIT: u32 = 6u;
 const MAX_BUNDLE_REACH: f32 = 4.0;
 
-// A bundle's words: key, flags (atomic or), the beams counted with the flags, the
-// beams added, then `BeamBundle`'s sums in fixed point, each `BUNDLE_SCALE` units to one
-// (the beams' start and end, in layers, `BUNDLE_LAYER_SCALE`; their source in the
-// grid's units, `fixed_units`).
-const BUNDLE_WORDS: u32 = 20u;
+// A bundle's words: key, flags (atomic or), the beams counted, then `BeamBundle`'s sums
+// in fixed point, each `BUNDLE_SCALE` units to one (the beams' start and end, in
+// layers, `BUNDLE_LAYER_SCALE`; their source in the grid's units, `fixed_units`).
+const BUNDLE_WORDS: u32 = 19u;
 const BUNDLE_FLAGS: u32 = 1u;
 const BUNDLE_COUNTED: u32 = 2u;
-const BUNDLE_ADDED: u32 = 3u;
-const BUNDLE_ACROSS: u32 = 4u;  // two words, then the slope's two
-const BUNDLE_MOMENTS: u32 = 8u;  // across², across·slope, slope²
-const BUNDLE_START: u32 = 11u;  // start, end
-const BUNDLE_SOURCE: u32 = 13u;  // rgb
-const BUNDLE_LENGTH: u32 = 16u;  // world length a layer over a cell's edge
-const BUNDLE_DIRECTION: u32 = 17u;  // xyz
+const BUNDLE_ACROSS: u32 = 3u;  // two words, then the slope's two
+const BUNDLE_MOMENTS: u32 = 7u;  // across², across·slope, slope²
+const BUNDLE_START: u32 = 10u;  // start, end
+const BUNDLE_SOURCE: u32 = 12u;  // rgb
+const BUNDLE_LENGTH: u32 = 15u;  // world length a layer over a cell's edge
+const BUNDLE_DIRECTION: u32 = 16u;  // xyz
 const BUNDLE_SCALE: f32 = 65536.0;
 const BUNDLE_LAYER_SCALE: f32 = 1024.0;
 const NO_BUNDLE: u32 = 0xffffffffu;
@@ -424,53 +423,32 @@ fn medium_units(m: u32) -> f32 {
 }
 
 // One invocation a volume: each of its beams that could join a bundle inserts the
-// bundle and adds its flags and itself to the count (`BeamGrid::deposit_all`'s first
+// bundle, adds itself to it (`BeamBundle::add`) and keeps its slot in `bundle_of`,
+// where `deposit` finds whether the bundle merged (`BeamGrid::deposit_all`'s first
 // loop).
 @compute @workgroup_size(64)
-fn count_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn gather_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     for (var index = id.x; index < counters[1]; index += groups.x * 64u) {
         let v = volumes[index];
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
+            var slot = NO_BUNDLE;
             let member = bundled_beam(v, grids.grids[m], settings.media[m].local_from_world, medium_units(m));
-            if !member.found {
-                continue;
+            if member.found {
+                slot = bundle_slot(member.key, true);
             }
-            let slot = bundle_slot(member.key, true);
             if slot != NO_BUNDLE {
-                atomicOr(&bundles[slot * BUNDLE_WORDS + BUNDLE_FLAGS], member.flags);
-                atomicAdd(&bundles[slot * BUNDLE_WORDS + BUNDLE_COUNTED], 1u);
-            }
-        }
-    }
-}
-
-// One invocation a volume: each of its beams whose bundle merges joins it, and the
-// volume's bit of each medium it joined one in is set in `joined`
-// (`BeamGrid::deposit_all`'s second loop).
-@compute @workgroup_size(64)
-fn join_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    for (var index = id.x; index < counters[1]; index += groups.x * 64u) {
-        let v = volumes[index];
-        var mask = 0u;
-        for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
-            let member = bundled_beam(v, grids.grids[m], settings.media[m].local_from_world, medium_units(m));
-            if !member.found {
-                continue;
-            }
-            let slot = bundle_slot(member.key, false);
-            if slot != NO_BUNDLE && bundle_merges(slot) {
                 add_to_its_bundle(slot, member);
-                mask |= 1u << m;
             }
+            bundle_of[4u * index + m] = slot;
         }
-        joined[index] = mask;
     }
 }
 
 // Adds a member to its bundle (`BeamBundle::add`).
 fn add_to_its_bundle(slot: u32, m: BundledBeam) {
     let at = slot * BUNDLE_WORDS;
-    atomicAdd(&bundles[at + BUNDLE_ADDED], 1u);
+    atomicOr(&bundles[at + BUNDLE_FLAGS], m.flags);
+    atomicAdd(&bundles[at + BUNDLE_COUNTED], 1u);
     add_to_bundle(at + BUNDLE_ACROSS, m.across.x * BUNDLE_SCALE);
     add_to_bundle(at + BUNDLE_ACROSS + 1u, m.across.y * BUNDLE_SCALE);
     add_to_bundle(at + BUNDLE_ACROSS + 2u, m.slope.x * BUNDLE_SCALE);
@@ -528,7 +506,7 @@ fn deposit_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_wo
         let slot = atomicLoad(&bundles[list + 1u + listed]);
         let at = slot * BUNDLE_WORDS;
         let key = atomicLoad(&bundles[at]);
-        let n = f32(atomicLoad(&bundles[at + BUNDLE_ADDED]));
+        let n = f32(atomicLoad(&bundles[at + BUNDLE_COUNTED]));
         if key == 0u || n == 0.0 || !bundle_merges(slot) {
             continue;
         }
@@ -679,8 +657,9 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         if index < count {
             let v = volumes[index];
             for (var m = 0u; m < media; m++) {
-                // A beam that joined a bundle goes with it (`deposit_bundles`).
-                if (joined[index] & (1u << m)) != 0u {
+                // A beam whose bundle merges goes with it (`deposit_bundles`).
+                let slot = bundle_of[4u * index + m];
+                if slot != NO_BUNDLE && bundle_merges(slot) {
                     continue;
                 }
                 let split = deposit_split(v, grids.grids[m].cell.x);

@@ -258,6 +258,8 @@ impl BeamBundle {
     }
 
     fn add(&mut self, m: &BundledBeam) {
+        self.flags |= m.flags;
+        self.count += 1;
         self.across += m.across;
         self.slope += m.slope;
         self.across_squared += m.across.length_squared() + m.width.x;
@@ -311,23 +313,21 @@ impl BeamGrid {
     /// Adds every volume's beam to the grid, then gathers the directions: narrow beams
     /// (at most [`MAX_BUNDLED_SPLIT`] cells wide) that enter the grid in the same cell,
     /// running the same way in the same colour, as one bundle ([`BeamBundle`]), the
-    /// others one by one. Returns how many beams went into bundles.
+    /// others one by one. Every such beam is added to its bundle as it is counted; a
+    /// bundle that does not merge is dropped and its beams go one by one. Returns how
+    /// many beams went into bundles.
     pub fn deposit_all(&mut self, volumes: &[CausticVolume], settings: &VolumeSettings) -> usize {
         let members: Vec<Option<BundledBeam>> = volumes.iter().map(|v| self.bundled_beam(v, settings)).collect();
         let mut bundles = std::collections::BTreeMap::<usize, BeamBundle>::new();
         for m in members.iter().flatten() {
-            let b = bundles.entry(m.key).or_default();
-            b.flags |= m.flags;
-            b.count += 1;
+            bundles.entry(m.key).or_default().add(m);
         }
         let mut bundled = 0;
         for (volume, member) in volumes.iter().zip(&members) {
-            match member.as_ref().filter(|m| bundles[&m.key].merges()) {
-                Some(m) => {
-                    bundles.get_mut(&m.key).expect("counted above").add(m);
-                    bundled += 1;
-                }
-                None => self.deposit(volume, settings),
+            if member.as_ref().is_some_and(|m| bundles[&m.key].merges()) {
+                bundled += 1;
+            } else {
+                self.deposit(volume, settings);
             }
         }
         for (key, bundle) in bundles.iter().filter(|(_, b)| b.merges()) {
