@@ -246,6 +246,12 @@ impl SpecializedRenderPipeline for BeamGridPipelines {
     }
 }
 
+/// The resolve's workgroups: one a tile of 8 × 8 cells across x and y and 16 layers
+/// along z, of every grid (`resolve_tile` in `beam_grid.wgsl`).
+fn resolve_tiles(layout: &[(GpuMedium, UVec4)]) -> u64 {
+    layout.iter().map(|(_, size)| u64::from(size.x.div_ceil(8) * size.y.div_ceil(8) * size.z.div_ceil(16))).sum()
+}
+
 /// The grids over `media`, `longest` cells along each box's longest side, their
 /// layout (to tell when it changes), their cells together and the textures' size (the
 /// grids stacked along z).
@@ -436,7 +442,7 @@ pub(super) fn deposit_beams(
     let groups = |items: u64| items.clamp(1, 65535) as u32;
     let volume_groups = groups(volumes.capacity().div_ceil(64));
     let deposit_groups = [volume_groups, volume_groups, groups((bundles.size() / BUNDLE_BYTES).div_ceil(64))];
-    let resolve_groups = groups(u64::from(grids.cells).div_ceil(64));
+    let resolve_groups = groups(resolve_tiles(&grids.layout));
     let diagnostics = ctx.diagnostic_recorder();
     let diagnostics = diagnostics.as_deref();
     let encoder = ctx.command_encoder();

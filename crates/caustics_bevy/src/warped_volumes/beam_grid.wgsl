@@ -705,38 +705,79 @@ fn deposited_direction(cell: u32) -> vec3<f32> {
     return vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u));
 }
 
-// One invocation a cell of every grid: its fixed-point words as the march reads them,
-// its direction gathered from the eight cells below it (`BeamGrid::gather_directions`),
-// each grid at its first layer of the textures. Half floats hold the fixed units
-// scaled down (`SOURCE_SCALE`, `DIRECTION_SCALE`): a channel stays under 2³¹ units, and
-// the eight cells' directions under 2³⁴. The deposit's words are cleared after this
-// pass, since a cell reads its neighbours'.
-@compute @workgroup_size(64)
-fn resolve(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let total = arrayLength(&fixed) / FIXED_WORDS;
-    for (var cell = id.x; cell < total; cell += groups.x * 64u) {
-        let place = grid_cell(cell);
-        let g = grids.grids[place.m];
-        let word = cell * FIXED_WORDS;
-        let first = g.size.w;
-        let c = place.at;
-        var direction = vec3(0.0);
-        for (var corner = 0u; corner < 8u; corner++) {
-            let o = vec3(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
-            if all(c >= o) {
-                let b = c - o;
-                direction += deposited_direction(first + (b.z * g.size.y + b.y) * g.size.x + b.x);
+// A workgroup's tile of cells: `RESOLVE_TILE`² across x and y, `RESOLVE_LAYERS` along
+// z (`resolve_tiles` in `beam_grid.rs` counts them).
+const RESOLVE_TILE: u32 = 8u;
+const RESOLVE_LAYERS: u32 = 16u;
+
+struct ResolveTile {
+    found: bool,
+    m: u32,
+    origin: vec3<u32>,
+}
+
+// Tile `index` of every grid's tiles, grid by grid.
+fn resolve_tile(index: u32) -> ResolveTile {
+    var rest = index;
+    for (var m = 0u; m < 4u; m++) {
+        let size = grids.grids[m].size.xyz;
+        let per = vec3(RESOLVE_TILE, RESOLVE_TILE, RESOLVE_LAYERS);
+        let tiles = (size + per - 1u) / per;
+        let count = tiles.x * tiles.y * tiles.z;
+        if rest < count {
+            let at = vec3(rest % tiles.x, (rest / tiles.x) % tiles.y, rest / (tiles.x * tiles.y));
+            return ResolveTile(true, m, at * per);
+        }
+        rest -= count;
+    }
+    return ResolveTile(false, 0u, vec3(0u));
+}
+
+// One invocation a column of a tile: each cell's fixed-point words as the march reads
+// them, its direction gathered from the eight cells below it
+// (`BeamGrid::gather_directions`) as the sum of two layers' 2 × 2 sums, the one below
+// kept from the step before; each grid at its first layer of the textures. Half
+// floats hold the fixed units scaled down (`SOURCE_SCALE`, `DIRECTION_SCALE`): a
+// channel stays under 2³¹ units, and the eight cells' directions under 2³⁴. The
+// deposit's words are cleared after this pass, since a cell reads its neighbours'.
+@compute @workgroup_size(8, 8)
+fn resolve(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_id) lane: vec3<u32>) {
+    for (var index = group.x; ; index += groups.x) {
+        let tile = resolve_tile(index);
+        if !tile.found {
+            break;
+        }
+        let g = grids.grids[tile.m];
+        let size = g.size.xyz;
+        let x = tile.origin.x + lane.x;
+        let y = tile.origin.y + lane.y;
+        let first = tile.origin.z;
+        let last = min(first + RESOLVE_LAYERS, size.z);
+        // The 2 × 2 sum of the layer below, from one layer before the tile's first.
+        var below = vec3(0.0);
+        for (var z = first - min(first, 1u); z < last; z++) {
+            var layer = vec3(0.0);
+            for (var corner = 0u; corner < 4u; corner++) {
+                let o = vec2(corner & 1u, corner >> 1u);
+                if x >= o.x && y >= o.y && x - o.x < size.x && y - o.y < size.y {
+                    layer += deposited_direction(g.size.w + (z * size.y + y - o.y) * size.x + x - o.x);
+                }
             }
+            if z >= first && x < size.x && y < size.y {
+                let direction = layer + below;
+                let word = (g.size.w + (z * size.y + y) * size.x + x) * FIXED_WORDS;
+                let texel = vec3<i32>(vec3(x, y, z + u32(g.cell.z)));
+                // Where every volume shares a hue, one texel a cell: the direction and
+                // the source's sum, which `lookup` shares out by the hue.
+                if grids.hue.w > 0.0 {
+                    textureStore(light, texel, vec4(direction * DIRECTION_SCALE, from_fixed(word) * SOURCE_SCALE));
+                } else {
+                    textureStore(light, texel, vec4(vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u)) * SOURCE_SCALE, 0.0));
+                    textureStore(directions, texel, vec4(direction * DIRECTION_SCALE, 0.0));
+                }
+            }
+            below = layer;
         }
-        let texel = vec3<i32>(c + vec3(0u, 0u, u32(g.cell.z)));
-        // Where every volume shares a hue, one texel a cell: the direction and the
-        // source's sum, which `lookup` shares out by the hue.
-        if grids.hue.w > 0.0 {
-            textureStore(light, texel, vec4(direction * DIRECTION_SCALE, from_fixed(word) * SOURCE_SCALE));
-            continue;
-        }
-        textureStore(light, texel, vec4(vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u)) * SOURCE_SCALE, 0.0));
-        textureStore(directions, texel, vec4(direction * DIRECTION_SCALE, 0.0));
     }
 }
 #endif
