@@ -232,6 +232,24 @@ fn caustic_volumes_match_their_cpu_twin_on_a_real_adapter() {
     eprintln!("shafts of one hue in a grey medium: relative L2 {against_grey_twin:.2e} from the twin");
     assert!(against_grey_twin < 0.01, "GPU and CPU beam grids differ in a grey medium: relative L2 {against_grey_twin}");
     renderer.world_mut().entity_mut(medium_entity).insert(medium);
+    // Two media side by side, each with its own grid, stacked in the textures: their
+    // sum against their twins' (an eye ray straight down crosses one of them).
+    let halves = [-1.0, 1.0].map(|x| Transform::from_xyz(x, 0.4, 0.0).with_scale(Vec3::new(2.0, 0.8, 4.0)));
+    renderer.world_mut().entity_mut(medium_entity).insert(halves[0]);
+    let second_medium = renderer.world_mut().spawn((medium, halves[1])).id();
+    let two_media = added(&render(&mut renderer, 3));
+    let twins = halves.map(|half| {
+        let world_from_local = caustics_core::glam::Affine3A::from_cols_array(&half.compute_affine().to_cols_array());
+        marched_twin(MediumBox { world_from_local, ..medium_box }, &set.volumes)
+    });
+    let two_twins: Vec<f32> = twins[0].iter().zip(&twins[1]).map(|(a, b)| a + b).collect();
+    let total = two_twins.iter().sum::<f32>();
+    assert!(twins.iter().all(|twin| twin.iter().sum::<f32>() > 0.25 * total), "a medium holds too little of the light to test its grid");
+    let against_two_twins = relative_l2(&two_media, &two_twins);
+    eprintln!("shafts in two media: relative L2 {against_two_twins:.2e} from their twins");
+    assert!(against_two_twins < 0.01, "GPU and CPU beam grids differ in two media: relative L2 {against_two_twins}");
+    renderer.world_mut().despawn(second_medium);
+    renderer.world_mut().entity_mut(medium_entity).insert(medium_transform);
     // Cells wider than the water's triangles: beams entering a cell together go as one
     // bundle. The GPU's bundles against the twin's, nearer them than each beam alone.
     let coarse = WarpedVolumesSettings { shaft_grid: 24, ..marched };
