@@ -370,9 +370,9 @@ pub(super) fn prepare_grids(
 /// Adds every volume's beam to the fixed-point grids, then turns them into the march's
 /// half-float textures, one invocation a column of cells, and clears them for the
 /// next deposit (a new buffer starts cleared), when [`prepare_grids`] asked for it
-/// (after the build: the same frame's volumes). The narrow beams that enter the grid through one cell go
-/// as one bundle (gathered one invocation a volume, deposited one invocation a
-/// bundle), the others one invocation a volume, or a workgroup a wide one.
+/// (after the build: the same frame's volumes). The narrow beams that enter the grid
+/// through one cell go as one bundle (gathered one invocation a volume, deposited one
+/// invocation a bundle), the others one invocation a volume, or a workgroup a wide one.
 pub(super) fn deposit_beams(
     mut ctx: RenderContext,
     mut grids: ResMut<BeamGridBuffers>,
