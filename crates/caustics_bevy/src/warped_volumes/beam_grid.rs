@@ -31,15 +31,18 @@ use bevy::render::{
 use bevy::shader::ShaderDefVal;
 use caustics_core::glam;
 use caustics_core::params::MediumCoefficients;
-use caustics_core::volumes::{MediumBox, cell_of, grid_size};
+use caustics_core::volumes::{MediumBox, cell_of, direction_blocks, grid_size};
 
 /// `Grid` in `beam_grid.wgsl`: one medium's cells (xyz) and the first one's index (w);
 /// a cell's smallest world edge (x) and world volume (y), and the grid's first layer in
-/// the march's textures (z).
+/// the march's textures (z); its blocks of deposited directions
+/// ([`direction_blocks`], xyz) and the first one's index (w), the blocks of every grid
+/// following the cells of every grid.
 #[derive(Clone, Copy, Default, PartialEq, ShaderType)]
 pub(super) struct GpuGrid {
     size: UVec4,
     cell: Vec4,
+    blocks: UVec4,
 }
 
 /// `Grids` in `beam_grid.wgsl`.
@@ -57,9 +60,9 @@ pub(super) struct GpuBeamGrids {
 /// sampler filters trilinearly.
 const GRID_TEXTURE_FORMAT: TextureFormat = TextureFormat::Rgba16Float;
 
-/// Six words a cell as the deposit adds to it, in 32-bit fixed point: the source and the
-/// directions whose lowest corner the cell is.
-const FIXED_CELL_BYTES: u64 = 24;
+/// Three words a cell or a block of cells as the deposit adds to it, in 32-bit fixed
+/// point: a cell's source, a block's directions.
+const FIXED_CELL_BYTES: u64 = 12;
 
 /// Nineteen words a bundle of beams (`BUNDLE_WORDS` in `beam_grid.wgsl`), and one in the
 /// list of the slots taken.
@@ -253,8 +256,8 @@ fn resolve_tiles(layout: &[(GpuMedium, UVec4)]) -> u64 {
 }
 
 /// The grids over `media`, `longest` cells along each box's longest side, their
-/// layout (to tell when it changes), their cells together and the textures' size (the
-/// grids stacked along z).
+/// layout (to tell when it changes), their cells and blocks together and the textures'
+/// size (the grids stacked along z).
 fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrids, Vec<(GpuMedium, UVec4)>, u32, UVec3) {
     let mut gpu = GpuBeamGrids { max_steps, ..default() };
     let mut layout = Vec::new();
@@ -266,10 +269,15 @@ fn lay_out(media: &ExtractedMedia, longest: u32, max_steps: u32) -> (GpuBeamGrid
         let core = MediumBox { world_from_local, coefficients };
         let size = grid_size(&core, longest);
         let (edge, volume) = cell_of(&core, size);
-        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, extent.z as f32, 0.0) };
+        let blocks = direction_blocks(size).extend(0);
+        *grid = GpuGrid { size: UVec4::new(size.x, size.y, size.z, first), cell: Vec4::new(edge, volume, extent.z as f32, 0.0), blocks };
         layout.push((*medium, grid.size));
         first += size.x * size.y * size.z;
         extent = UVec3::new(extent.x.max(size.x), extent.y.max(size.y), extent.z + size.z);
+    }
+    for grid in gpu.grids.iter_mut().take(media.0.len()) {
+        grid.blocks.w = first;
+        first += grid.blocks.truncate().element_product();
     }
     (gpu, layout, first, extent)
 }
@@ -352,7 +360,8 @@ pub(super) fn prepare_grids(
         grids.deposit = true;
     }
     let capacity = volumes.capacity();
-    let table = bundle_bytes(bundle_slots(capacity, u64::from(first)));
+    let cells = layout.iter().map(|(_, size)| u64::from(size.x * size.y * size.z)).sum();
+    let table = bundle_bytes(bundle_slots(capacity, cells));
     if grids.bundles.as_ref().is_none_or(|b| b.size() != table) {
         grids.bundles = buffer("caustic_shaft_bundles", table);
         grids.deposit = true;

@@ -9,10 +9,11 @@
 #import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
 #import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, sample_on_ray}
 
-// One medium's grid (`GpuBeamGrid` in `render.rs`).
+// One medium's grid (`GpuGrid` in `beam_grid.rs`).
 struct Grid {
     size: vec4<u32>,   // xyz: cells, w: the first cell's index in `fixed`
     cell: vec4<f32>,   // x: the smallest world edge of a cell, y: a cell's world volume, z: its first layer in the textures
+    blocks: vec4<u32>, // xyz: blocks of 2 × 2 × 2 cells (`direction_blocks`), w: the first one's index in `fixed`
 }
 
 struct Grids {
@@ -21,13 +22,18 @@ struct Grids {
     max_steps: u32,
 }
 
-// The deposit's six words a cell: colour · E_beam · e^{−σt dₛ} (rgb), then the
-// directions of the samples whose lowest corner the cell is, weighted by their light
-// (xyz), each a signed 32-bit fixed-point number (`fixed_units`), so that it adds with
-// one integer atomic where a float add needs a compare-exchange loop. `resolve` turns
-// them into the march's two half-float 3D textures (`light`, `directions`).
-const FIXED_WORDS: u32 = 6u;
-const DIRECTION_WORD: u32 = 3u;
+// The deposit's three words a cell, colour · E_beam · e^{−σt dₛ} (rgb), and three a
+// block of 2 × 2 × 2 cells after every grid's cells, the directions of the samples
+// whose lowest corner lies in the block, weighted by their light (xyz): each a signed
+// 32-bit fixed-point number (`fixed_units`), so that it adds with one integer atomic
+// where a float add needs a compare-exchange loop. `resolve` turns them into the
+// march's two half-float 3D textures (`light`, `directions`).
+const FIXED_WORDS: u32 = 3u;
+
+// The first word of block `block` of grid `g`.
+fn block_word(g: Grid, block: vec3<u32>) -> u32 {
+    return (g.blocks.w + (block.z * g.blocks.y + block.y) * g.blocks.x + block.x) * FIXED_WORDS;
+}
 
 // `build.wgsl`'s FLUX: the build's kept flux, three words of f32 bits.
 const FLUX: u32 = 9u;
@@ -233,7 +239,7 @@ fn beam_layer(beam: ThinBeam, depth: f32, j: u32) -> BeamLayer {
 // layer's middle plane across `axis`: the four of its layer, since the other four weigh
 // nothing (one atomic add a channel each, in fixed-point units; where every volume
 // shares one hue, only the source's sum, which `resolve` shares out by the hue), and
-// its direction added to the lowest of the eight.
+// its direction added to the block of the lowest of the eight.
 fn spread(g: Grid, grid_point: vec3<f32>, axis: u32, source: vec3<f32>, direction: vec3<f32>) {
     let one_hue = grids.hue.w > 0.0;
     let channels = select(3u, 1u, one_hue);
@@ -252,9 +258,9 @@ fn spread(g: Grid, grid_point: vec3<f32>, axis: u32, source: vec3<f32>, directio
             add(c.cell * FIXED_WORDS + k, c.weight * light[k]);
         }
     }
-    let lowest = grid_corner(g, corners, 0u).cell * FIXED_WORDS + DIRECTION_WORD;
+    let block = block_word(g, corners.base / 2u);
     for (var k = 0u; k < 3u; k++) {
-        add(lowest + k, direction[k]);
+        add(block + k, direction[k]);
     }
 }
 
@@ -572,20 +578,21 @@ fn deposit_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_wo
                     }
                 }
             }
-            // The direction to lowest corners, every other cell, whose eight cells
-            // cover those lit.
-            let first_corner = clamp(vec2(ra.x, rb.x), vec2(0), edge);
-            let last_corner = clamp(vec2(ra.y, rb.y), vec2(0), edge);
-            let corners = (last_corner - first_corner) / 2 + 1;
-            let share = direction * ((light.x + light.y + light.z) / f32(corners.x * corners.y));
-            c[axis] = min(u32(layer), max(size[axis], 2u) - 2u);
-            for (var i = first_corner.x; i <= last_corner.x; i += 2) {
-                c[a] = u32(min(i, max(edge.x - 1, 0)));
-                for (var j = first_corner.y; j <= last_corner.y; j += 2) {
-                    c[b] = u32(min(j, max(edge.y - 1, 0)));
-                    let cell = g.size.w + (c.z * size.y + c.y) * size.x + c.x;
+            // The direction to every other block from the one of the first cell
+            // lit, whose eight blocks cover those lit.
+            let first_block = clamp(vec2(ra.x, rb.x), vec2(0), edge) / 2;
+            let last_block = clamp(vec2(ra.y, rb.y), vec2(0), edge) / 2;
+            let blocks = (last_block - first_block) / 2 + 1;
+            let share = direction * ((light.x + light.y + light.z) / f32(blocks.x * blocks.y));
+            var block = vec3(0u);
+            block[axis] = u32(layer) / 2u;
+            for (var i = first_block.x; i <= last_block.x; i += 2) {
+                block[a] = u32(i);
+                for (var j = first_block.y; j <= last_block.y; j += 2) {
+                    block[b] = u32(j);
+                    let word = block_word(g, block);
                     for (var k3 = 0u; k3 < 3u; k3++) {
-                        add(cell * FIXED_WORDS + DIRECTION_WORD + k3, share[k3]);
+                        add(word + k3, share[k3]);
                     }
                 }
             }
@@ -699,10 +706,23 @@ fn from_fixed(word: u32) -> f32 {
     return f32(bitcast<i32>(fixed[word]));
 }
 
-// The directions deposited at a cell's word `DIRECTION_WORD`.
-fn deposited_direction(cell: u32) -> vec3<f32> {
-    let word = cell * FIXED_WORDS + DIRECTION_WORD;
+// The directions deposited in block `block` of grid `g`.
+fn deposited_direction(g: Grid, block: vec3<u32>) -> vec3<f32> {
+    let word = block_word(g, block);
     return vec3(from_fixed(word), from_fixed(word + 1u), from_fixed(word + 2u));
+}
+
+// The directions deposited in the 2 × 2 blocks `(bx − i, by − j)`, `i, j ∈ {0, 1}`, of
+// block layer `bz`.
+fn block_layer(g: Grid, bx: u32, by: u32, bz: u32) -> vec3<f32> {
+    var sum = vec3(0.0);
+    for (var corner = 0u; corner < 4u; corner++) {
+        let o = vec2(corner & 1u, corner >> 1u);
+        if bx >= o.x && by >= o.y && bx - o.x < g.blocks.x && by - o.y < g.blocks.y {
+            sum += deposited_direction(g, vec3(bx - o.x, by - o.y, bz));
+        }
+    }
+    return sum;
 }
 
 // A workgroup's tile of cells: `RESOLVE_TILE`² across x and y, `RESOLVE_LAYERS` along
@@ -734,12 +754,13 @@ fn resolve_tile(index: u32) -> ResolveTile {
 }
 
 // One invocation a column of a tile: each cell's fixed-point words as the march reads
-// them, its direction gathered from the eight cells below it
-// (`BeamGrid::gather_directions`) as the sum of two layers' 2 × 2 sums, the one below
-// kept from the step before; each grid at its first layer of the textures. Half
-// floats hold the fixed units scaled down (`SOURCE_SCALE`, `DIRECTION_SCALE`): a
-// channel stays under 2³¹ units, and the eight cells' directions under 2³⁴. The
-// deposit's words are cleared after this pass, since a cell reads its neighbours'.
+// them, its direction gathered from the eight blocks below its block
+// (`BeamGrid::gather_directions`) as the sum of two block layers' 2 × 2 sums, each
+// found once for the two layers of cells it serves; each grid at its first layer of
+// the textures. Half floats hold the fixed units scaled down (`SOURCE_SCALE`,
+// `DIRECTION_SCALE`): a channel stays under 2³¹ units, and the eight blocks'
+// directions under 1.4 · 2³⁴. The deposit's words are cleared after this pass, since
+// a cell reads its neighbours'.
 @compute @workgroup_size(8, 8)
 fn resolve(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_id) lane: vec3<u32>) {
     for (var index = group.x; ; index += groups.x) {
@@ -753,17 +774,19 @@ fn resolve(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         let y = tile.origin.y + lane.y;
         let first = tile.origin.z;
         let last = min(first + RESOLVE_LAYERS, size.z);
-        // The 2 × 2 sum of the layer below, from one layer before the tile's first.
+        // The 2 × 2 sums of the cells' block layer and the one below it (the tile's
+        // first layer is even: `RESOLVE_LAYERS` is).
         var below = vec3(0.0);
-        for (var z = first - min(first, 1u); z < last; z++) {
-            var layer = vec3(0.0);
-            for (var corner = 0u; corner < 4u; corner++) {
-                let o = vec2(corner & 1u, corner >> 1u);
-                if x >= o.x && y >= o.y && x - o.x < size.x && y - o.y < size.y {
-                    layer += deposited_direction(g.size.w + (z * size.y + y - o.y) * size.x + x - o.x);
+        var layer = vec3(0.0);
+        for (var z = first; z < last; z++) {
+            if z % 2u == 0u {
+                below = layer;
+                if z == first && z > 0u {
+                    below = block_layer(g, x / 2u, y / 2u, z / 2u - 1u);
                 }
+                layer = block_layer(g, x / 2u, y / 2u, z / 2u);
             }
-            if z >= first && x < size.x && y < size.y {
+            if x < size.x && y < size.y {
                 let direction = layer + below;
                 let word = (g.size.w + (z * size.y + y) * size.x + x) * FIXED_WORDS;
                 let texel = vec3<i32>(vec3(x, y, z + u32(g.cell.z)));
@@ -776,7 +799,6 @@ fn resolve(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                     textureStore(directions, texel, vec4(direction * DIRECTION_SCALE, 0.0));
                 }
             }
-            below = layer;
         }
     }
 }

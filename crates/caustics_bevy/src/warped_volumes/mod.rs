@@ -103,7 +103,7 @@ pub enum ShaftIntegral {
     /// eye ray marched through it one step a cell: a cost per pixel that does not
     /// grow with the volumes an eye ray crosses (the default). At the default 96
     /// cells, pixel means within 1.7 % (relative L2) of [`Self::Exact`]'s on the ocean
-    /// example's shafts and 3.2 % on the disco ball's (`crates/caustics_core/tests/shafts.rs`).
+    /// example's shafts and 3.6 % on the disco ball's (`crates/caustics_core/tests/shafts.rs`).
     #[default]
     Grid,
     /// The exact integral through every volume the eye ray crosses (§3.5): each

@@ -15,10 +15,10 @@
 //! around it (four in the middle plane, eight where the beam ends inside a layer):
 //! `∫ E_beam dV` over a beam is its flux times its length, which the deposit keeps
 //! exactly however thin the beam. A sample's direction, which only aims the phase
-//! function, goes to one cell, the lowest of its eight, and each cell's direction
-//! gathers the eight cells below it ([`BeamGrid::gather_directions`]): the sum over
-//! the samples that lit the cell, at three adds a sample where a spread took
-//! twenty-four. The march samples the grid trilinearly.
+//! function, goes to one block of 2 × 2 × 2 cells, the one that holds the lowest of
+//! its eight, and each cell's direction gathers the eight blocks below its own
+//! ([`BeamGrid::gather_directions`]): the sum over the samples that lit the cell (and
+//! some beside it), at three adds a sample where a spread took twenty-four. The march samples the grid trilinearly.
 //!
 //! A fine generator's beams are far more than the grid's cells: the deposit merges
 //! the narrow beams that enter the grid through one cell into a bundle (the moments of
@@ -293,8 +293,17 @@ pub struct BeamGrid {
     /// Per cell, the directions of the beam samples that lit it, summed with the
     /// weight of their source ([`Self::gather_directions`] of `deposited`).
     pub direction: Vec<Vec3>,
-    /// Per cell, the directions of the samples whose lowest corner it is.
+    /// Per block of 2 × 2 × 2 cells ([`direction_blocks`]), the directions of the
+    /// samples whose lowest corner lies in it.
     deposited: Vec<Vec3>,
+}
+
+/// The blocks of 2 × 2 × 2 cells (the last ones cut short) that hold a `size` grid's
+/// deposited directions: a direction only aims the phase function, and varies across
+/// a beam far slower than its light, so that half the resolution keeps the shafts and
+/// spares the deposit most of its direction adds.
+pub fn direction_blocks(size: UVec3) -> UVec3 {
+    (size + 1) / 2
 }
 
 impl BeamGrid {
@@ -302,7 +311,8 @@ impl BeamGrid {
     pub fn new(medium: MediumBox, longest: u32) -> Self {
         let size = grid_size(&medium, longest);
         let cells = (size.x * size.y * size.z) as usize;
-        Self { medium, size, source: vec![Vec3::ZERO; cells], direction: vec![Vec3::ZERO; cells], deposited: vec![Vec3::ZERO; cells] }
+        let blocks = direction_blocks(size).element_product() as usize;
+        Self { medium, size, source: vec![Vec3::ZERO; cells], direction: vec![Vec3::ZERO; cells], deposited: vec![Vec3::ZERO; blocks] }
     }
 
     /// The smallest world edge of a cell, and a cell's world volume.
@@ -463,37 +473,47 @@ impl BeamGrid {
                     self.source[((c.z * size.y + c.y) * size.x + c.x) as usize] += w_i * bundle_weight(mean.y, reach, j) * source;
                 }
             }
-            // The direction to lowest corners, every other cell, whose eight cells
-            // cover those lit.
-            let corners = |mean: f32, last: i32| {
+            // The direction to every other block from the one of the first cell lit,
+            // whose eight blocks cover those lit: one block where the bundle lights at
+            // most three cells across.
+            let blocks = |mean: f32, last: i32| {
                 let cells = bundle_cells(mean, reach);
                 let (lo, hi) = ((*cells.start()).clamp(0, last), (*cells.end()).clamp(0, last));
-                (lo..=hi).step_by(2).map(move |i| i.min((last - 1).max(0)) as u32)
+                (lo / 2..=hi / 2).step_by(2).map(|i| i as u32)
             };
-            let share = direction * (source.element_sum() / (corners(mean.x, last_a).count() * corners(mean.y, last_b).count()) as f32);
-            c[axis] = (layer as u32).min(size[axis].max(2) - 2);
-            for i in corners(mean.x, last_a) {
-                for j in corners(mean.y, last_b) {
-                    (c[a], c[b]) = (i, j);
-                    self.deposited[((c.z * size.y + c.y) * size.x + c.x) as usize] += share;
+            let share = direction * (source.element_sum() / (blocks(mean.x, last_a).count() * blocks(mean.y, last_b).count()) as f32);
+            let (in_blocks, mut block) = (direction_blocks(size), UVec3::ZERO);
+            block[axis] = layer as u32 / 2;
+            for i in blocks(mean.x, last_a) {
+                for j in blocks(mean.y, last_b) {
+                    (block[a], block[b]) = (i, j);
+                    self.deposited[((block.z * in_blocks.y + block.y) * in_blocks.x + block.x) as usize] += share;
                 }
             }
         }
     }
 
-    /// Each cell's direction: the sum of those deposited at the eight cells `c − o`,
-    /// `o ∈ {0, 1}³`, the lowest corners of every sample that lit it.
+    /// The block of [`direction_blocks`] that holds cell `cell` (an index).
+    fn block_of(&self, cell: usize) -> usize {
+        let (size, blocks) = (self.size, direction_blocks(self.size));
+        let c = UVec3::new(cell as u32 % size.x, (cell as u32 / size.x) % size.y, cell as u32 / (size.x * size.y)) / 2;
+        ((c.z * blocks.y + c.y) * blocks.x + c.x) as usize
+    }
+
+    /// Each cell's direction: the sum of those deposited in the eight blocks `b − o`,
+    /// `o ∈ {0, 1}³`, `b` the cell's block, which hold the lowest corners of every
+    /// sample that lit it (and of some beside it).
     pub fn gather_directions(&mut self) {
-        let size = self.size;
-        let index = |c: UVec3| ((c.z * size.y + c.y) * size.x + c.x) as usize;
+        let (size, blocks) = (self.size, direction_blocks(self.size));
         for z in 0..size.z {
             for y in 0..size.y {
                 for x in 0..size.x {
-                    let c = UVec3::new(x, y, z);
-                    self.direction[index(c)] = (0..8u32)
+                    let b = UVec3::new(x, y, z) / 2;
+                    self.direction[((z * size.y + y) * size.x + x) as usize] = (0..8u32)
                         .map(|corner| UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2))
-                        .filter(|&o| c.cmpge(o).all())
-                        .map(|o| self.deposited[index(c - o)])
+                        .filter(|&o| b.cmpge(o).all())
+                        .map(|o| b - o)
+                        .map(|d| self.deposited[((d.z * blocks.y + d.y) * blocks.x + d.x) as usize])
                         .sum();
                 }
             }
@@ -540,7 +560,8 @@ impl BeamGrid {
                 for (index, w) in corners {
                     self.source[index] += w * source;
                 }
-                self.deposited[corners[0].0] += s.ray / beam_length * source.element_sum();
+                let block = self.block_of(corners[0].0);
+                self.deposited[block] += s.ray / beam_length * source.element_sum();
             }
         }
     }

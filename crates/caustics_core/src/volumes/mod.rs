@@ -38,7 +38,9 @@ mod build;
 mod medium;
 mod prism;
 
-pub use beam_grid::{BeamGrid, MAX_DEPOSIT_LAYERS, MAX_DEPOSIT_SPLIT, ThinBeam, cell_of, deposit_barycentric, deposit_split, grid_size, march_steps};
+pub use beam_grid::{
+    BeamGrid, MAX_DEPOSIT_LAYERS, MAX_DEPOSIT_SPLIT, ThinBeam, cell_of, deposit_barycentric, deposit_split, direction_blocks, grid_size, march_steps,
+};
 pub use build::{BuildStats, VertexFans, build_drawn_volumes, build_generator_volumes, build_scene_volumes, channels, occluders_of};
 pub use medium::{MAX_RAY_PIECES, MediumBox, in_scattered_radiance, mean_attenuation, ray_pieces};
 pub use prism::{BoundingShape, HEXAHEDRON_TRIANGLES};
