@@ -662,13 +662,14 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         workgroupBarrier();
         let index = base + local;
         if index < count {
-            let v = volumes[index];
             for (var m = 0u; m < media; m++) {
-                // A beam whose bundle merges goes with it (`deposit_bundles`).
+                // A beam whose bundle merges goes with it (`deposit_bundles`); the
+                // volume is loaded only for the others.
                 let slot = bundle_of[4u * index + m];
                 if slot != NO_BUNDLE && bundle_merges(slot) {
                     continue;
                 }
+                let v = volumes[index];
                 let split = deposit_split(v, grids.grids[m].cell.x);
                 if split * split > QUEUED_BEAMS {
                     wide[atomicAdd(&queued, 1u)] = index * 4u + m;
