@@ -290,5 +290,9 @@ fn bundles_of_thin_beams_keep_the_shafts_of_each_beam() {
         assert!(joined as f32 > 0.8 * volumes.len() as f32, "{joined} of {} beams in bundles", volumes.len());
         assert!(error < 0.015, "{ocean:?}: bundled shafts differ by {error}");
         assert!(flux < 0.005, "{ocean:?}: the bundles' light differs by {flux}");
+        // The directions' blocks cover every cell a bundle lit, so that none scatters
+        // with no phase function.
+        let aimless = bundled.source.iter().zip(&bundled.direction).filter(|(s, d)| s.element_sum() > 0.0 && **d == Vec3::ZERO).count();
+        assert_eq!(aimless, 0, "{ocean:?}: {aimless} lit cells have no direction");
     }
 }

@@ -18,7 +18,8 @@
 //! function, goes to one block of 2 × 2 × 2 cells, the one that holds the lowest of
 //! its eight, and each cell's direction gathers the eight blocks below its own
 //! ([`BeamGrid::gather_directions`]): the sum over the samples that lit the cell (and
-//! some beside it), at three adds a sample where a spread took twenty-four. The march samples the grid trilinearly.
+//! some beside it), at three adds a sample where a spread took twenty-four. The march
+//! samples the grid trilinearly.
 //!
 //! A fine generator's beams are far more than the grid's cells: the deposit merges
 //! the narrow beams that enter the grid through one cell into a bundle (the moments of
