@@ -307,6 +307,12 @@ pub fn direction_blocks(size: UVec3) -> UVec3 {
     (size + 1) / 2
 }
 
+/// The index of block `block` among a `size` grid's [`direction_blocks`] (x fastest).
+fn block_index(size: UVec3, block: UVec3) -> usize {
+    let blocks = direction_blocks(size);
+    ((block.z * blocks.y + block.y) * blocks.x + block.x) as usize
+}
+
 impl BeamGrid {
     /// An empty grid over `medium`, `longest` cells along its longest side.
     pub fn new(medium: MediumBox, longest: u32) -> Self {
@@ -483,12 +489,12 @@ impl BeamGrid {
                 (lo / 2..=hi / 2).step_by(2).map(|i| i as u32)
             };
             let share = direction * (source.element_sum() / (blocks(mean.x, last_a).count() * blocks(mean.y, last_b).count()) as f32);
-            let (in_blocks, mut block) = (direction_blocks(size), UVec3::ZERO);
+            let mut block = UVec3::ZERO;
             block[axis] = layer as u32 / 2;
             for i in blocks(mean.x, last_a) {
                 for j in blocks(mean.y, last_b) {
                     (block[a], block[b]) = (i, j);
-                    self.deposited[((block.z * in_blocks.y + block.y) * in_blocks.x + block.x) as usize] += share;
+                    self.deposited[block_index(size, block)] += share;
                 }
             }
         }
@@ -496,16 +502,15 @@ impl BeamGrid {
 
     /// The block of [`direction_blocks`] that holds cell `cell` (an index).
     fn block_of(&self, cell: usize) -> usize {
-        let (size, blocks) = (self.size, direction_blocks(self.size));
-        let c = UVec3::new(cell as u32 % size.x, (cell as u32 / size.x) % size.y, cell as u32 / (size.x * size.y)) / 2;
-        ((c.z * blocks.y + c.y) * blocks.x + c.x) as usize
+        let size = self.size;
+        block_index(size, UVec3::new(cell as u32 % size.x, (cell as u32 / size.x) % size.y, cell as u32 / (size.x * size.y)) / 2)
     }
 
     /// Each cell's direction: the sum of those deposited in the eight blocks `b − o`,
     /// `o ∈ {0, 1}³`, `b` the cell's block, which hold the lowest corners of every
     /// sample that lit it (and of some beside it).
     pub fn gather_directions(&mut self) {
-        let (size, blocks) = (self.size, direction_blocks(self.size));
+        let size = self.size;
         for z in 0..size.z {
             for y in 0..size.y {
                 for x in 0..size.x {
@@ -514,7 +519,7 @@ impl BeamGrid {
                         .map(|corner| UVec3::new(corner & 1, (corner >> 1) & 1, corner >> 2))
                         .filter(|&o| b.cmpge(o).all())
                         .map(|o| b - o)
-                        .map(|d| self.deposited[((d.z * blocks.y + d.y) * blocks.x + d.x) as usize])
+                        .map(|d| self.deposited[block_index(size, d)])
                         .sum();
                 }
             }
