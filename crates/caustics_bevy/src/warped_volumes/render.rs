@@ -77,6 +77,10 @@ pub(super) struct GpuVolumeSettings {
     splat_pixels: u32,
     /// [`WarpedVolumesSettings::footprint_filter`]: 1 or 0.
     footprint_filter: u32,
+    /// xyz: the colour every volume shares up to a factor ([`compute::VolumeBuild`]'s
+    /// hue), its largest channel 1; w 1 when they share one: `splat` then adds one word
+    /// of light a pixel, where the three channels would take three atomic adds.
+    hue: Vec4,
     media: [GpuMedium; MAX_MEDIA],
 }
 
@@ -333,7 +337,7 @@ pub(super) fn build(app: &mut App) {
         .add_systems(
             Render,
             (
-                timed(&cpu, prepare_buffers).in_set(RenderSystems::PrepareResources),
+                timed(&cpu, prepare_buffers).in_set(RenderSystems::PrepareResources).after(compute::prepare_build),
                 timed(&cpu, compute::prepare_build).in_set(RenderSystems::PrepareResources),
                 timed(&cpu, beam_grid::prepare_grids).in_set(RenderSystems::PrepareResources).after(compute::prepare_build).after(prepare_buffers),
                 timed(&cpu, compute::read_back_counts).in_set(RenderSystems::Cleanup),
@@ -377,7 +381,7 @@ fn mark_views_seeing_media(mut commands: Commands, views: Extract<CameraFrusta>,
 }
 
 fn prepare_buffers(
-    (extracted, sources): (Res<ExtractedVolumeSettings>, Res<compute::ExtractedSources>),
+    (extracted, sources, build): (Res<ExtractedVolumeSettings>, Res<compute::ExtractedSources>, Res<compute::VolumeBuild>),
     media: Res<ExtractedMedia>,
     mut buffers: ResMut<VolumeBuffers>,
     mut surface_work: ResMut<SurfaceWorkReadback>,
@@ -396,6 +400,7 @@ fn prepare_buffers(
         medium_count,
         splat_pixels: extracted.0.splat_pixels,
         footprint_filter: settings.footprint_filter.into(),
+        hue: build.hue.map_or(Vec4::ZERO, |h| (h / h.max_element()).extend(1.0)),
         media,
     };
     buffers.settings.set_label(Some("caustic_volume_settings"));
@@ -564,7 +569,10 @@ fn init_pipeline(
     });
     let resolve_layout = BindGroupLayoutDescriptor::new(
         "caustic_volumes_resolve_layout",
-        &BindGroupLayoutEntries::sequential(ShaderStages::FRAGMENT, (uniform_buffer::<ViewUniform>(true), storage_buffer_read_only::<u32>(false))),
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::FRAGMENT,
+            (uniform_buffer::<ViewUniform>(true), storage_buffer_read_only::<u32>(false), uniform_buffer::<GpuVolumeSettings>(false)),
+        ),
     );
     // A projection into the irradiance buffer, drawn only where the view sees a
     // surface (its depth test against the receiver depth).
@@ -796,11 +804,11 @@ fn prepare_surface_targets(
             }
         };
         let layout = pipelines.resolve_layout.get(&cache);
-        let resolve_bind_group = kept_resolve.get(&[layout.into(), view_buffer.into(), (&splatted).into()], || {
+        let resolve_bind_group = kept_resolve.get(&[layout.into(), view_buffer.into(), (&splatted).into(), settings.into()], || {
             device.create_bind_group(
                 "caustic_volumes_resolve_bind_group",
                 layout,
-                &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding())),
+                &BindGroupEntries::sequential((view_binding.clone(), splatted.as_entire_binding(), settings.as_entire_binding())),
             )
         });
         let layout = pipelines.splat_layouts[multisampled].get(&cache);

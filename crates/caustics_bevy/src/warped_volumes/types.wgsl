@@ -35,6 +35,7 @@ struct VolumeSettings {
     medium_count: u32,
     splat_pixels: u32,          // `splat` lights the volumes whose shape covers at most this many pixels
     footprint_filter: u32,      // 1: `splat` gives each pixel the mean over its footprint, 0: the point sample
+    hue: vec4<f32>,             // xyz: the colour every volume shares up to a factor, largest channel 1; w: 1 when they do
     media: array<Medium, 4>,
 }
 

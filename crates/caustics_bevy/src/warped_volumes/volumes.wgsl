@@ -43,7 +43,8 @@ fn load_depth(pixel: vec2<i32>) -> f32 {
 #ifdef SPLAT
 // The build's counters: [1] is the number of volumes it kept.
 @group(0) @binding(5) var<storage, read> counters: array<u32>;
-// The light `splat` adds, fixed point, three words a pixel of the view's viewport.
+// The light `splat` adds, fixed point, three words a pixel of the view's viewport
+// (the first alone where every volume shares `settings.hue`).
 @group(0) @binding(6) var<storage, read_write> splatted: array<atomic<u32>>;
 // The rasteriser's indirect draw ([0] vertices, [1] instances), the volumes `splat`
 // lit and the pixels it shaded for them, then from `FIRST_LARGE` on the volumes the
@@ -329,11 +330,21 @@ fn add_light(v: CausticVolume, corner: array<vec2<f32>, 8>, y: i32, first: i32, 
     let width = i32(view.viewport.z);
     let lit = lit_columns(corner, y, first, last);
     for (var x = lit.x; x <= lit.y; x++) {
-        let light = vec3<u32>(surface_light(v, vec2(x, y), filtered) * SPLAT_SCALE + 0.5);
+        let light = surface_light(v, vec2(x, y), filtered);
         let pixel = 3u * u32((y - origin.y) * width + x - origin.x);
+        if settings.hue.w > 0.0 {
+            // One hue: its largest channel, which `splat_resolve` turns back into
+            // the colour (at the cap, the clamp keeps the hue).
+            let word = u32(max(light.r, max(light.g, light.b)) * SPLAT_SCALE + 0.5);
+            if word != 0u {
+                atomicAdd(&splatted[pixel], word);
+            }
+            continue;
+        }
+        let words = vec3<u32>(light * SPLAT_SCALE + 0.5);
         for (var c = 0u; c < 3u; c++) {
-            if light[c] != 0u {
-                atomicAdd(&splatted[pixel + c], light[c]);
+            if words[c] != 0u {
+                atomicAdd(&splatted[pixel + c], words[c]);
             }
         }
     }
