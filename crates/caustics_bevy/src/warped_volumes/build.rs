@@ -108,6 +108,10 @@ pub(super) struct VolumeSources {
     /// The receivers' world bounds: every volume ends beyond them.
     pub bounds: Option<(glam::Vec3, glam::Vec3)>,
     pub settings: VolumeSettings,
+    /// The in-scattering pass draws each volume's bounding shape
+    /// ([`super::ShaftIntegral::Exact`]): the build bounds the whole beam too, not only
+    /// the slice the surface pass draws.
+    pub draws_beams: bool,
     pub generation: u64,
 }
 
@@ -262,6 +266,7 @@ fn gather_sources(
         return;
     }
     sources.settings = settings.core();
+    sources.draws_beams = settings.shaft_integral == super::ShaftIntegral::Exact;
     sources.lights = core_lights(&lights);
     // Volumes end beyond the receivers' world bounds.
     sources.bounds = occluders

@@ -27,7 +27,7 @@ struct BuildJob {
     normal_from_local: mat4x4<f32>,  // the inverse transpose of its 3 × 3 part
     light: vec4<f32>,       // w 0: directional, xyz its unit travel direction; w 1: xyz the position
     spot: vec4<f32>,        // a spot's unit axis, w cos θₒ
-    light_power: vec4<f32>, // x irradiance (directional) or intensity, y the spot's 1/(cos θᵢ − cos θₒ) (0: no cone), z 1/range² (0: none)
+    light_power: vec4<f32>, // x irradiance (directional) or intensity, y the spot's 1/(cos θᵢ − cos θₒ) (0: no cone), z 1/range² (0: none), w 1: the beams are drawn
     color: vec4<f32>,       // the channel's flux colour; w the index of refraction (0: a mirror)
     bounds_lo: vec4<f32>,   // the receivers' bounds; w the smallest ray cosine
     bounds_hi: vec4<f32>,   // w 1: lit from behind too
@@ -796,20 +796,22 @@ fn triangle_volume(t: u32) -> TriangleFlux {
         let normal = world_dir(frame, slab.normal);
         out.slab = vec4(normal, slab.near + dot(normal, frame.origin));
         out.slab_far = vec4(slab.far + dot(normal, frame.origin), 0.0, 0.0, 0.0);
-        corners = bounding_shape(v, r, slab.last);
         // The slice of the beam that crosses the slab, bounded on its own and cut to
         // the slab where its sides cross it.
         let top = array(v[0] + slab.first * r[0], v[1] + slab.first * r[1], v[2] + slab.first * r[2]);
         surface = to_world_outwards(frame, cut_to_slab(bounding_shape(top, r, slab.last - slab.first), slab));
+        // The whole beam only where the in-scattering pass draws it; else no pass
+        // reads `corners`.
+        corners = surface;
+        if job.light_power.w > 0.0 {
+            corners = to_world_outwards(frame, bounding_shape(v, r, slab.last));
+        }
     } else {
         let end = occluded_beyond(v, r, out.hit_planes);
         if end.y > 0.0 {
             out.origin.w = clamp(end.x, 1.0e-3 * depth, depth);
         }
-        corners = bounding_shape(v, r, out.origin.w);
-    }
-    corners = to_world_outwards(frame, corners);
-    if !on_slab {
+        corners = to_world_outwards(frame, bounding_shape(v, r, out.origin.w));
         surface = corners;
         // `SurfaceSlab::EMPTY`, `BoundingShape::EMPTY`: rays that all meet nothing
         // light no surface.

@@ -99,7 +99,7 @@ impl GpuBuildJob {
             normal_from_local: Mat4::from_mat3(Mat3::from_mat4(generator.world_from_local).inverse().transpose()),
             light: light_vec,
             spot,
-            light_power: Vec4::new(power, spot_scale, light.inverse_range_squared(), 0.0),
+            light_power: Vec4::new(power, spot_scale, light.inverse_range_squared(), f32::from(u8::from(sources.draws_beams))),
             color: v4(color, ior.unwrap_or(0.0)),
             bounds_lo: v4(lo, sources.settings.min_ray_cosine),
             bounds_hi: v4(hi, if generator.two_sided { 1.0 } else { 0.0 }),

@@ -60,7 +60,8 @@ pub(super) struct GpuCausticVolume {
     slab: Vec4,
     slab_far: Vec4,
     hit_planes: [Vec4; 3],
-    /// The bounding shape the in-scattering pass draws.
+    /// The bounding shape the in-scattering pass draws ([`super::ShaftIntegral::Exact`];
+    /// else, where the surface pass draws a slice, that slice's).
     corners: [Vec4; 8],
     /// The one the surface pass draws: the slice of the beam crossing the slab, none
     /// for a volume that lights no surface, else `corners`.

@@ -25,7 +25,7 @@ struct CausticVolume {
     slab: vec4<f32>,           // the slab near ≤ n·p ≤ far around the surface the rays land on (world): xyz n (zero: none), w near
     slab_far: vec4<f32>,       // x: far
     hit_planes: array<vec4<f32>, 3>, // per vertex ray: the first surface it meets, n·p + w < 0 behind
-    corners: array<vec4<f32>, 8>,  // the bounding shape (§4.3) the in-scattering pass draws
+    corners: array<vec4<f32>, 8>,  // the bounding shape (§4.3) the in-scattering pass draws (`ShaftIntegral::Exact`; else maybe `surface_corners`)
     surface_corners: array<vec4<f32>, 8>, // the one the surface pass draws: the slice crossing the slab, or none, or `corners`
 }
 
