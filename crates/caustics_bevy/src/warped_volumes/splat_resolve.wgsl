@@ -17,9 +17,9 @@
 fn project(in: FullscreenVertexOutput) -> @location(0) vec4<f32> {
     let pixel = vec2<u32>(in.position.xy - view.viewport.xy);
     let at = 3u * (pixel.y * u32(view.viewport.z) + pixel.x);
-    var light = vec3<f32>(vec3(splatted[at], splatted[at + 1u], splatted[at + 2u]));
-    if settings.hue.w > 0.0 {
-        light = f32(splatted[at]) * settings.hue.xyz;
+    var light = f32(splatted[at]) * settings.hue.xyz;
+    if settings.hue.w == 0.0 {
+        light = vec3<f32>(vec3(splatted[at], splatted[at + 1u], splatted[at + 2u]));
     }
     return vec4(min(light / #{SPLAT_SCALE}.0, vec3(MAX_EXPOSED_IRRADIANCE)), 0.0);
 }
