@@ -278,7 +278,7 @@ const BUNDLE_COUNTED: u32 = 2u;
 const BUNDLE_ACROSS: u32 = 3u;  // two words, then the slope's two
 const BUNDLE_MOMENTS: u32 = 7u;  // across², across·slope, slope²
 const BUNDLE_START: u32 = 10u;  // start, end
-const BUNDLE_SOURCE: u32 = 12u;  // rgb
+const BUNDLE_SOURCE: u32 = 12u;  // rgb, or their sum where every volume shares one hue
 const BUNDLE_LENGTH: u32 = 15u;  // world length a layer over a cell's edge
 const BUNDLE_DIRECTION: u32 = 16u;  // xyz
 const BUNDLE_SCALE: f32 = 65536.0;
@@ -464,8 +464,15 @@ fn add_to_its_bundle(slot: u32, m: BundledBeam) {
     add_to_bundle(at + BUNDLE_MOMENTS + 2u, (dot(m.slope, m.slope) + m.width.z) * BUNDLE_SCALE);
     add_to_bundle(at + BUNDLE_START, m.start * BUNDLE_LAYER_SCALE);
     add_to_bundle(at + BUNDLE_START + 1u, m.end * BUNDLE_LAYER_SCALE);
+    // Where every volume shares one hue the deposit adds the channels' sum alone.
+    if grids.hue.w > 0.0 {
+        add_to_bundle(at + BUNDLE_SOURCE, m.source.x + m.source.y + m.source.z);
+    } else {
+        for (var k = 0u; k < 3u; k++) {
+            add_to_bundle(at + BUNDLE_SOURCE + k, m.source[k]);
+        }
+    }
     for (var k = 0u; k < 3u; k++) {
-        add_to_bundle(at + BUNDLE_SOURCE + k, m.source[k]);
         add_to_bundle(at + BUNDLE_DIRECTION + k, m.direction[k] * BUNDLE_SCALE);
     }
     add_to_bundle(at + BUNDLE_LENGTH, m.length * BUNDLE_SCALE);
