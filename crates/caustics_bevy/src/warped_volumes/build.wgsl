@@ -1,14 +1,15 @@
 // Caustic volumes built on the GPU: the WGSL twin of `build_generator_volumes` in
 // `caustics_core::volumes`, one job (a generator under one light, in one colour
-// channel) at a time, in four dispatches:
+// channel) at a time, in five dispatches:
 //
 // - `vertex_rays`: each vertex placed in the world, its ray reflected or refracted with
 //   its Fresnel weight, whether an occluder hides it from the light, and where its ray
 //   first meets an occluder (the scene's other surfaces, `bevy_caustics::triangle_bvh`);
 // - `slicing_axis`: the rays' sum, the axis shared by the triangles it fits (one
 //   workgroup);
-// - `vertex_fans`: each vertex's fan coefficients in a frame along that axis, which the
-//   triangles that slice along it share;
+// - `triangle_areas`: each triangle's area coefficients in a frame along that axis;
+// - `vertex_fans`: each vertex's fan coefficients in a frame along that axis, summed
+//   from its triangles', which the triangles that slice along it share;
 // - `triangle_volumes`: each triangle's caustic volume (frame, flattening, area and fan
 //   coefficients of §3.4, hit planes, the bounding prism of §4.3), appended to the
 //   volumes the passes draw; a dropped triangle (unlit, shadowed, TIR, grazing,
@@ -51,8 +52,12 @@ struct VertexRay {
 // normals), read through `job.vertex`.
 @group(0) @binding(1) var<storage, read> vertices: array<f32>;
 @group(0) @binding(3) var<storage, read> triangles: array<u32>;
-@group(0) @binding(4) var<storage, read> fan_starts: array<u32>;
-@group(0) @binding(5) var<storage, read> fan_triangles: array<u32>;
+// Each vertex's first entry in the fans' list (one more than the vertices), then that
+// list: the triangles around each vertex.
+@group(0) @binding(4) var<storage, read> fans: array<u32>;
+// `triangle_areas`: each triangle's area coefficients along the shared slicing axis,
+// in the frame at its first vertex; w 0 where it cannot be flattened.
+@group(0) @binding(5) var<storage, read_write> areas: array<vec4<f32>>;
 @group(0) @binding(6) var<storage, read> owned_sides: array<u32>;
 // One per vertex, then the slicing axis (w 1 when there is one).
 @group(0) @binding(7) var<storage, read_write> rays: array<VertexRay>;
@@ -545,12 +550,17 @@ fn perpendicular(y: vec3<f32>) -> vec3<f32> {
     return vec3(1.0 + sign * y.x * y.x * a, sign * y.x * y.y * a, -sign * y.x);
 }
 
+// Entry `k` of the fans' list: a triangle.
+fn fan_triangle(k: u32) -> u32 {
+    return fans[job.counts.x + 1u + k];
+}
+
 // The area coefficients of the fan around `vertex`, flattened into frame `f` and
 // summed (§3.4, Fig. 5); w 0 where a triangle of it cannot be flattened.
 fn fan_sum(f: Frame, vertex: u32) -> vec4<f32> {
     var sum = vec3(0.0);
-    for (var k = fan_starts[vertex]; k < fan_starts[vertex + 1u]; k++) {
-        let t = fan_triangles[k];
+    for (var k = fans[vertex]; k < fans[vertex + 1u]; k++) {
+        let t = fan_triangle(k);
         var fv: array<vec3<f32>, 3>;
         var fr: array<vec3<f32>, 3>;
         for (var j = 0u; j < 3u; j++) {
@@ -572,15 +582,52 @@ fn fan_sum(f: Frame, vertex: u32) -> vec4<f32> {
 // the two frames differ by a turn about y, which keeps areas across it, a height h,
 // which shifts the depth (A(α + h)), and perhaps a mirror, which negates the areas.
 fn shifted_fan(ray: VertexRay, origin: vec3<f32>, y: vec3<f32>, mirrored: bool) -> vec4<f32> {
-    let h = dot(origin - ray.position.xyz, y);
-    let s = ray.fan.xyz;
-    let shifted = vec3(s.x + h * (s.y + h * s.z), s.y + 2.0 * h * s.z, s.z);
-    return vec4(select(shifted, -shifted, mirrored), ray.fan.w);
+    let s = shifted(ray.fan.xyz, dot(origin - ray.position.xyz, y));
+    return vec4(select(s, -s, mirrored), ray.fan.w);
 }
 
-// Each vertex's fan sum in the frame at the vertex whose y is the shared slicing axis
-// (`perpendicular` its x), once a vertex rather than once for each of the triangles
-// around it that slice along the axis (`shifted_fan`).
+// `shifted_fan`'s shift: area coefficients found in a frame along the shared axis, in
+// the frame whose origin lies `h` deeper along it (A(α + h)).
+fn shifted(s: vec3<f32>, h: f32) -> vec3<f32> {
+    return vec3(s.x + h * (s.y + h * s.z), s.y + 2.0 * h * s.z, s.z);
+}
+
+// The frame at `origin` along the shared slicing axis `y` (`perpendicular` its x).
+fn axis_frame(origin: vec3<f32>, y: vec3<f32>) -> Frame {
+    let x = perpendicular(y);
+    return Frame(origin, x, y, cross(x, y));
+}
+
+// Each triangle's area coefficients in the frame along the shared slicing axis at its
+// first vertex, flattened once here rather than once in each of its vertices' fans.
+@compute @workgroup_size(64)
+fn triangle_areas(@builtin(global_invocation_id) id: vec3<u32>) {
+    let t = id.x;
+    let axis = rays[job.counts.x].direction;
+    // Without a shared axis no fan reads them.
+    if t >= job.counts.y || axis.w == 0.0 {
+        return;
+    }
+    let f = axis_frame(rays[triangles[3u * t]].position.xyz, axis.xyz);
+    var fv: array<vec3<f32>, 3>;
+    var fr: array<vec3<f32>, 3>;
+    for (var j = 0u; j < 3u; j++) {
+        let corner = triangles[3u * t + j];
+        let flat = flattened(f, rays[corner].position.xyz, rays[corner].direction.xyz);
+        if !flat.ok {
+            areas[t] = vec4(0.0);
+            return;
+        }
+        fv[j] = flat.v;
+        fr[j] = flat.r;
+    }
+    areas[t] = vec4(area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]), 1.0);
+}
+
+// Each vertex's fan sum in the frame at the vertex along the shared slicing axis
+// (`axis_frame`), once a vertex rather than once for each of the triangles around it
+// that slice along the axis (`shifted_fan`): its triangles' `areas`, each shifted from
+// its first vertex's frame, which differs from the vertex's only along the axis.
 @compute @workgroup_size(64)
 fn vertex_fans(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -589,8 +636,18 @@ fn vertex_fans(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= job.counts.x || axis.w == 0.0 {
         return;
     }
-    let x = perpendicular(axis.xyz);
-    rays[i].fan = fan_sum(Frame(rays[i].position.xyz, x, axis.xyz, cross(x, axis.xyz)), i);
+    let position = rays[i].position.xyz;
+    var sum = vec3(0.0);
+    for (var k = fans[i]; k < fans[i + 1u]; k++) {
+        let t = fan_triangle(k);
+        let area = areas[t];
+        if area.w == 0.0 {
+            rays[i].fan = vec4(0.0);
+            return;
+        }
+        sum += shifted(area.xyz, dot(position - rays[triangles[3u * t]].position.xyz, axis.xyz));
+    }
+    rays[i].fan = vec4(sum, 1.0);
 }
 
 // The flux a triangle's volume keeps and the flux it drops, per channel.

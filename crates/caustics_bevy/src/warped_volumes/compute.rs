@@ -3,8 +3,8 @@
 //! ocean): the generators' vertices as this frame draws them, read from Bevy's own
 //! vertex buffers (copied only for a mesh without normals, whose smooth normals are
 //! made here), their topology (uploaded when it changes), the lights and the
-//! occluders' BVH. One job per generator, light and colour channel runs four
-//! dispatches (vertex rays, slicing axis, vertex fans, triangle volumes) that append the volumes
+//! occluders' BVH. One job per generator, light and colour channel runs five
+//! dispatches (vertex rays, slicing axis, triangle areas, vertex fans, triangle volumes) that append the volumes
 //! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
 //! indirect draw; the counts of what was dropped go back to the main world.
 
@@ -166,10 +166,13 @@ pub(super) fn extract_sources(mut extracted: ResMut<ExtractedSources>, sources: 
 /// normals) and its per-vertex rays.
 struct GeneratorBuffers {
     topology: Arc<Topology>,
-    /// Triangles, fan starts, fan triangles, owned sides.
-    indices: [Buffer; 4],
+    /// Triangles, fans (each vertex's first entry, then the fans' triangles), owned
+    /// sides.
+    indices: [Buffer; 3],
     copy: Option<Buffer>,
     rays: Buffer,
+    /// Each triangle's area coefficients along the shared slicing axis (`build.wgsl`).
+    areas: Buffer,
     bind_group: KeptBindGroup,
 }
 
@@ -218,12 +221,12 @@ impl VolumeBuild {
     }
 }
 
-/// The build's pipelines (vertex rays, slicing axis, vertex fans, triangle volumes, and
+/// The build's pipelines (vertex rays, slicing axis, triangle areas, vertex fans, triangle volumes, and
 /// the empty `anchor` of [`anchor_first_timestamp`]) and layout, and the occluders' refit.
 #[derive(Resource)]
 pub(super) struct VolumeBuildPipelines {
     layout: KeptLayout,
-    pipelines: [CachedComputePipelineId; 5],
+    pipelines: [CachedComputePipelineId; 6],
     refit: BvhRefitPipelines,
 }
 
@@ -238,7 +241,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
                 (1, read()),
                 (3, read()),
                 (4, read()),
-                (5, read()),
+                (5, storage_buffer_sized(false, None)),
                 (6, read()),
                 (7, storage_buffer_sized(false, None)),
                 (8, storage_buffer_sized(false, None)),
@@ -253,7 +256,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         "caustic_volume",
         &layout,
         &shader,
-        ["vertex_rays", "slicing_axis", "vertex_fans", "triangle_volumes", "anchor"],
+        ["vertex_rays", "slicing_axis", "triangle_areas", "vertex_fans", "triangle_volumes", "anchor"],
     );
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
@@ -271,14 +274,19 @@ impl GeneratorBuffers {
             topology: topology.clone(),
             indices: [
                 storage(device, "caustic_volume_triangles", &bytes(&topology.triangles)),
-                storage(device, "caustic_volume_fan_starts", &bytes(topology.fans.starts())),
-                storage(device, "caustic_volume_fan_triangles", &bytes(topology.fans.triangles())),
+                storage(device, "caustic_volume_fans", &bytes(&[topology.fans.starts(), topology.fans.triangles()].concat())),
                 storage(device, "caustic_volume_owned_sides", &bytes(&topology.owned_sides)),
             ],
             copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
                 size: (topology.vertices as u64 + 1) * VERTEX_RAY_BYTES,
+                usage: BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            }),
+            areas: device.create_buffer(&BufferDescriptor {
+                label: Some("caustic_volume_triangle_areas"),
+                size: topology.owned_sides.len().max(1) as u64 * 16,
                 usage: BufferUsages::STORAGE,
                 mapped_at_creation: false,
             }),
@@ -441,10 +449,21 @@ pub(super) fn prepare_build(
     for (entity, job, counts) in planned {
         let offset = build.written_jobs.1[job];
         let (Some(g), Some(vertices)) = (build.generators.get_mut(&entity), vertex_bindings.get(&entity)) else { continue };
-        let [a, b, c, d] = g.indices.each_ref().map(Bound::from);
-        let bound =
-            [layout.into(), (&jobs_buffer).into(), vertices.bound(), a, b, c, d, (&g.rays).into(), volumes.into(), (&counters).into(), (&occluders).into()];
-        let (indices, rays) = (&g.indices, &g.rays);
+        let [a, b, c] = g.indices.each_ref().map(Bound::from);
+        let bound = [
+            layout.into(),
+            (&jobs_buffer).into(),
+            vertices.bound(),
+            a,
+            b,
+            (&g.areas).into(),
+            c,
+            (&g.rays).into(),
+            volumes.into(),
+            (&counters).into(),
+            (&occluders).into(),
+        ];
+        let (indices, rays, areas) = (&g.indices, &g.rays, &g.areas);
         let bind_group = g.bind_group.get(&bound, || {
             device.create_bind_group(
                 "caustic_volume_build_bind_group",
@@ -454,8 +473,8 @@ pub(super) fn prepare_build(
                     (1, BindingResource::Buffer(vertices.binding())),
                     (3, indices[0].as_entire_binding()),
                     (4, indices[1].as_entire_binding()),
-                    (5, indices[2].as_entire_binding()),
-                    (6, indices[3].as_entire_binding()),
+                    (5, areas.as_entire_binding()),
+                    (6, indices[2].as_entire_binding()),
                     (7, rays.as_entire_binding()),
                     (8, volumes.as_entire_binding()),
                     (9, counters.as_entire_binding()),
@@ -468,7 +487,7 @@ pub(super) fn prepare_build(
 }
 
 /// Once per change of the sources (every frame while they move on the GPU): the
-/// counters started again, every job's four dispatches, then a copy of the counters
+/// counters started again, every job's five dispatches, then a copy of the counters
 /// for the main world, at once for new sources.
 pub(super) fn build_volumes(
     mut ctx: RenderContext,
@@ -500,17 +519,14 @@ pub(super) fn build_volumes(
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
     let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
     pass.set_bind_group(0, &build.dispatches[0].bind_group, &[build.dispatches[0].offset]);
-    anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[4]));
+    anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[5]));
     for dispatch in &build.dispatches {
         pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
-        pass.set_pipeline(kernels[0]);
-        pass.dispatch_workgroups(dispatch.vertices.div_ceil(64), 1, 1);
-        pass.set_pipeline(kernels[1]);
-        pass.dispatch_workgroups(1, 1, 1);
-        pass.set_pipeline(kernels[2]);
-        pass.dispatch_workgroups(dispatch.vertices.div_ceil(64), 1, 1);
-        pass.set_pipeline(kernels[3]);
-        pass.dispatch_workgroups(dispatch.triangles.div_ceil(64), 1, 1);
+        let (vertices, triangles) = (dispatch.vertices.div_ceil(64), dispatch.triangles.div_ceil(64));
+        for (kernel, groups) in kernels.iter().zip([vertices, 1, triangles, vertices, triangles]) {
+            pass.set_pipeline(kernel);
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
     }
     span.end(&mut pass);
     drop(pass);
