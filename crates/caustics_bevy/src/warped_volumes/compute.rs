@@ -286,7 +286,7 @@ impl GeneratorBuffers {
             }),
             areas: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_triangle_areas"),
-                size: topology.owned_sides.len().max(1) as u64 * 16,
+                size: (topology.triangles.len() / 3).max(1) as u64 * 16,
                 usage: BufferUsages::STORAGE,
                 mapped_at_creation: false,
             }),
