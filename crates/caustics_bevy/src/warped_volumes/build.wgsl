@@ -555,24 +555,33 @@ fn fan_triangle(k: u32) -> u32 {
     return fans[job.counts.x + 1u + k];
 }
 
+// Triangle `t`'s area coefficients, its vertices' rays flattened into frame `f`
+// (§3.4); w 0 where one cannot be flattened.
+fn flattened_area(f: Frame, t: u32) -> vec4<f32> {
+    var fv: array<vec3<f32>, 3>;
+    var fr: array<vec3<f32>, 3>;
+    for (var j = 0u; j < 3u; j++) {
+        let corner = triangles[3u * t + j];
+        let flat = flattened(f, rays[corner].position.xyz, rays[corner].direction.xyz);
+        if !flat.ok {
+            return vec4(0.0);
+        }
+        fv[j] = flat.v;
+        fr[j] = flat.r;
+    }
+    return vec4(area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]), 1.0);
+}
+
 // The area coefficients of the fan around `vertex`, flattened into frame `f` and
 // summed (§3.4, Fig. 5); w 0 where a triangle of it cannot be flattened.
 fn fan_sum(f: Frame, vertex: u32) -> vec4<f32> {
     var sum = vec3(0.0);
     for (var k = fans[vertex]; k < fans[vertex + 1u]; k++) {
-        let t = fan_triangle(k);
-        var fv: array<vec3<f32>, 3>;
-        var fr: array<vec3<f32>, 3>;
-        for (var j = 0u; j < 3u; j++) {
-            let corner = triangles[3u * t + j];
-            let flat = flattened(f, rays[corner].position.xyz, rays[corner].direction.xyz);
-            if !flat.ok {
-                return vec4(0.0);
-            }
-            fv[j] = flat.v;
-            fr[j] = flat.r;
+        let area = flattened_area(f, fan_triangle(k));
+        if area.w == 0.0 {
+            return vec4(0.0);
         }
-        sum += area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]);
+        sum += area.xyz;
     }
     return vec4(sum, 1.0);
 }
@@ -608,20 +617,7 @@ fn triangle_areas(@builtin(global_invocation_id) id: vec3<u32>) {
     if t >= job.counts.y || axis.w == 0.0 {
         return;
     }
-    let f = axis_frame(rays[triangles[3u * t]].position.xyz, axis.xyz);
-    var fv: array<vec3<f32>, 3>;
-    var fr: array<vec3<f32>, 3>;
-    for (var j = 0u; j < 3u; j++) {
-        let corner = triangles[3u * t + j];
-        let flat = flattened(f, rays[corner].position.xyz, rays[corner].direction.xyz);
-        if !flat.ok {
-            areas[t] = vec4(0.0);
-            return;
-        }
-        fv[j] = flat.v;
-        fr[j] = flat.r;
-    }
-    areas[t] = vec4(area_coefficients(fv[0], fv[1], fv[2], fr[0], fr[1], fr[2]), 1.0);
+    areas[t] = flattened_area(axis_frame(rays[triangles[3u * t]].position.xyz, axis.xyz), t);
 }
 
 // Each vertex's fan sum in the frame at the vertex along the shared slicing axis
