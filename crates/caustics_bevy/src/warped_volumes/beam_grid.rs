@@ -20,8 +20,8 @@ use bevy::render::{
     diagnostic::RecordDiagnostics,
     render_resource::{
         binding_types::{
-            sampler, storage_buffer_read_only_sized, storage_buffer_sized, texture_3d, texture_depth_2d, texture_depth_2d_multisampled, texture_storage_3d,
-            uniform_buffer,
+            sampler, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d, texture_3d, texture_depth_2d, texture_depth_2d_multisampled,
+            texture_storage_3d, uniform_buffer,
         },
         *,
     },
@@ -136,7 +136,7 @@ pub(super) fn init_pipelines(
         &BindGroupLayoutEntries::sequential(
             ShaderStages::COMPUTE,
             (
-                storage_buffer_read_only_sized(false, None),
+                texture_2d(TextureSampleType::Float { filterable: false }),
                 storage_buffer_read_only_sized(false, None),
                 uniform_buffer::<super::render::GpuVolumeSettings>(false),
                 uniform_buffer::<GpuBeamGrids>(false),
@@ -399,7 +399,7 @@ pub(super) fn deposit_beams(
         Some(fixed),
         Some(bundles),
         Some(bundle_of),
-        Some(buffer),
+        Some(volume_texels),
         Some(counters),
         Some(settings),
         Some(uniform),
@@ -411,7 +411,7 @@ pub(super) fn deposit_beams(
         grids.fixed.as_ref(),
         grids.bundles.as_ref(),
         grids.bundle_of.as_ref(),
-        volumes.volumes.as_ref(),
+        volumes.volumes.as_ref().map(|v| &v.view),
         volumes.counters.as_ref(),
         volumes.settings.buffer(),
         grids.grids.buffer(),
@@ -421,13 +421,13 @@ pub(super) fn deposit_beams(
     };
     let device = ctx.render_device();
     let layout = pipelines.deposit_layout.get(&cache);
-    let bound = [layout.into(), buffer.into(), counters.into(), settings.into(), uniform.into(), fixed.into(), bundles.into(), bundle_of.into()];
+    let bound = [layout.into(), volume_texels.into(), counters.into(), settings.into(), uniform.into(), fixed.into(), bundles.into(), bundle_of.into()];
     let deposit_group = grids.kept[0].get(&bound, || {
         device.create_bind_group(
             "caustic_shaft_deposit_bind_group",
             layout,
             &BindGroupEntries::sequential((
-                buffer.as_entire_binding(),
+                volume_texels,
                 counters.as_entire_binding(),
                 settings.as_entire_binding(),
                 uniform.as_entire_binding(),

@@ -7,7 +7,7 @@
 #import bevy_render::view::View
 #import bevy_core_pipeline::fullscreen_vertex_shader::FullscreenVertexOutput
 #import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
-#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, sample_on_ray}
+#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, load_volume, sample_on_ray}
 
 // One medium's grid (`GpuGrid` in `beam_grid.rs`).
 struct Grid {
@@ -101,7 +101,7 @@ fn grid_cell(cell: u32) -> GridCell {
 }
 
 #ifdef DEPOSIT
-@group(0) @binding(0) var<storage, read> volumes: array<CausticVolume>;
+@group(0) @binding(0) var volumes: texture_2d<f32>;
 @group(0) @binding(1) var<storage, read> counters: array<u32>;
 @group(0) @binding(2) var<uniform> settings: VolumeSettings;
 @group(0) @binding(3) var<uniform> grids: Grids;
@@ -435,7 +435,7 @@ fn medium_units(m: u32) -> f32 {
 @compute @workgroup_size(64)
 fn gather_bundles(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     for (var index = id.x; index < counters[1]; index += groups.x * 64u) {
-        let v = volumes[index];
+        let v = load_volume(volumes, index);
         for (var m = 0u; m < min(settings.medium_count, 4u); m++) {
             var slot = NO_BUNDLE;
             let member = bundled_beam(v, grids.grids[m], settings.media[m].local_from_world, medium_units(m));
@@ -676,7 +676,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
                 if slot != NO_BUNDLE && bundle_merges(slot) {
                     continue;
                 }
-                let v = volumes[index];
+                let v = load_volume(volumes, index);
                 let split = deposit_split(v, grids.grids[m].cell.x);
                 if split * split > QUEUED_BEAMS {
                     wide[atomicAdd(&queued, 1u)] = index * 4u + m;
@@ -688,7 +688,7 @@ fn deposit(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) gro
         workgroupBarrier();
         let n = atomicLoad(&queued);
         for (var q = 0u; q < n; q++) {
-            let v = volumes[wide[q] / 4u];
+            let v = load_volume(volumes, wide[q] / 4u);
             let m = wide[q] % 4u;
             deposit_thin_beams(v, m, deposit_split(v, grids.grids[m].cell.x), local, 64u);
         }

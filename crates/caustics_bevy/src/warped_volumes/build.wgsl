@@ -21,7 +21,7 @@
 
 #import bevy_caustics::optics::{reflect_about, refract_through, fresnel_transmittance}
 #import bevy_caustics::triangle_bvh::intersect_triangles
-#import bevy_caustics::warped_volumes::CausticVolume
+#import bevy_caustics::warped_volumes::{CORNERS_TEXEL, CausticVolume, HIT_PLANES_TEXEL, SURFACE_CORNERS_TEXEL, volume_at, volume_capacity}
 
 struct BuildJob {
     world_from_local: mat4x4<f32>,
@@ -61,7 +61,7 @@ struct VertexRay {
 @group(0) @binding(6) var<storage, read> owned_sides: array<u32>;
 // One per vertex, then the slicing axis (w 1 when there is one).
 @group(0) @binding(7) var<storage, read_write> rays: array<VertexRay>;
-@group(0) @binding(8) var<storage, read_write> volumes: array<CausticVolume>;
+@group(0) @binding(8) var volumes: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 
 // `build::SHARED_AXIS_MIN_COS`, `volumes::OCCLUSION_SLACK`.
@@ -878,10 +878,10 @@ fn triangle_volume(t: u32) -> TriangleFlux {
         out.surface_corners[c] = vec4(surface[c], 1.0);
     }
     let flux = colour * ((weight.x + weight.y + weight.z) / 3.0 * 0.5 * abc.x);
-    // Past the volumes the adapter can bind (`prepare_build` warns), the slot is given
+    // Past the volumes the texture holds (`prepare_build` warns), the slot is given
     // back and the volume's flux counted as dropped: the instance count never passes it.
     let slot = atomicAdd(&counters[INSTANCES], 1u);
-    if slot >= arrayLength(&volumes) {
+    if slot >= volume_capacity(textureDimensions(volumes)) {
         atomicSub(&counters[INSTANCES], 1u);
         return TriangleFlux(vec3(0.0), flux);
     }
@@ -890,8 +890,28 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     } else if out.slab.y == 1.0 {
         atomicAdd(&counters[ESCAPING], 1u);
     }
-    volumes[slot] = out;
+    store_volume(slot, out);
     return TriangleFlux(flux, vec3(0.0));
+}
+
+// Writes volume `v` at `index` of `volumes`, as `load_volume` reads it.
+fn store_volume(index: u32, v: CausticVolume) {
+    let at = volume_at(textureDimensions(volumes).x, index);
+    // The fields before `hit_planes`, in order.
+    let fields = array(
+        v.origin, v.axis_x, v.axis_y, v.axis_z, v.surface_normal, v.vertex_x, v.vertex_z, v.ray_x, v.ray_z,
+        v.fan_a, v.fan_b, v.fan_c, v.triangle_abc, v.flux, v.color, v.light_distance, v.slab, v.slab_far,
+    );
+    for (var k = 0u; k < HIT_PLANES_TEXEL; k++) {
+        textureStore(volumes, vec2(at.x + k, at.y), fields[k]);
+    }
+    for (var k = 0u; k < 3u; k++) {
+        textureStore(volumes, vec2(at.x + HIT_PLANES_TEXEL + k, at.y), v.hit_planes[k]);
+    }
+    for (var k = 0u; k < 8u; k++) {
+        textureStore(volumes, vec2(at.x + CORNERS_TEXEL + k, at.y), v.corners[k]);
+        textureStore(volumes, vec2(at.x + SURFACE_CORNERS_TEXEL + k, at.y), v.surface_corners[k]);
+    }
 }
 
 // The workgroup's kept and dropped fluxes, summed in halves.

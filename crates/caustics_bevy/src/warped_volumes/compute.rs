@@ -9,8 +9,8 @@
 //! indirect draw; the counts of what was dropped go back to the main world.
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
-use super::render::{GpuCausticVolume, VolumeBuffers, WordsReadback};
-use crate::gpu_budget::{CausticGpuBudget, largest_binding, mib};
+use super::render::{GpuCausticVolume, VolumeBuffers, VolumeTexture, WordsReadback};
+use crate::gpu_budget::{CausticGpuBudget, mib};
 use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
 use crate::irradiance::kept_bind_group::{Bound, KeptBindGroup, KeptLayout};
@@ -25,7 +25,7 @@ use bevy::render::{
     mesh::{RenderMesh, allocator::MeshAllocator},
     render_asset::RenderAssets,
     render_resource::{
-        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer},
+        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, texture_storage_2d, uniform_buffer},
         *,
     },
     renderer::{RenderContext, RenderDevice, RenderQueue},
@@ -244,7 +244,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
                 (5, storage_buffer_sized(false, None)),
                 (6, read()),
                 (7, storage_buffer_sized(false, None)),
-                (8, storage_buffer_sized(false, None)),
+                (8, texture_storage_2d(TextureFormat::Rgba32Float, StorageTextureAccess::WriteOnly)),
                 (9, storage_buffer_sized(false, None)),
                 (14, read()),
             ),
@@ -401,11 +401,11 @@ pub(super) fn prepare_build(
     };
     build.refit.prepare(&sources.occluders, &occluders, &sources.deformed, &pipelines.refit, (&meshes, &allocator, &device, &queue), &cache);
     let volume_bytes = GpuCausticVolume::min_size().get();
-    let bindable = largest_binding(&device).min(budget.bytes) / volume_bytes;
+    let bindable = VolumeTexture::largest(&device).min(budget.bytes / volume_bytes);
     if capacity > bindable {
         if build.clamped != Some(capacity) {
             warn!(
-                "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {}, more than this adapter binds \
+                "bevy_caustics: the caustic volumes of {capacity} generator triangles (per light and colour channel) need {}, more than this adapter's largest texture holds \
                  or CausticGpuBudget allows ({}): the first {bindable} volumes built are drawn and the rest dropped (counted in CausticVolumes' \
                  dropped flux); use coarser generator meshes",
                 mib(capacity * volume_bytes),
@@ -415,13 +415,8 @@ pub(super) fn prepare_build(
         build.clamped = Some(capacity);
         capacity = bindable;
     }
-    if buffers.volumes.as_ref().is_none_or(|b| b.size() < capacity * volume_bytes) {
-        buffers.volumes = Some(device.create_buffer(&BufferDescriptor {
-            label: Some("caustic_volumes"),
-            size: capacity * volume_bytes,
-            usage: BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        }));
+    if buffers.volumes.as_ref().is_none_or(|v| v.capacity() < capacity) {
+        buffers.volumes = Some(VolumeTexture::new(&device, capacity));
     }
     let counters = buffers
         .counters
@@ -441,7 +436,7 @@ pub(super) fn prepare_build(
             usage: BufferUsages::COPY_SRC,
         })
     });
-    let (Some(jobs), Some(volumes)) = (build.jobs.binding(), buffers.volumes.as_ref()) else {
+    let (Some(jobs), Some(volumes)) = (build.jobs.binding(), buffers.volumes.as_ref().map(|v| &v.view)) else {
         return;
     };
     let layout = pipelines.layout.get(&cache);
@@ -476,7 +471,7 @@ pub(super) fn prepare_build(
                     (5, areas.as_entire_binding()),
                     (6, indices[2].as_entire_binding()),
                     (7, rays.as_entire_binding()),
-                    (8, volumes.as_entire_binding()),
+                    (8, volumes),
                     (9, counters.as_entire_binding()),
                     (14, occluders.as_entire_binding()),
                 )),

@@ -89,12 +89,61 @@ pub(super) struct GpuVolumeSettings {
 #[derive(Resource, Default)]
 pub(super) struct ExtractedVolumeSettings(pub WarpedVolumesSettings);
 
+/// The volumes as the GPU build writes them and the passes read them: one rgba32float
+/// texel a vec4 of [`GpuCausticVolume`], in field order, whole volumes to a row
+/// (`load_volume` in `types.wgsl`). A texture rather than a storage buffer: lavapipe
+/// loads a storage buffer's words at scattered places lane by lane, and a texel about
+/// five times faster (`docs/cli-and-performance.md`).
+pub(super) struct VolumeTexture {
+    pub texture: Texture,
+    pub view: TextureView,
+}
+
+/// `VOLUME_TEXELS` in `types.wgsl`: the texels a volume takes.
+pub(super) const VOLUME_TEXELS: u32 = 37;
+
+impl VolumeTexture {
+    /// Room for at least `capacity` volumes, at most [`Self::largest`].
+    pub fn new(device: &RenderDevice, capacity: u64) -> Self {
+        let per_row = Self::per_row(device);
+        let rows = capacity.div_ceil(per_row).max(1) as u32;
+        let texture = device.create_texture(&TextureDescriptor {
+            label: Some("caustic_volumes"),
+            size: Extent3d { width: per_row as u32 * VOLUME_TEXELS, height: rows, depth_or_array_layers: 1 },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: TextureDimension::D2,
+            format: TextureFormat::Rgba32Float,
+            usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&TextureViewDescriptor::default());
+        Self { texture, view }
+    }
+
+    /// Whole volumes to a row: at most 128, within the adapter's widest texture.
+    fn per_row(device: &RenderDevice) -> u64 {
+        u64::from(device.limits().max_texture_dimension_2d / VOLUME_TEXELS).clamp(1, 128)
+    }
+
+    /// The most volumes a texture on this adapter holds.
+    pub fn largest(device: &RenderDevice) -> u64 {
+        Self::per_row(device) * u64::from(device.limits().max_texture_dimension_2d)
+    }
+
+    /// The volumes it holds.
+    pub fn capacity(&self) -> u64 {
+        let size = self.texture.size();
+        u64::from(size.width / VOLUME_TEXELS) * u64::from(size.height)
+    }
+}
+
 /// Render world: the volumes the GPU build wrote (`None` while no generator, light or
 /// receiver calls for any), the counters whose first words are the passes' indirect
 /// draw, and the passes' settings.
 #[derive(Resource, Default)]
 pub(super) struct VolumeBuffers {
-    pub volumes: Option<Buffer>,
+    pub volumes: Option<VolumeTexture>,
     pub counters: Option<Buffer>,
     /// The build of the current sources came back with no volume: the passes skip
     /// their draws (a generator in full shadow, say).
@@ -105,7 +154,7 @@ pub(super) struct VolumeBuffers {
 impl VolumeBuffers {
     /// The volumes the buffer holds room for.
     pub fn capacity(&self) -> u64 {
-        self.volumes.as_ref().map_or(0, |b| b.size() / GpuCausticVolume::min_size().get())
+        self.volumes.as_ref().map_or(0, VolumeTexture::capacity)
     }
 }
 
@@ -437,7 +486,7 @@ fn volumes_layout(label: &'static str, (multisampled, centre): (bool, bool), vis
         visibility,
         (
             uniform_buffer::<ViewUniform>(true),
-            storage_buffer_read_only::<GpuCausticVolume>(false),
+            texture_2d(TextureSampleType::Float { filterable: false }),
             uniform_buffer::<GpuVolumeSettings>(false),
             match (centre, multisampled) {
                 (true, _) => texture_2d(TextureSampleType::Float { filterable: false }),
@@ -770,7 +819,7 @@ fn prepare_surface_targets(
         let (Some(depth), Some(normal), Some(volumes), Some(counters), Some(settings), Some(view_buffer), Some(view_binding)) = (
             prepass.depth_view(),
             prepass.normal_view(),
-            buffers.volumes.as_ref().filter(|_| !buffers.empty),
+            buffers.volumes.as_ref().filter(|_| !buffers.empty).map(|v| &v.view),
             buffers.counters.as_ref(),
             buffers.settings.buffer(),
             view_uniforms.uniforms.buffer(),
@@ -830,7 +879,7 @@ fn prepare_surface_targets(
                 layout,
                 &BindGroupEntries::sequential((
                     view_binding.clone(),
-                    volumes.as_entire_binding(),
+                    volumes,
                     settings.as_entire_binding(),
                     &centre.default_view,
                     normal,
@@ -843,8 +892,7 @@ fn prepare_surface_targets(
         let layout = volume_layouts.layout(false, multisampled == 1).get(&cache);
         let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), (&centre.default_view).into(), normal.into(), (&large).into()];
         let draw_bind_group = kept_draw.get(&bound, || {
-            let entries =
-                (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
+            let entries = (view_binding.clone(), volumes, settings.as_entire_binding(), &centre.default_view, normal, large.as_entire_binding());
             device.create_bind_group("caustic_volumes_surface_bind_group", layout, &BindGroupEntries::sequential(entries))
         });
         let kept = [kept_depth, kept_resolve, kept_splat, kept_draw];
@@ -884,14 +932,20 @@ fn prepare_shaft_bind_groups(
             continue;
         };
         let mut kept = shafts.as_mut().map(|s| std::mem::take(&mut s.kept)).unwrap_or_default();
-        let bindings =
-            (pipelines.shafts, prepass.normal_view(), buffers.volumes.as_ref(), grids.grids.buffer(), grids.textures.as_ref(), buffers.counters.as_ref());
+        let bindings = (
+            pipelines.shafts,
+            prepass.normal_view(),
+            buffers.volumes.as_ref().map(|v| &v.view),
+            grids.grids.buffer(),
+            grids.textures.as_ref(),
+            buffers.counters.as_ref(),
+        );
         let bind_group = match bindings {
             (ShaftPipeline::Exact(_), Some(normal), Some(volumes), ..) => {
                 let layout = layouts.layout(true, pipelines.multisampled).get(&cache);
                 let bound = [layout.into(), view_buffer.into(), volumes.into(), settings.into(), depth.into(), normal.into()];
                 kept.get(&bound, || {
-                    let entries = (view_binding.clone(), volumes.as_entire_binding(), settings.as_entire_binding(), depth, normal);
+                    let entries = (view_binding.clone(), volumes, settings.as_entire_binding(), depth, normal);
                     device.create_bind_group("caustic_volumes_bind_group", layout, &BindGroupEntries::sequential(entries))
                 })
             }
@@ -963,5 +1017,18 @@ impl SpecializedRenderPipeline for ShaftUpsamplePipeline {
             }),
             ..default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{GpuCausticVolume, VOLUME_TEXELS};
+    use bevy::render::render_resource::ShaderType;
+
+    #[test]
+    fn a_volume_takes_the_texels_the_shaders_read() {
+        assert_eq!(GpuCausticVolume::min_size().get(), u64::from(VOLUME_TEXELS) * 16, "one rgba32float texel a vec4 of the volume");
+        let wgsl = include_str!("types.wgsl");
+        assert!(wgsl.contains(&format!("const VOLUME_TEXELS: u32 = {VOLUME_TEXELS}u;")), "types.wgsl's VOLUME_TEXELS is not {VOLUME_TEXELS}");
     }
 }

@@ -29,6 +29,52 @@ struct CausticVolume {
     surface_corners: array<vec4<f32>, 8>, // the one the surface pass draws: the slice crossing the slab, or none, or `corners`
 }
 
+// The volumes live in a texture (`render::VolumeTexture`): one rgba32float texel a vec4
+// of `CausticVolume`, in field order, whole volumes to a row. The passes read a
+// volume's fields at scattered places, and lavapipe reads a texel there about five
+// times faster than the same four words of a storage buffer, whose loads it makes
+// lane by lane; a GPU reads either through its caches.
+const VOLUME_TEXELS: u32 = 37u;
+// The first texel of `CausticVolume::hit_planes`, of `corners` and of `surface_corners`.
+const HIT_PLANES_TEXEL: u32 = 18u;
+const CORNERS_TEXEL: u32 = 21u;
+const SURFACE_CORNERS_TEXEL: u32 = 29u;
+
+// Where volume `index`'s first texel lies in a texture `width` texels wide.
+fn volume_at(width: u32, index: u32) -> vec2<u32> {
+    let per_row = width / VOLUME_TEXELS;
+    return vec2(index % per_row * VOLUME_TEXELS, index / per_row);
+}
+
+// The volumes a texture of `size` texels holds.
+fn volume_capacity(size: vec2<u32>) -> u32 {
+    return size.x / VOLUME_TEXELS * size.y;
+}
+
+fn texel(volumes: texture_2d<f32>, at: vec2<u32>, k: u32) -> vec4<f32> {
+    return textureLoad(volumes, vec2(at.x + k, at.y), 0);
+}
+
+// Texel `k` of volume `index`: one field, or one of its corners.
+fn volume_texel(volumes: texture_2d<f32>, index: u32, k: u32) -> vec4<f32> {
+    return texel(volumes, volume_at(textureDimensions(volumes).x, index), k);
+}
+
+// Volume `index`; a pass loads only the fields it reads.
+fn load_volume(volumes: texture_2d<f32>, index: u32) -> CausticVolume {
+    let at = volume_at(textureDimensions(volumes).x, index);
+    return CausticVolume(
+        texel(volumes, at, 0u), texel(volumes, at, 1u), texel(volumes, at, 2u), texel(volumes, at, 3u), texel(volumes, at, 4u), texel(volumes, at, 5u),
+        texel(volumes, at, 6u), texel(volumes, at, 7u), texel(volumes, at, 8u), texel(volumes, at, 9u), texel(volumes, at, 10u), texel(volumes, at, 11u),
+        texel(volumes, at, 12u), texel(volumes, at, 13u), texel(volumes, at, 14u), texel(volumes, at, 15u), texel(volumes, at, 16u), texel(volumes, at, 17u),
+        array(texel(volumes, at, 18u), texel(volumes, at, 19u), texel(volumes, at, 20u)),
+        array(texel(volumes, at, 21u), texel(volumes, at, 22u), texel(volumes, at, 23u), texel(volumes, at, 24u),
+            texel(volumes, at, 25u), texel(volumes, at, 26u), texel(volumes, at, 27u), texel(volumes, at, 28u)),
+        array(texel(volumes, at, 29u), texel(volumes, at, 30u), texel(volumes, at, 31u), texel(volumes, at, 32u),
+            texel(volumes, at, 33u), texel(volumes, at, 34u), texel(volumes, at, 35u), texel(volumes, at, 36u)),
+    );
+}
+
 struct VolumeSettings {
     intensity_mode: u32,        // 0 conserving, 1 the paper's interpolation, 2 constant
     max_magnification: f32,

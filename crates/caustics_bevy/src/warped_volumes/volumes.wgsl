@@ -14,11 +14,11 @@
 
 #import bevy_render::view::View
 #import bevy_caustics::receiver::{Medium, clip_medium, exposed, world_at}
-#import bevy_caustics::warped_volumes::{CausticVolume, VolumeSettings, beta, footprint_irradiance, sample_volume, to_local}
+#import bevy_caustics::warped_volumes::{CORNERS_TEXEL, CausticVolume, SURFACE_CORNERS_TEXEL, VolumeSettings, beta, footprint_irradiance, load_volume, sample_volume, to_local, volume_texel}
 
 
 @group(0) @binding(0) var<uniform> view: View;
-@group(0) @binding(1) var<storage, read> volumes: array<CausticVolume>;
+@group(0) @binding(1) var volumes: texture_2d<f32>;
 @group(0) @binding(2) var<uniform> settings: VolumeSettings;
 #ifdef RECEIVER_CENTRE
 // The depth of the receiver point at each pixel's centre (`centre_depth`), 0 where the
@@ -139,7 +139,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     var farthest = 1.0;
     var projected = true;
     for (var k = 0; k < 8; k++) {
-        let seen = view_pixel(volumes[volume].surface_corners[k].xyz);
+        let seen = view_pixel(volume_texel(volumes, volume, SURFACE_CORNERS_TEXEL + u32(k)).xyz);
         corners[k] = seen.xy;
         for (var j = 0; j < 4; j++) {
             grown[4 * k + j] = corners[k] + vec2(f32(j & 1), f32(j >> 1u)) * 2.0 - 1.0;
@@ -181,11 +181,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     );
     let k = triangles[vertex_index];
 #ifdef SURFACE
-    let corner = volumes[volume].surface_corners[k];
+    let corner = volume_texel(volumes, volume, SURFACE_CORNERS_TEXEL + u32(k));
 #else
     let volume = instance;
     out.volume = volume;
-    let corner = volumes[instance].corners[k];
+    let corner = volume_texel(volumes, instance, CORNERS_TEXEL + u32(k));
 #endif
     out.position = view.clip_from_world * vec4(corner.xyz, 1.0);
     // A hair farther (reversed z), so that the surface pass's depth test keeps the
@@ -313,7 +313,7 @@ fn surface(in: VertexOutput) -> @location(0) vec4<f32> {
             discard;
         }
     }
-    return vec4(surface_light(volumes[in.volume], pixel, settings.footprint_filter != 0u), 0.0);
+    return vec4(surface_light(load_volume(volumes, in.volume), pixel, settings.footprint_filter != 0u), 0.0);
 }
 #endif
 #endif
@@ -369,7 +369,7 @@ fn splat_shape(index: u32) -> SplatShape {
     if index >= counters[1] {
         return shape;
     }
-    let v = volumes[index];
+    let v = load_volume(volumes, index);
     // A volume whose rays meet no surface lights none (`SurfaceSlab::EMPTY`).
     if any(v.slab.xyz != vec3(0.0)) && v.slab.w > v.slab_far.x {
         return shape;
@@ -462,7 +462,7 @@ fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) group
     workgroupBarrier();
     var shaded = 0u;
     if own && shape.rows > 0u {
-        let v = volumes[first_volume + lane];
+        let v = load_volume(volumes, first_volume + lane);
         for (var row = 0u; row < shape.rows; row++) {
             shaded += add_light(v, shape.corner, shape.first.y + i32(row), shape.first.x, shape.last.x);
         }
@@ -475,7 +475,7 @@ fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) group
             k++;
         }
         let s = shapes[k];
-        shaded += add_light(volumes[first_volume + k], s.corner, s.first.y + i32(row - rows_before[k]), s.first.x, s.last.x);
+        shaded += add_light(load_volume(volumes, first_volume + k), s.corner, s.first.y + i32(row - rows_before[k]), s.first.x, s.last.x);
     }
     atomicAdd(&large[SPLATTED_PIXELS], shaded);
     if shape.rows > 0u {
@@ -619,7 +619,7 @@ fn volumetric(in: VertexOutput) -> @location(0) vec4<f32> {
     if depth > 0.0 {
         len = distance(world_at(view, at, depth), eye);
     }
-    let v = volumes[in.volume];
+    let v = load_volume(volumes, in.volume);
     var radiance = vec3(0.0);
     for (var i = 0u; i < min(settings.medium_count, 4u); i++) {
         let m = settings.media[i];
