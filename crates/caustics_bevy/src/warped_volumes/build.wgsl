@@ -47,6 +47,10 @@ struct VertexRay {
     fan: vec4<f32>,        // `vertex_fans`, where there is a shared axis: the fan's coefficients along it; w 0 where it cannot be flattened
 }
 
+// `compute::{RAY_TEXELS, RAYS_PER_ROW}`.
+const RAY_TEXELS: u32 = 7u;
+const RAYS_PER_ROW: u32 = 16u;
+
 @group(0) @binding(0) var<uniform> job: BuildJob;
 // The generator's vertices where Bevy draws them from (or a copy, for a mesh without
 // normals), read through `job.vertex`.
@@ -62,6 +66,11 @@ struct VertexRay {
 // One per vertex, then the slicing axis (w 1 when there is one).
 @group(0) @binding(7) var<storage, read_write> rays: array<VertexRay>;
 @group(0) @binding(8) var volumes: texture_storage_2d<rgba32float, write>;
+// `rays` as `triangle_volumes` reads them, copied into a texture once the fans are in
+// (`compute::build_volumes`): one rgba32float texel a field, `RAYS_PER_ROW` rays to a
+// row. Lavapipe loads a texel about five times faster than a storage buffer's four
+// words at scattered places (`types.wgsl`).
+@group(0) @binding(10) var ray_texels: texture_2d<f32>;
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 
 // `build::SHARED_AXIS_MIN_COS`, `volumes::OCCLUSION_SLACK`.
@@ -652,6 +661,16 @@ struct TriangleFlux {
     dropped: vec3<f32>,
 }
 
+fn ray_texel(at: vec2<u32>, k: u32) -> vec4<f32> {
+    return textureLoad(ray_texels, vec2(at.x + k, at.y), 0);
+}
+
+// Vertex `v`'s ray from `ray_texels`; a kernel loads only the fields it reads.
+fn vertex_ray(v: u32) -> VertexRay {
+    let at = vec2(v % RAYS_PER_ROW * RAY_TEXELS, v / RAYS_PER_ROW);
+    return VertexRay(ray_texel(at, 0u), ray_texel(at, 1u), ray_texel(at, 2u), ray_texel(at, 3u), ray_texel(at, 4u), ray_texel(at, 5u), ray_texel(at, 6u));
+}
+
 // A dropped triangle's flux: its vertices' mean weight over its area (half the length
 // of its edges' cross product).
 fn dropped(colour: vec3<f32>, weight: vec3<f32>, cross_length: f32) -> TriangleFlux {
@@ -669,8 +688,8 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     var p: array<vec3<f32>, 3>;
     var valid = true;
     for (var i = 0u; i < 3u; i++) {
-        p[i] = rays[tri[i]].position.xyz;
-        valid = valid && rays[tri[i]].position.w > 0.0;
+        p[i] = vertex_ray(tri[i]).position.xyz;
+        valid = valid && vertex_ray(tri[i]).position.w > 0.0;
     }
     let edge_cross = cross(p[1] - p[0], p[2] - p[0]);
     let longest = max(max(dot(p[1] - p[0], p[1] - p[0]), dot(p[2] - p[0], p[2] - p[0])), dot(p[2] - p[1], p[2] - p[1]));
@@ -681,14 +700,14 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     let cross_length = length(edge_cross);
     let geometric = edge_cross / cross_length;
     // The front is the side the vertex normals face.
-    let front = rays[tri.x].normal.xyz + rays[tri.y].normal.xyz + rays[tri.z].normal.xyz;
+    let front = vertex_ray(tri.x).normal.xyz + vertex_ray(tri.y).normal.xyz + vertex_ray(tri.z).normal.xyz;
     var unit: array<vec3<f32>, 3>;
     var weight = vec3(0.0);
     var lit = false;
     var tir = false;
     var all_shadowed = true;
     for (var i = 0u; i < 3u; i++) {
-        let ray = rays[tri[i]];
+        let ray = vertex_ray(tri[i]);
         unit[i] = ray.direction.xyz;
         var fresnel = ray.direction.w;
         if all(ray.direction.xyz == vec3(0.0)) {
@@ -780,7 +799,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     for (var i = 0u; i < 3u; i++) {
         var sum: vec4<f32>;
         if along_axis {
-            sum = shifted_fan(rays[tri[i]], frame.origin, y, mirrored);
+            sum = shifted_fan(vertex_ray(tri[i]), frame.origin, y, mirrored);
         } else {
             sum = fan_sum(frame, tri[i]);
         }
@@ -811,7 +830,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
             to_vertex = length(p[i] - job.light.xyz);
         }
         light_distance[i] = to_vertex - local(frame, p[i]).y * length(r[i]);
-        let ray = rays[tri[i]];
+        let ray = vertex_ray(tri[i]);
         out.hit_planes[i] = vec4(0.0, 0.0, 0.0, 1.0);
         if ray.hit.w > 0.0 {
             out.hit_planes[i] = hit_plane(frame, ray.hit.xyz, ray.hit_normal.xyz, r[i], depth);
@@ -826,7 +845,7 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     var hit = vec3(false);
     var hits = 0u;
     for (var i = 0u; i < 3u; i++) {
-        let ray = rays[tri[i]];
+        let ray = vertex_ray(tri[i]);
         hit[i] = ray.hit.w > 0.0;
         hits += select(0u, 1u, hit[i]);
         points[i] = local(frame, ray.hit.xyz);

@@ -25,7 +25,7 @@ use bevy::render::{
     mesh::{RenderMesh, allocator::MeshAllocator},
     render_asset::RenderAssets,
     render_resource::{
-        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, texture_storage_2d, uniform_buffer},
+        binding_types::{storage_buffer_read_only_sized, storage_buffer_sized, texture_2d, texture_storage_2d, uniform_buffer},
         *,
     },
     renderer::{RenderContext, RenderDevice, RenderQueue},
@@ -52,8 +52,13 @@ struct GpuBuildJob {
     vertex: UVec4,
 }
 
-/// `VertexRay` in `build.wgsl`: seven `vec4`s.
-const VERTEX_RAY_BYTES: u64 = 7 * 16;
+/// `VertexRay` in `build.wgsl`: seven `vec4`s, each a texel of the rays' texture.
+const RAY_TEXELS: u32 = 7;
+const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
+/// The rays a row of their texture holds (`RAYS_PER_ROW` in `build.wgsl`): a row of the
+/// rays' buffer then copies whole, 1792 bytes, a multiple of the 256 a copy's rows
+/// take.
+const RAYS_PER_ROW: u32 = 16;
 
 /// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
 /// instances, two zeros), five counts, the kept and the dropped flux (f32 bits), the
@@ -171,15 +176,21 @@ struct GeneratorBuffers {
     indices: [Buffer; 3],
     copy: Option<Buffer>,
     rays: Buffer,
+    /// `rays` as `triangle_volumes` reads them, copied into a texture
+    /// ([`Dispatch::ray_texels`]).
+    ray_texels: (Texture, TextureView),
     /// Each triangle's area coefficients along the shared slicing axis (`build.wgsl`).
     areas: Buffer,
     bind_group: KeptBindGroup,
 }
 
 /// A job's dispatch: its generator's bind group, its uniform offset, its vertices and
-/// triangles.
+/// triangles, and its rays' buffer and texture, copied from one to the other between
+/// the fans and the volumes.
 struct Dispatch {
     bind_group: BindGroup,
+    rays: Buffer,
+    ray_texels: Texture,
     offset: u32,
     vertices: u32,
     triangles: u32,
@@ -246,6 +257,7 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
                 (7, storage_buffer_sized(false, None)),
                 (8, texture_storage_2d(TextureFormat::Rgba32Float, StorageTextureAccess::WriteOnly)),
                 (9, storage_buffer_sized(false, None)),
+                (10, texture_2d(TextureSampleType::Float { filterable: false })),
                 (14, read()),
             ),
         ),
@@ -259,6 +271,11 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
         ["vertex_rays", "slicing_axis", "triangle_areas", "vertex_fans", "triangle_volumes", "anchor"],
     );
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
+}
+
+/// The rows of a generator's rays' texture: its vertices' rays and the slicing axis.
+fn ray_rows(topology: &Topology) -> u32 {
+    (topology.vertices as u32 + 1).div_ceil(RAYS_PER_ROW)
 }
 
 fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
@@ -280,10 +297,24 @@ impl GeneratorBuffers {
             copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
-                size: (topology.vertices as u64 + 1) * VERTEX_RAY_BYTES,
-                usage: BufferUsages::STORAGE,
+                size: u64::from(ray_rows(topology) * RAYS_PER_ROW) * VERTEX_RAY_BYTES,
+                usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
+            ray_texels: {
+                let texture = device.create_texture(&TextureDescriptor {
+                    label: Some("caustic_volume_vertex_ray_texels"),
+                    size: Extent3d { width: RAYS_PER_ROW * RAY_TEXELS, height: ray_rows(topology), depth_or_array_layers: 1 },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: TextureDimension::D2,
+                    format: TextureFormat::Rgba32Float,
+                    usage: TextureUsages::COPY_DST | TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                });
+                let view = texture.create_view(&TextureViewDescriptor::default());
+                (texture, view)
+            },
             areas: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_triangle_areas"),
                 size: (topology.triangles.len() / 3).max(1) as u64 * 16,
@@ -455,10 +486,11 @@ pub(super) fn prepare_build(
             c,
             (&g.rays).into(),
             volumes.into(),
+            (&g.ray_texels.1).into(),
             (&counters).into(),
             (&occluders).into(),
         ];
-        let (indices, rays, areas) = (&g.indices, &g.rays, &g.areas);
+        let (indices, rays, areas, ray_texels) = (&g.indices, &g.rays, &g.areas, &g.ray_texels.1);
         let bind_group = g.bind_group.get(&bound, || {
             device.create_bind_group(
                 "caustic_volume_build_bind_group",
@@ -473,11 +505,19 @@ pub(super) fn prepare_build(
                     (7, rays.as_entire_binding()),
                     (8, volumes),
                     (9, counters.as_entire_binding()),
+                    (10, ray_texels),
                     (14, occluders.as_entire_binding()),
                 )),
             )
         });
-        build.dispatches.push(Dispatch { bind_group, offset, vertices: counts.x, triangles: counts.y });
+        build.dispatches.push(Dispatch {
+            bind_group,
+            rays: g.rays.clone(),
+            ray_texels: g.ray_texels.0.clone(),
+            offset,
+            vertices: counts.x,
+            triangles: counts.y,
+        });
     }
 }
 
@@ -511,20 +551,29 @@ pub(super) fn build_volumes(
         recorder.record("occluder refit");
     }
     encoder.copy_buffer_to_buffer(empty, 0, counters, 0, empty.size());
-    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
-    let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
-    pass.set_bind_group(0, &build.dispatches[0].bind_group, &[build.dispatches[0].offset]);
-    anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[5]));
+    // Each job in two passes (spans of one name add up): its rays, axis, areas and
+    // fans, then, once the rays are copied into their texture, its volumes.
     for dispatch in &build.dispatches {
-        pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
         let (vertices, triangles) = (dispatch.vertices.div_ceil(64), dispatch.triangles.div_ceil(64));
-        for (kernel, groups) in kernels.iter().zip([vertices, 1, triangles, vertices, triangles]) {
-            pass.set_pipeline(kernel);
-            pass.dispatch_workgroups(groups, 1, 1);
+        for (first, stage) in [(0, &kernels[..4]), (4, &kernels[4..5])] {
+            if first == 4 {
+                let rays = TexelCopyBufferInfo {
+                    buffer: &dispatch.rays,
+                    layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(RAYS_PER_ROW * RAY_TEXELS * 16), rows_per_image: None },
+                };
+                encoder.copy_buffer_to_texture(rays, dispatch.ray_texels.as_image_copy(), dispatch.ray_texels.size());
+            }
+            let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
+            let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
+            pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
+            anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[5]));
+            for (kernel, groups) in stage.iter().zip(&[vertices, 1, triangles, vertices, triangles][first..]) {
+                pass.set_pipeline(kernel);
+                pass.dispatch_workgroups(*groups, 1, 1);
+            }
+            span.end(&mut pass);
         }
     }
-    span.end(&mut pass);
-    drop(pass);
     build.dispatches.clear();
     recorder.record("volume build");
     let device = ctx.render_device().clone();
