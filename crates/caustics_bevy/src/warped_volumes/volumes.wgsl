@@ -440,7 +440,12 @@ var<workgroup> rows_before: array<u32, 65>;
 // twelve edges over the row).
 @compute @workgroup_size(64)
 fn splat(@builtin(workgroup_id) group: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
-    let first_volume = (group.x + group.y * groups.x) * 64u;
+    // Workgroups in turn take volumes from the two halves of the list (a bijection on
+    // the workgroups): lavapipe runs neighbouring workgroups at once on its threads,
+    // and near volumes light near pixels, so that from far apart their atomic adds
+    // seldom meet in one cache line.
+    let g = group.x + group.y * groups.x;
+    let first_volume = (g % 2u * ((groups.x * groups.y + 1u) / 2u) + g / 2u) * 64u;
     if first_volume + lane == 0u {
         atomicStore(&large[0], 60u);
     }
