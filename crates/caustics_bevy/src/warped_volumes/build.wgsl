@@ -47,9 +47,8 @@ struct VertexRay {
     fan: vec4<f32>,        // `vertex_fans`, where there is a shared axis: the fan's coefficients along it; w 0 where it cannot be flattened
 }
 
-// `compute::{RAY_TEXELS, RAYS_PER_ROW}`.
+// `compute::RAY_TEXELS`.
 const RAY_TEXELS: u32 = 7u;
-const RAYS_PER_ROW: u32 = 16u;
 
 @group(0) @binding(0) var<uniform> job: BuildJob;
 // The generator's vertices where Bevy draws them from (or a copy, for a mesh without
@@ -67,8 +66,8 @@ const RAYS_PER_ROW: u32 = 16u;
 @group(0) @binding(7) var<storage, read_write> rays: array<VertexRay>;
 @group(0) @binding(8) var volumes: texture_storage_2d<rgba32float, write>;
 // `rays` as `triangle_volumes` reads them, copied into a texture once the fans are in
-// (`compute::build_volumes`): one rgba32float texel a field, `RAYS_PER_ROW` rays to a
-// row. Lavapipe loads a texel about five times faster than a storage buffer's four
+// (`compute::build_volumes`): one rgba32float texel a field, whole rays to a row
+// (`compute::rays_per_row`). Lavapipe loads a texel about five times faster than a storage buffer's four
 // words at scattered places (`types.wgsl`).
 @group(0) @binding(10) var ray_texels: texture_2d<f32>;
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
@@ -667,7 +666,8 @@ fn ray_texel(at: vec2<u32>, k: u32) -> vec4<f32> {
 
 // Vertex `v`'s ray from `ray_texels`; a kernel loads only the fields it reads.
 fn vertex_ray(v: u32) -> VertexRay {
-    let at = vec2(v % RAYS_PER_ROW * RAY_TEXELS, v / RAYS_PER_ROW);
+    let per_row = textureDimensions(ray_texels).x / RAY_TEXELS;
+    let at = vec2(v % per_row * RAY_TEXELS, v / per_row);
     return VertexRay(ray_texel(at, 0u), ray_texel(at, 1u), ray_texel(at, 2u), ray_texel(at, 3u), ray_texel(at, 4u), ray_texel(at, 5u), ray_texel(at, 6u));
 }
 

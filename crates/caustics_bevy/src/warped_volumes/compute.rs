@@ -55,10 +55,13 @@ struct GpuBuildJob {
 /// `VertexRay` in `build.wgsl`: seven `vec4`s, each a texel of the rays' texture.
 const RAY_TEXELS: u32 = 7;
 const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
-/// The rays a row of their texture holds (`RAYS_PER_ROW` in `build.wgsl`): a row of the
-/// rays' buffer then copies whole, 1792 bytes, a multiple of the 256 a copy's rows
-/// take.
-const RAYS_PER_ROW: u32 = 16;
+
+/// The rays a row of their texture holds: a multiple of 16, so that a row of the rays'
+/// buffer (1792 bytes for 16 rays) is a multiple of the 256 bytes a copy's rows take;
+/// at most 1024, within the adapter's widest texture.
+fn rays_per_row(device: &RenderDevice) -> u32 {
+    (device.limits().max_texture_dimension_2d / (16 * RAY_TEXELS) * 16).clamp(16, 1024)
+}
 
 /// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
 /// instances, two zeros), five counts, the kept and the dropped flux (f32 bits), the
@@ -273,9 +276,10 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
-/// The rows of a generator's rays' texture: its vertices' rays and the slicing axis.
-fn ray_rows(topology: &Topology) -> u32 {
-    (topology.vertices as u32 + 1).div_ceil(RAYS_PER_ROW)
+/// The rows of a generator's rays' texture, `per_row` rays a row: its vertices' rays and
+/// the slicing axis.
+fn ray_rows(topology: &Topology, per_row: u32) -> u32 {
+    (topology.vertices as u32 + 1).div_ceil(per_row)
 }
 
 fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
@@ -287,6 +291,7 @@ fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffe
 impl GeneratorBuffers {
     fn new(device: &RenderDevice, topology: &Arc<Topology>) -> Self {
         let bytes = |words: &[u32]| bytemuck::cast_slice::<u32, u8>(words).to_vec();
+        let per_row = rays_per_row(device);
         Self {
             topology: topology.clone(),
             indices: [
@@ -297,14 +302,14 @@ impl GeneratorBuffers {
             copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
-                size: u64::from(ray_rows(topology) * RAYS_PER_ROW) * VERTEX_RAY_BYTES,
+                size: u64::from(ray_rows(topology, per_row) * per_row) * VERTEX_RAY_BYTES,
                 usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
             ray_texels: {
                 let texture = device.create_texture(&TextureDescriptor {
                     label: Some("caustic_volume_vertex_ray_texels"),
-                    size: Extent3d { width: RAYS_PER_ROW * RAY_TEXELS, height: ray_rows(topology), depth_or_array_layers: 1 },
+                    size: Extent3d { width: per_row * RAY_TEXELS, height: ray_rows(topology, per_row), depth_or_array_layers: 1 },
                     mip_level_count: 1,
                     sample_count: 1,
                     dimension: TextureDimension::D2,
@@ -559,7 +564,7 @@ pub(super) fn build_volumes(
             if first == 4 {
                 let rays = TexelCopyBufferInfo {
                     buffer: &dispatch.rays,
-                    layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(RAYS_PER_ROW * RAY_TEXELS * 16), rows_per_image: None },
+                    layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(dispatch.ray_texels.width() * 16), rows_per_image: None },
                 };
                 encoder.copy_buffer_to_texture(rays, dispatch.ray_texels.as_image_copy(), dispatch.ray_texels.size());
             }
