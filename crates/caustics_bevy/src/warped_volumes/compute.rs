@@ -9,7 +9,7 @@
 //! indirect draw; the counts of what was dropped go back to the main world.
 
 use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
-use super::render::{GpuCausticVolume, VolumeBuffers, VolumeTexture, WordsReadback};
+use super::render::{GpuCausticVolume, VolumeBuffers, VolumeTexture, WordsReadback, texel_texture};
 use crate::gpu_budget::{CausticGpuBudget, mib};
 use crate::gpu_work::anchor_first_timestamp;
 use crate::irradiance::bvh_refit::{BvhRefit, BvhRefitPipelines, DrawnMeshes};
@@ -306,20 +306,12 @@ impl GeneratorBuffers {
                 usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
-            ray_texels: {
-                let texture = device.create_texture(&TextureDescriptor {
-                    label: Some("caustic_volume_vertex_ray_texels"),
-                    size: Extent3d { width: per_row * RAY_TEXELS, height: ray_rows(topology, per_row), depth_or_array_layers: 1 },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: TextureDimension::D2,
-                    format: TextureFormat::Rgba32Float,
-                    usage: TextureUsages::COPY_DST | TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                });
-                let view = texture.create_view(&TextureViewDescriptor::default());
-                (texture, view)
-            },
+            ray_texels: texel_texture(
+                device,
+                "caustic_volume_vertex_ray_texels",
+                UVec2::new(per_row * RAY_TEXELS, ray_rows(topology, per_row)),
+                TextureUsages::COPY_DST | TextureUsages::TEXTURE_BINDING,
+            ),
             areas: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_triangle_areas"),
                 size: (topology.triangles.len() / 3).max(1) as u64 * 16,

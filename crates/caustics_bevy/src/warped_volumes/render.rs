@@ -102,22 +102,29 @@ pub(super) struct VolumeTexture {
 /// `VOLUME_TEXELS` in `types.wgsl`: the texels a volume takes.
 pub(super) const VOLUME_TEXELS: u32 = 37;
 
+/// An rgba32float texture of `size` texels, one `vec4` of a record each, and its view.
+pub(super) fn texel_texture(device: &RenderDevice, label: &'static str, size: UVec2, usage: TextureUsages) -> (Texture, TextureView) {
+    let texture = device.create_texture(&TextureDescriptor {
+        label: Some(label),
+        size: Extent3d { width: size.x, height: size.y, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: TextureDimension::D2,
+        format: TextureFormat::Rgba32Float,
+        usage,
+        view_formats: &[],
+    });
+    let view = texture.create_view(&TextureViewDescriptor::default());
+    (texture, view)
+}
+
 impl VolumeTexture {
     /// Room for at least `capacity` volumes, at most [`Self::largest`].
     pub fn new(device: &RenderDevice, capacity: u64) -> Self {
         let per_row = Self::per_row(device);
         let rows = capacity.div_ceil(per_row).max(1) as u32;
-        let texture = device.create_texture(&TextureDescriptor {
-            label: Some("caustic_volumes"),
-            size: Extent3d { width: per_row as u32 * VOLUME_TEXELS, height: rows, depth_or_array_layers: 1 },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: TextureDimension::D2,
-            format: TextureFormat::Rgba32Float,
-            usage: TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING,
-            view_formats: &[],
-        });
-        let view = texture.create_view(&TextureViewDescriptor::default());
+        let usage = TextureUsages::STORAGE_BINDING | TextureUsages::TEXTURE_BINDING;
+        let (texture, view) = texel_texture(device, "caustic_volumes", UVec2::new(per_row as u32 * VOLUME_TEXELS, rows), usage);
         Self { texture, view }
     }
 
