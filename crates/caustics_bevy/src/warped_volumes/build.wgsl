@@ -21,7 +21,7 @@
 
 #import bevy_caustics::optics::{reflect_about, refract_through, fresnel_transmittance}
 #import bevy_caustics::triangle_bvh::intersect_triangles
-#import bevy_caustics::warped_volumes::{CORNERS_TEXEL, CausticVolume, HIT_PLANES_TEXEL, SURFACE_CORNERS_TEXEL, volume_at, volume_capacity}
+#import bevy_caustics::warped_volumes::{CORNERS_TEXEL, CausticVolume, HIT_PLANES_TEXEL, SURFACE_CORNERS_TEXEL, record_at, texel, volume_at, volume_capacity}
 
 struct BuildJob {
     world_from_local: mat4x4<f32>,
@@ -65,12 +65,12 @@ const RAY_TEXELS: u32 = 7u;
 // One per vertex, then the slicing axis (w 1 when there is one).
 @group(0) @binding(7) var<storage, read_write> rays: array<VertexRay>;
 @group(0) @binding(8) var volumes: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 // `rays` as `triangle_volumes` reads them, copied into a texture once the fans are in
 // (`compute::build_volumes`): one rgba32float texel a field, whole rays to a row
-// (`compute::rays_per_row`). Lavapipe loads a texel about five times faster than a storage buffer's four
-// words at scattered places (`types.wgsl`).
+// (`compute::rays_per_row`). Lavapipe loads a texel about five times faster than a
+// storage buffer's four words at scattered places (`types.wgsl`).
 @group(0) @binding(10) var ray_texels: texture_2d<f32>;
-@group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 
 // `build::SHARED_AXIS_MIN_COS`, `volumes::OCCLUSION_SLACK`.
 const SHARED_AXIS_MIN_COS: f32 = 0.25;
@@ -660,15 +660,13 @@ struct TriangleFlux {
     dropped: vec3<f32>,
 }
 
-fn ray_texel(at: vec2<u32>, k: u32) -> vec4<f32> {
-    return textureLoad(ray_texels, vec2(at.x + k, at.y), 0);
-}
-
 // Vertex `v`'s ray from `ray_texels`; a kernel loads only the fields it reads.
 fn vertex_ray(v: u32) -> VertexRay {
-    let per_row = textureDimensions(ray_texels).x / RAY_TEXELS;
-    let at = vec2(v % per_row * RAY_TEXELS, v / per_row);
-    return VertexRay(ray_texel(at, 0u), ray_texel(at, 1u), ray_texel(at, 2u), ray_texel(at, 3u), ray_texel(at, 4u), ray_texel(at, 5u), ray_texel(at, 6u));
+    let at = record_at(textureDimensions(ray_texels).x, RAY_TEXELS, v);
+    return VertexRay(
+        texel(ray_texels, at, 0u), texel(ray_texels, at, 1u), texel(ray_texels, at, 2u), texel(ray_texels, at, 3u),
+        texel(ray_texels, at, 4u), texel(ray_texels, at, 5u), texel(ray_texels, at, 6u),
+    );
 }
 
 // A dropped triangle's flux: its vertices' mean weight over its area (half the length
@@ -688,8 +686,9 @@ fn triangle_volume(t: u32) -> TriangleFlux {
     var p: array<vec3<f32>, 3>;
     var valid = true;
     for (var i = 0u; i < 3u; i++) {
-        p[i] = vertex_ray(tri[i]).position.xyz;
-        valid = valid && vertex_ray(tri[i]).position.w > 0.0;
+        let position = vertex_ray(tri[i]).position;
+        p[i] = position.xyz;
+        valid = valid && position.w > 0.0;
     }
     let edge_cross = cross(p[1] - p[0], p[2] - p[0]);
     let longest = max(max(dot(p[1] - p[0], p[1] - p[0]), dot(p[2] - p[0], p[2] - p[0])), dot(p[2] - p[1], p[2] - p[1]));

@@ -550,26 +550,27 @@ pub(super) fn build_volumes(
     encoder.copy_buffer_to_buffer(empty, 0, counters, 0, empty.size());
     // Each job in two passes (spans of one name add up): its rays, axis, areas and
     // fans, then, once the rays are copied into their texture, its volumes.
+    let anchor = kernels[5];
     for dispatch in &build.dispatches {
         let (vertices, triangles) = (dispatch.vertices.div_ceil(64), dispatch.triangles.div_ceil(64));
-        for (first, stage) in [(0, &kernels[..4]), (4, &kernels[4..5])] {
-            if first == 4 {
-                let rays = TexelCopyBufferInfo {
-                    buffer: &dispatch.rays,
-                    layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(dispatch.ray_texels.width() * 16), rows_per_image: None },
-                };
-                encoder.copy_buffer_to_texture(rays, dispatch.ray_texels.as_image_copy(), dispatch.ray_texels.size());
-            }
+        let build_pass = |encoder: &mut CommandEncoder, kernels: &[&ComputePipeline], groups: &[u32]| {
             let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor { label: Some("caustic_volume_build"), ..default() });
             let span = diagnostics.pass_span(&mut pass, "caustics/volume_build");
             pass.set_bind_group(0, &dispatch.bind_group, &[dispatch.offset]);
-            anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(kernels[5]));
-            for (kernel, groups) in stage.iter().zip(&[vertices, 1, triangles, vertices, triangles][first..]) {
+            anchor_first_timestamp(&mut pass, diagnostics.is_some(), Some(anchor));
+            for (kernel, &groups) in kernels.iter().zip(groups) {
                 pass.set_pipeline(kernel);
-                pass.dispatch_workgroups(*groups, 1, 1);
+                pass.dispatch_workgroups(groups, 1, 1);
             }
             span.end(&mut pass);
-        }
+        };
+        build_pass(encoder, &kernels[..4], &[vertices, 1, triangles, vertices]);
+        let rays = TexelCopyBufferInfo {
+            buffer: &dispatch.rays,
+            layout: TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(dispatch.ray_texels.width() * 16), rows_per_image: None },
+        };
+        encoder.copy_buffer_to_texture(rays, dispatch.ray_texels.as_image_copy(), dispatch.ray_texels.size());
+        build_pass(encoder, &kernels[4..5], &[triangles]);
     }
     build.dispatches.clear();
     recorder.record("volume build");

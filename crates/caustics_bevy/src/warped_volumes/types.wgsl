@@ -40,10 +40,16 @@ const HIT_PLANES_TEXEL: u32 = 18u;
 const CORNERS_TEXEL: u32 = 21u;
 const SURFACE_CORNERS_TEXEL: u32 = 29u;
 
+// Where record `index` of `texels` texels (a volume, the build's vertex ray) begins in
+// a texture `width` texels wide that holds whole records to a row.
+fn record_at(width: u32, texels: u32, index: u32) -> vec2<u32> {
+    let per_row = width / texels;
+    return vec2(index % per_row * texels, index / per_row);
+}
+
 // Where volume `index`'s first texel lies in a texture `width` texels wide.
 fn volume_at(width: u32, index: u32) -> vec2<u32> {
-    let per_row = width / VOLUME_TEXELS;
-    return vec2(index % per_row * VOLUME_TEXELS, index / per_row);
+    return record_at(width, VOLUME_TEXELS, index);
 }
 
 // The volumes a texture of `size` texels holds.
@@ -51,8 +57,9 @@ fn volume_capacity(size: vec2<u32>) -> u32 {
     return size.x / VOLUME_TEXELS * size.y;
 }
 
-fn texel(volumes: texture_2d<f32>, at: vec2<u32>, k: u32) -> vec4<f32> {
-    return textureLoad(volumes, vec2(at.x + k, at.y), 0);
+// Texel `k` of the record that begins at `at`.
+fn texel(records: texture_2d<f32>, at: vec2<u32>, k: u32) -> vec4<f32> {
+    return textureLoad(records, vec2(at.x + k, at.y), 0);
 }
 
 // Texel `k` of volume `index`: one field, or one of its corners.
