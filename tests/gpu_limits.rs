@@ -3,17 +3,20 @@
 //! the adapter's storage bindings and a 32 MiB `CausticGpuBudget`. Each is lowered to
 //! fit (a wgpu validation error would stop the frames, and an allocation past the budget
 //! would show in the allocator's report), still renders finite caustics, and the GPU
-//! memory the plugin holds stays within the budget.
+//! memory the plugin holds stays within the budget. A warped-volumes generator whose
+//! vertex rays no storage binding holds is skipped, and the frames go on.
 //!
 //! One test function: a process holds one Bevy app with a render device at a time.
 
 mod support;
 
 use bevy::prelude::*;
+use bevy::render::renderer::RenderDevice;
 use bevy_caustics::convolution::{PoolRipples, PoolSurface};
 use bevy_caustics::headless::HeadlessRenderer;
 use bevy_caustics::hierarchical_maps::HierarchicalMapsSettings;
 use bevy_caustics::illumination_textures::IlluminationTexturesSettings;
+use bevy_caustics::warped_volumes::CausticVolumes;
 use bevy_caustics::{CausticGenerator, CausticGpuBudget, CausticReceiver, CausticTechnique};
 use support::{render, render_caustics};
 
@@ -80,6 +83,24 @@ fn requests_beyond_the_gpu_and_the_budget_are_lowered_and_still_render() {
         check(&mut renderer, camera, what, pass);
         despawn_generators(&mut renderer);
     }
+
+    // Warped volumes over a mesh with more vertices than one storage binding holds the
+    // rays of (112 bytes each): the generator is skipped with a warning, where binding
+    // its rays would be a wgpu error, and the frames go on.
+    let limits = renderer.world_mut().resource::<RenderDevice>().limits();
+    let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+    // A plane of `side` subdivisions has (side + 2)² vertices.
+    let side = ((binding / 112) as f64).sqrt() as u32;
+    assert!(side <= 2048, "this adapter binds {binding} bytes at once: a generator past it takes over 4 M vertices, too many for a test");
+    let world = renderer.world_mut();
+    let gathered = world.resource::<CausticVolumes>().gathered;
+    let plane = world.resource_mut::<Assets<Mesh>>().add(Plane3d::default().mesh().size(8.0, 8.0).subdivisions(side));
+    world.spawn((Mesh3d(plane), CausticGenerator { technique: CausticTechnique::WarpedVolumes, ..CausticGenerator::refractive(1.333) }));
+    render(&mut renderer, 3);
+    let volumes = renderer.world_mut().resource::<CausticVolumes>();
+    assert!(volumes.gathered > gathered, "the volumes' sources were not gathered again");
+    assert_eq!(volumes.stats.volumes, 0, "a generator of {} vertices was built", (side + 2).pow(2));
+    despawn_generators(&mut renderer);
 
     let world = renderer.world_mut();
     let asked = PoolRipples { columns: 8192, rows: 8192, cell_size: 4.0 / 8192.0, depth: 1.0, ..default() };

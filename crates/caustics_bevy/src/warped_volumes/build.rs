@@ -8,6 +8,7 @@
 use super::WarpedVolumesSettings;
 use crate::CausticTechnique;
 use crate::components::{CausticGenerator, InvalidCausticParams};
+use crate::gpu_budget::mib;
 use crate::irradiance::ActiveCausticTechniques;
 use crate::irradiance::mesh_bvhs::MeshBvhs;
 use crate::mesh_vertices::MovesOnGpu;
@@ -19,6 +20,7 @@ use bevy::camera::primitives::Aabb;
 use bevy::mesh::Indices;
 use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
+use bevy::render::{renderer::RenderDevice, settings::WgpuLimits};
 use caustics_core::glam;
 use caustics_core::mesh::TriMesh;
 use caustics_core::params::SpecularInteraction;
@@ -64,6 +66,17 @@ pub struct SurfaceWork {
 /// world.
 #[derive(Resource, Clone, Default)]
 pub(super) struct BuildStatsChannel(pub Arc<Mutex<Option<BuildStats>>>, pub Arc<Mutex<Option<SurfaceWork>>>);
+
+/// `VertexRay` in `build.wgsl`: seven `vec4`s, each a texel of the rays' texture.
+pub(super) const RAY_TEXELS: u32 = 7;
+pub(super) const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
+
+/// The rays a row of their texture holds: a multiple of 16, so that a row of the rays'
+/// buffer (1792 bytes for 16 rays) is a multiple of the 256 bytes a copy's rows take;
+/// at most 1024, within the adapter's widest texture.
+pub(super) fn rays_per_row(limits: &WgpuLimits) -> u32 {
+    (limits.max_texture_dimension_2d / (16 * RAY_TEXELS) * 16).clamp(16, 1024)
+}
 
 /// A mesh's triangles and what the build derives from them alone: the fans of §3.4
 /// and the sides each triangle owns (bits, `VertexFans::owned_edges`).
@@ -209,6 +222,39 @@ impl Topology {
             }
     }
 
+    /// The rows of its rays' texture, `per_row` rays a row: its vertices' rays and the
+    /// slicing axis.
+    pub fn ray_rows(&self, per_row: u32) -> u32 {
+        (self.vertices as u32 + 1).div_ceil(per_row)
+    }
+
+    /// What keeps its build from binding on an adapter of `limits`, if anything: a
+    /// buffer past the largest storage binding (its vertices take `vertex_bytes`) or its
+    /// rays' texture past the tallest 2D texture. wgpu refuses such a binding, and
+    /// Bevy's renderer panics on the error.
+    fn unbindable(&self, vertex_bytes: u64, limits: &WgpuLimits) -> Option<String> {
+        let per_row = rays_per_row(limits);
+        let rows = self.ray_rows(per_row);
+        let words = |n: usize| n as u64 * 4;
+        let buffers = [
+            ("vertex rays", u64::from(rows) * u64::from(per_row) * VERTEX_RAY_BYTES),
+            ("vertices", vertex_bytes),
+            ("triangles", words(self.triangles.len())),
+            ("vertex fans", words(self.fans.starts().len() + self.fans.triangles().len())),
+            ("triangle areas", (self.triangles.len() / 3) as u64 * 16),
+        ];
+        let binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if let Some((what, bytes)) = buffers.into_iter().find(|(_, bytes)| *bytes > binding) {
+            return Some(format!("needs {} for its {what}, more than this adapter binds at once ({}): use a coarser mesh", mib(bytes), mib(binding)));
+        }
+        (rows > limits.max_texture_dimension_2d).then(|| {
+            format!(
+                "has {} vertices, more rays than this adapter's largest texture holds ({} rows of {per_row}): use a coarser mesh",
+                self.vertices, limits.max_texture_dimension_2d
+            )
+        })
+    }
+
     /// The topology of a mesh's triangles, checked.
     fn of(vertices: usize, triangles: Vec<u32>) -> Result<Self, String> {
         let corners: Vec<[u32; 3]> = triangles.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
@@ -242,6 +288,7 @@ fn gather_sources(
     mut volumes: ResMut<CausticVolumes>,
     mut active: ResMut<ActiveCausticTechniques>,
     mut state: Local<GatherState>,
+    device: Option<Res<RenderDevice>>,
 ) {
     let (mut occluder_mesh_changed, mut generator_mesh_changed) = (false, false);
     let mut changed_meshes = HashSet::new();
@@ -300,9 +347,13 @@ fn gather_sources(
                 Some((_, known)) if known.fits(mesh) => Ok(known.clone()),
                 _ => triangle_indices(mesh).and_then(|(vertices, triangles)| Topology::of(vertices, triangles)).map(Arc::new),
             }
-            .and_then(|topology| match unusable_vertex(mesh) {
-                Some(problem) => Err(problem),
-                None => Ok(topology),
+            .and_then(|topology| {
+                // Positions and normals, as the build's copy holds them, at the least.
+                let vertex_bytes = mesh.count_vertices() as u64 * mesh.get_vertex_size().max(24);
+                match unusable_vertex(mesh).or_else(|| device.as_ref().and_then(|d| topology.unbindable(vertex_bytes, &d.limits()))) {
+                    Some(problem) => Err(problem),
+                    None => Ok(topology),
+                }
             }),
         };
         match topology {
@@ -368,5 +419,37 @@ fn receive_stats(channel: Res<BuildStatsChannel>, mut volumes: ResMut<CausticVol
     }
     if let Some(surface) = channel.1.lock().ok().and_then(|mut s| s.take()) {
         volumes.surface = surface;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A strip of `n` quads: 2n + 2 vertices, 2n triangles.
+    fn strip(n: u32) -> Topology {
+        let triangles = (0..n).flat_map(|i| [2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 1, 2 * i + 3, 2 * i + 2]).collect();
+        Topology::of(2 * n as usize + 2, triangles).unwrap()
+    }
+
+    #[test]
+    fn a_generator_past_the_adapters_bindings_is_refused_with_the_reason() {
+        let topology = strip(1000);
+        let limits = WgpuLimits::downlevel_defaults();
+        // 2002 rays and the slicing axis, 16 a row in a texture 200 texels wide: 126
+        // rows of 1792 bytes.
+        let narrow = WgpuLimits { max_texture_dimension_2d: 200, ..limits.clone() };
+        assert_eq!(rays_per_row(&narrow), 16);
+        let rays = 126 * 16 * VERTEX_RAY_BYTES;
+        let bound =
+            |vertex_bytes: u64, binding: u64| topology.unbindable(vertex_bytes, &WgpuLimits { max_storage_buffer_binding_size: binding, ..narrow.clone() });
+        assert_eq!(bound(rays, rays), None);
+        assert!(bound(rays, rays - 4).is_some_and(|why| why.contains("for its vertex rays")));
+        assert!(bound(rays + 4, rays).is_some_and(|why| why.contains("for its vertices")));
+        let tiny = WgpuLimits { max_buffer_size: 4096, ..limits.clone() };
+        assert!(topology.unbindable(0, &tiny).is_some_and(|why| why.contains("more than this adapter binds at once (0.0 MiB)")));
+        // 126 rows of 16 rays in a texture at most 125 texels tall.
+        let short = WgpuLimits { max_texture_dimension_2d: 125, ..limits };
+        assert!(topology.unbindable(0, &short).is_some_and(|why| why.contains("largest texture holds (125 rows of 16)")));
     }
 }

@@ -8,7 +8,7 @@
 //! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
 //! indirect draw; the counts of what was dropped go back to the main world.
 
-use super::build::{BuildStatsChannel, Topology, VolumeGenerator, VolumeSources};
+use super::build::{BuildStatsChannel, RAY_TEXELS, Topology, VERTEX_RAY_BYTES, VolumeGenerator, VolumeSources, rays_per_row};
 use super::render::{GpuCausticVolume, VolumeBuffers, VolumeTexture, WordsReadback, texel_texture};
 use crate::gpu_budget::{CausticGpuBudget, mib};
 use crate::gpu_work::anchor_first_timestamp;
@@ -50,17 +50,6 @@ struct GpuBuildJob {
     bounds_hi: Vec4,
     counts: UVec4,
     vertex: UVec4,
-}
-
-/// `VertexRay` in `build.wgsl`: seven `vec4`s, each a texel of the rays' texture.
-const RAY_TEXELS: u32 = 7;
-const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
-
-/// The rays a row of their texture holds: a multiple of 16, so that a row of the rays'
-/// buffer (1792 bytes for 16 rays) is a multiple of the 256 bytes a copy's rows take;
-/// at most 1024, within the adapter's widest texture.
-fn rays_per_row(device: &RenderDevice) -> u32 {
-    (device.limits().max_texture_dimension_2d / (16 * RAY_TEXELS) * 16).clamp(16, 1024)
 }
 
 /// The words of `counters` in `build.wgsl`: the indirect draw (36 vertices, the
@@ -276,12 +265,6 @@ pub(super) fn init_pipelines(mut commands: Commands, asset_server: Res<AssetServ
     commands.insert_resource(VolumeBuildPipelines { layout: KeptLayout::new(layout), pipelines, refit: BvhRefitPipelines::new(&cache, &asset_server) });
 }
 
-/// The rows of a generator's rays' texture, `per_row` rays a row: its vertices' rays and
-/// the slicing axis.
-fn ray_rows(topology: &Topology, per_row: u32) -> u32 {
-    (topology.vertices as u32 + 1).div_ceil(per_row)
-}
-
 fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffer {
     // A binding may not be empty.
     let contents = if contents.is_empty() { &[0; 4][..] } else { contents };
@@ -291,7 +274,7 @@ fn storage(device: &RenderDevice, label: &'static str, contents: &[u8]) -> Buffe
 impl GeneratorBuffers {
     fn new(device: &RenderDevice, topology: &Arc<Topology>) -> Self {
         let bytes = |words: &[u32]| bytemuck::cast_slice::<u32, u8>(words).to_vec();
-        let per_row = rays_per_row(device);
+        let per_row = rays_per_row(&device.limits());
         Self {
             topology: topology.clone(),
             indices: [
@@ -302,14 +285,14 @@ impl GeneratorBuffers {
             copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
-                size: u64::from(ray_rows(topology, per_row) * per_row) * VERTEX_RAY_BYTES,
+                size: u64::from(topology.ray_rows(per_row)) * u64::from(per_row) * VERTEX_RAY_BYTES,
                 usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
             ray_texels: texel_texture(
                 device,
                 "caustic_volume_vertex_ray_texels",
-                UVec2::new(per_row * RAY_TEXELS, ray_rows(topology, per_row)),
+                UVec2::new(per_row * RAY_TEXELS, topology.ray_rows(per_row)),
                 TextureUsages::COPY_DST | TextureUsages::TEXTURE_BINDING,
             ),
             areas: device.create_buffer(&BufferDescriptor {
