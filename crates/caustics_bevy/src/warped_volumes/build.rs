@@ -231,7 +231,7 @@ impl Topology {
     /// What keeps its build from binding on an adapter of `limits`, if anything: a
     /// buffer past the largest storage binding (its vertices take `vertex_bytes`) or its
     /// rays' texture past the tallest 2D texture. wgpu refuses such a binding, and
-    /// Bevy's renderer panics on the error.
+    /// Bevy quits the app on the validation error.
     fn unbindable(&self, vertex_bytes: u64, limits: &WgpuLimits) -> Option<String> {
         let per_row = rays_per_row(limits);
         let rows = self.ray_rows(per_row);
