@@ -69,7 +69,7 @@ pub(super) struct BuildStatsChannel(pub Arc<Mutex<Option<BuildStats>>>, pub Arc<
 
 /// `VertexRay` in `build.wgsl`: seven `vec4`s, each a texel of the rays' texture.
 pub(super) const RAY_TEXELS: u32 = 7;
-pub(super) const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
+const VERTEX_RAY_BYTES: u64 = RAY_TEXELS as u64 * 16;
 
 /// The rays a row of their texture holds: a multiple of 16, so that a row of the rays'
 /// buffer (1792 bytes for 16 rays) is a multiple of the 256 bytes a copy's rows take;
@@ -228,6 +228,11 @@ impl Topology {
         (self.vertices as u32 + 1).div_ceil(per_row)
     }
 
+    /// The bytes of its rays' buffer, whole rows of `per_row` rays.
+    pub fn ray_bytes(&self, per_row: u32) -> u64 {
+        u64::from(self.ray_rows(per_row)) * u64::from(per_row) * VERTEX_RAY_BYTES
+    }
+
     /// What keeps its build from binding on an adapter of `limits`, if anything: a
     /// buffer past the largest storage binding (its vertices take `vertex_bytes`) or its
     /// rays' texture past the tallest 2D texture. wgpu refuses such a binding, and
@@ -237,7 +242,7 @@ impl Topology {
         let rows = self.ray_rows(per_row);
         let words = |n: usize| n as u64 * 4;
         let buffers = [
-            ("vertex rays", u64::from(rows) * u64::from(per_row) * VERTEX_RAY_BYTES),
+            ("vertex rays", self.ray_bytes(per_row)),
             ("vertices", vertex_bytes),
             ("triangles", words(self.triangles.len())),
             ("vertex fans", words(self.fans.starts().len() + self.fans.triangles().len())),

@@ -68,7 +68,7 @@ const RAY_TEXELS: u32 = 7u;
 @group(0) @binding(9) var<storage, read_write> counters: array<atomic<u32>>;
 // `rays` as `triangle_volumes` reads them, copied into a texture once the fans are in
 // (`compute::build_volumes`): one rgba32float texel a field, whole rays to a row
-// (`compute::rays_per_row`). Lavapipe loads a texel about five times faster than a
+// (`build::rays_per_row`). Lavapipe loads a texel about five times faster than a
 // storage buffer's four words at scattered places (`types.wgsl`).
 @group(0) @binding(10) var ray_texels: texture_2d<f32>;
 

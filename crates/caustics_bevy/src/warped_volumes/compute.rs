@@ -8,7 +8,7 @@
 //! kept to [`VolumeBuffers::volumes`] and count them as the instances of the passes'
 //! indirect draw; the counts of what was dropped go back to the main world.
 
-use super::build::{BuildStatsChannel, RAY_TEXELS, Topology, VERTEX_RAY_BYTES, VolumeGenerator, VolumeSources, rays_per_row};
+use super::build::{BuildStatsChannel, RAY_TEXELS, Topology, VolumeGenerator, VolumeSources, rays_per_row};
 use super::render::{GpuCausticVolume, VolumeBuffers, VolumeTexture, WordsReadback, texel_texture};
 use crate::gpu_budget::{CausticGpuBudget, mib};
 use crate::gpu_work::anchor_first_timestamp;
@@ -285,7 +285,7 @@ impl GeneratorBuffers {
             copy: None,
             rays: device.create_buffer(&BufferDescriptor {
                 label: Some("caustic_volume_vertex_rays"),
-                size: u64::from(topology.ray_rows(per_row)) * u64::from(per_row) * VERTEX_RAY_BYTES,
+                size: topology.ray_bytes(per_row),
                 usage: BufferUsages::STORAGE | BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             }),
